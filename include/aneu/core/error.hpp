@@ -1,0 +1,38 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// The one exception hierarchy that crosses layer boundaries (CONVENTIONS.md §3).
+#include <stdexcept>
+#include <string>
+
+namespace aneu {
+
+/// Base of every aneuclip error. The message says what failed, on which object, the values involved and
+/// what was expected.
+class Error : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+/// Bad data or parameters given by the user (exit code 2).
+class InputError : public Error {
+public:
+    using Error::Error;
+};
+/// A file could not be read or written, or its content does not follow the schema (exit code 1, or 2
+/// when the file was a user input; the tools decide).
+class IoError : public Error {
+public:
+    using Error::Error;
+};
+/// A mesher failed or produced an unusable mesh.
+class MeshingError : public Error {
+public:
+    using Error::Error;
+};
+/// A numerical method failed (not SPD, singular, residual check failed, would not fit in memory).
+class NumericalError : public Error {
+public:
+    using Error::Error;
+};
+
+}  // namespace aneu

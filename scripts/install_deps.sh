@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# Installs every Debian 12 package aneuclip needs to build, test and run (compiler and CMake included).
+# Idempotent: packages already present are left alone, and when nothing is missing apt is not touched.
+# Works as root without sudo, and as a user with sudo.
+set -euo pipefail
+
+PACKAGES=(
+  # toolchain
+  build-essential cmake ninja-build ccache pkg-config git ca-certificates
+  # core: linear algebra, I/O, CLI, logging, tests
+  libeigen3-dev libhdf5-dev libsuitesparse-dev libopenblas-dev liblapack-dev
+  libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev libssl-dev zlib1g-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  # pipeline: imaging and meshing
+  libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
+  libcgal-dev libgmp-dev libmpfr-dev libboost-dev
+  libnglib-dev netgen libtet1.5-dev
+  # off-screen rendering for snapshots (Debian's VTK renders through X11 only)
+  xvfb xauth
+)
+
+if [ "$(id -u)" -eq 0 ]; then
+  SUDO=()
+elif command -v sudo >/dev/null 2>&1; then
+  SUDO=(sudo)
+else
+  echo "install_deps.sh: error: not root and sudo is not available; run as root or install sudo" >&2
+  exit 2
+fi
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install_deps.sh: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+echo "install_deps.sh: installing ${#missing[@]} missing package(s): ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+"${SUDO[@]}" apt-get update -q
+"${SUDO[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"

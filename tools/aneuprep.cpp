@@ -1,0 +1,44 @@
+// SPDX-License-Identifier: MIT
+// aneuprep: the offline stages of aneuclip, one subcommand each.
+#include <CLI/CLI.hpp>
+
+#include "aneu/core/dependency_info.hpp"
+#include "aneu/core/version.hpp"
+#include "aneu/pipeline/dependency_info.hpp"
+#include "cli_common.hpp"
+#include "commands.hpp"
+
+int main(int argc, char** argv) {
+    using namespace aneu::tools;
+    CLI::App app{"aneuclip offline pipeline: CT angiography -> case bundle", "aneuprep"};
+    app.require_subcommand(1);
+    app.fallthrough();  // --log-level/--quiet/--log-file are accepted after the subcommand too
+    app.set_version_flag("--version", std::string("aneuprep ") + aneu::tool_version() + " (" +
+                                          aneu::git_revision() + ")");
+    LoggingOptions log;
+    add_logging_options(app, log);
+    const auto args = args_of(argc, argv);
+    std::function<int()> action;
+    add_phantom_command(app, args, action);
+    add_inspect_command(app, action);
+
+    auto* ver = app.add_subcommand("version", "print versions of aneuclip and of every library it uses");
+    ver->callback([&] {
+        action = [] {
+            fmt::print("aneuprep {} ({})\n", aneu::tool_version(), aneu::git_revision());
+            for (const auto& [k, v] : aneu::core_dependency_versions()) fmt::print("  {:<18} {}\n", k, v);
+            for (const auto& [k, v] : aneu::pipeline::pipeline_dependency_versions()) {
+                fmt::print("  {:<18} {}\n", k, v);
+            }
+            return 0;
+        };
+    });
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        return app.exit(e);
+    }
+    apply_logging_options(log);
+    return action ? action() : 0;
+}

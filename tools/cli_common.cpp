@@ -1,0 +1,83 @@
+// SPDX-License-Identifier: MIT
+#include "cli_common.hpp"
+
+#include <chrono>
+#include <map>
+
+#include <spdlog/sinks/basic_file_sink.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+
+#include "aneu/core/error.hpp"
+
+namespace aneu::tools {
+
+spdlog::logger& logger() {
+    static std::shared_ptr<spdlog::logger> l = [] {
+        auto lg = std::make_shared<spdlog::logger>("aneu", std::make_shared<spdlog::sinks::stderr_color_sink_mt>());
+        lg->set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
+        return lg;
+    }();
+    return *l;
+}
+
+void add_logging_options(CLI::App& app, LoggingOptions& o) {
+    app.add_option("--log-level", o.level, "log level: trace, debug, info, warn, error, off")
+        ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
+        ->capture_default_str();
+    app.add_flag("-q,--quiet", o.quiet, "only warnings and errors");
+    app.add_option("--log-file", o.file, "also write the log to this file");
+}
+
+void apply_logging_options(const LoggingOptions& o) {
+    auto& l = logger();
+    l.set_level(o.quiet ? spdlog::level::warn : spdlog::level::from_str(o.level));
+    if (!o.file.empty()) {
+        auto sink = std::make_shared<spdlog::sinks::basic_file_sink_mt>(o.file, false);
+        sink->set_pattern("[%Y-%m-%d %H:%M:%S.%e] [%l] %v");
+        l.sinks().push_back(sink);
+    }
+}
+
+Reporter make_log_reporter() {
+    Reporter r;
+    r.on_message = [](Level lv, const std::string& m) {
+        auto& l = logger();
+        if (lv == Level::WARN) {
+            l.warn(m);
+        } else if (lv == Level::INFO) {
+            l.info(m);
+        } else {
+            l.debug(m);
+        }
+    };
+    auto last = std::make_shared<std::map<std::string, std::chrono::steady_clock::time_point>>();
+    r.on_progress = [last](const std::string& stage, std::int64_t done, std::int64_t total) {
+        const auto now = std::chrono::steady_clock::now();
+        auto it = last->find(stage);
+        const bool due = it == last->end() || now - it->second > std::chrono::milliseconds(500);
+        if (!due && done < total) return;
+        (*last)[stage] = now;
+        const double pct = total > 0 ? 100.0 * static_cast<double>(done) / static_cast<double>(total) : 100.0;
+        logger().info("{}: {}/{} ({:.0f} %)", stage, done, total, pct);
+    };
+    return r;
+}
+
+int run_guarded(const std::string& name, const std::function<void()>& body) {
+    try {
+        body();
+        return 0;
+    } catch (const InputError& e) {
+        logger().flush();
+        fmt::print(stderr, "{}: error: {}\n", name, e.what());
+        return EXIT_INPUT;
+    } catch (const std::exception& e) {
+        logger().flush();
+        fmt::print(stderr, "{}: error: {}\n", name, e.what());
+        return EXIT_PROCESSING;
+    }
+}
+
+std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
+
+}  // namespace aneu::tools

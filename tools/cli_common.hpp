@@ -1,0 +1,44 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Shared plumbing of the command-line tools: logging options, the Reporter that forwards to spdlog,
+// and run_guarded, which owns the mapping from exceptions to exit codes (CONVENTIONS.md §3).
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "aneu/core/reporter.hpp"
+
+namespace aneu::tools {
+
+/// Exit codes: 0 success, 1 processing failure, 2 invalid input or configuration.
+inline constexpr int EXIT_PROCESSING = 1;
+inline constexpr int EXIT_INPUT = 2;
+
+/// The one named logger of the tools ("aneu"), writing to stderr.
+spdlog::logger& logger();
+
+/// Options of every tool: --log-level, --quiet, --log-file.
+struct LoggingOptions {
+    std::string level = "info";
+    bool quiet = false;
+    std::string file;
+};
+void add_logging_options(CLI::App& app, LoggingOptions& o);
+/// Applies the options to logger() (call after parsing).
+void apply_logging_options(const LoggingOptions& o);
+
+/// A Reporter that logs messages and rate-limited progress (every 0.5 s, and at completion).
+Reporter make_log_reporter();
+
+/// Runs `body` for command `name`: an aneu::InputError prints "<name>: error: <message>" and returns 2,
+/// any other aneu::Error or std::exception returns 1; success returns 0.
+int run_guarded(const std::string& name, const std::function<void()>& body);
+
+/// argv as a vector of strings.
+std::vector<std::string> args_of(int argc, char** argv);
+
+}  // namespace aneu::tools
