@@ -55,32 +55,41 @@ void write_tiles(H5::Group& g, const M& W, const Layout& L, Reporter& rep) {
     }
 }
 
+/// Reads whole tiles of /condensed/W_tiles with H5Dread_chunk: W is stored uncompressed in the native
+/// type, one chunk per tile, so each tile is one contiguous read that bypasses HDF5's selection and
+/// conversion machinery (a hyperslab-union read of the same tiles measured ~10x slower).
 struct TileReader {
     H5::DataSet ds;
     Layout L;
-    /// Reads column block J: buf tile k (k ≤ J) = tile (J,k); (k > J) = tile (k,J). b×b row-major each.
-    template <class T>
-    void read_column_block(hsize_t J, std::vector<T>& buf) const {
-        H5::DataSpace fspace = ds.getSpace();
-        const hsize_t start[3] = {tile_index(J, 0), 0, 0}, count[3] = {J + 1, L.b, L.b};
-        fspace.selectHyperslab(H5S_SELECT_SET, count, start);
-        for (hsize_t I = J + 1; I < L.nb; ++I) {
-            const hsize_t s1[3] = {tile_index(I, J), 0, 0}, c1[3] = {1, L.b, L.b};
-            fspace.selectHyperslab(H5S_SELECT_OR, c1, s1);
+    bool f32 = true;  ///< stored type: float32 (else float64)
+
+    template <class S>
+    void read_tile(hsize_t t, S* dst) const {
+        const hsize_t offset[3] = {t, 0, 0};
+        std::uint32_t filters = 0;
+        if (H5Dread_chunk(ds.getId(), H5P_DEFAULT, offset, &filters, dst) < 0) {
+            throw H5::DataSetIException("read_tile", "H5Dread_chunk failed for tile " + std::to_string(t));
         }
-        const hsize_t mdims[3] = {L.nb, L.b, L.b};
-        H5::DataSpace mspace(3, mdims);
-        buf.resize(L.nb * L.b * L.b);
-        ds.read(buf.data(), h5::pred<T>(), mspace, fspace);
+    }
+    /// Reads column block J in stored type S: buf tile k (k ≤ J) = tile (J,k); (k > J) = tile (k,J).
+    template <class S>
+    void read_column_block(hsize_t J, std::vector<S>& buf) const {
+        const hsize_t bb = L.b * L.b;
+        buf.resize(L.nb * bb);
+        for (hsize_t k = 0; k < L.nb; ++k) read_tile(k <= J ? tile_index(J, k) : tile_index(k, J), buf.data() + k * bb);
     }
     /// W(i, J·b + c) for all i from a column block buffer.
-    template <class T, class Out>
-    void extract_column(const std::vector<T>& buf, hsize_t J, hsize_t c, Out&& out) const {
+    template <class S, class Out>
+    void extract_column(const std::vector<S>& buf, hsize_t J, hsize_t c, Out&& out) const {
         const hsize_t bb = L.b * L.b;
         for (hsize_t I = 0; I < L.nb; ++I) {
-            const T* t = buf.data() + I * bb;
-            for (hsize_t r = 0; r < L.b && I * L.b + r < L.n; ++r) {
-                out(static_cast<Eigen::Index>(I * L.b + r)) = I <= J ? t[c * L.b + r] : t[r * L.b + c];
+            const S* t = buf.data() + I * bb;
+            const hsize_t rows = std::min(L.b, L.n - I * L.b);
+            const auto base = static_cast<Eigen::Index>(I * L.b);
+            if (I <= J) {
+                for (hsize_t r = 0; r < rows; ++r) out(base + static_cast<Eigen::Index>(r)) = t[c * L.b + r];
+            } else {
+                for (hsize_t r = 0; r < rows; ++r) out(base + static_cast<Eigen::Index>(r)) = t[r * L.b + c];
             }
         }
     }
@@ -94,7 +103,21 @@ TileReader open_tiles(const H5::H5File& f, const h5::Ctx& ctx, Eigen::Index n) {
     const auto b = h5::read_attr_int(g, "/condensed", "tile_size", ctx);
     if (b <= 0) throw InputError(ctx.where("/condensed") + ": tile_size = " + std::to_string(b) + ", expected > 0");
     TileReader tr{g.openDataSet("W_tiles"), Layout(static_cast<hsize_t>(n), static_cast<hsize_t>(b))};
-    if (tr.ds.getTypeClass() != H5T_FLOAT) throw InputError(ctx.where("/condensed/W_tiles") + ": expected float data");
+    const H5::DataType t = tr.ds.getDataType();
+    if (t == H5::PredType::NATIVE_FLOAT) {
+        tr.f32 = true;
+    } else if (t == H5::PredType::NATIVE_DOUBLE) {
+        tr.f32 = false;
+    } else {
+        throw InputError(ctx.where("/condensed/W_tiles") + ": expected native float32 or float64 data");
+    }
+    const H5::DSetCreatPropList pl = tr.ds.getCreatePlist();
+    hsize_t chunk[3] = {0, 0, 0};
+    if (pl.getLayout() != H5D_CHUNKED || pl.getChunk(3, chunk) != 3 || chunk[0] != 1 ||
+        chunk[1] != static_cast<hsize_t>(b) || chunk[2] != static_cast<hsize_t>(b) || pl.getNfilters() != 0) {
+        throw InputError(ctx.where("/condensed/W_tiles") + ": expected one uncompressed chunk per tile of " +
+                         std::to_string(b) + "x" + std::to_string(b));
+    }
     H5::DataSpace sp = tr.ds.getSpace();
     std::vector<hsize_t> d(3, 0);
     if (sp.getSimpleExtentNdims() != 3) throw InputError(ctx.where("/condensed/W_tiles") + ": expected rank 3");
@@ -127,15 +150,22 @@ Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> read_columns(const std::string&
         by_block[static_cast<hsize_t>(cols[q]) / tr.L.b].push_back(q);
     }
     Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> out(n, static_cast<Eigen::Index>(cols.size()));
-    std::vector<T> buf;
-    try {
+    auto gather = [&](auto stored_zero) {
+        std::vector<decltype(stored_zero)> buf;
         for (const auto& [J, qs] : by_block) {
             tr.read_column_block(J, buf);
             for (size_t q : qs) {
-                auto col = out.col(static_cast<Eigen::Index>(q));
+                T* col = out.col(static_cast<Eigen::Index>(q)).data();
                 tr.extract_column(buf, J, static_cast<hsize_t>(cols[q]) % tr.L.b,
-                                  [&](Eigen::Index i) -> T& { return col(i); });
+                                  [col](Eigen::Index i) -> T& { return col[i]; });
             }
+        }
+    };
+    try {
+        if (tr.f32) {
+            gather(0.0f);
+        } else {
+            gather(0.0);
         }
     } catch (const H5::Exception& e) {
         throw InputError(path + ": /condensed/W_tiles: read failed (HDF5: " + h5::last_error_detail() + ")");
@@ -147,25 +177,27 @@ template <class T>
 void read_full(const TileReader& tr, Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>& W) {
     const auto n = static_cast<Eigen::Index>(tr.L.n);
     W.resize(n, n);
-    std::vector<T> buf;
-    const hsize_t b = tr.L.b, bb = b * b;
-    for (hsize_t I = 0; I < tr.L.nb; ++I) {
-        H5::DataSpace fspace = tr.ds.getSpace();
-        const hsize_t start[3] = {tile_index(I, 0), 0, 0}, count[3] = {I + 1, b, b};
-        fspace.selectHyperslab(H5S_SELECT_SET, count, start);
-        H5::DataSpace mspace(3, count);
-        buf.resize((I + 1) * bb);
-        tr.ds.read(buf.data(), h5::pred<T>(), mspace, fspace);
-        for (hsize_t J = 0; J <= I; ++J) {
-            for (hsize_t r = 0; r < b && I * b + r < tr.L.n; ++r) {
-                for (hsize_t c = 0; c < b && J * b + c < tr.L.n; ++c) {
-                    const T v = buf[J * bb + r * b + c];
-                    const auto gi = static_cast<Eigen::Index>(I * b + r), gj = static_cast<Eigen::Index>(J * b + c);
-                    W(gi, gj) = v;
-                    W(gj, gi) = v;
+    const hsize_t b = tr.L.b;
+    auto fill = [&](auto stored_zero) {
+        std::vector<decltype(stored_zero)> t(b * b);
+        for (hsize_t I = 0; I < tr.L.nb; ++I) {
+            for (hsize_t J = 0; J <= I; ++J) {
+                tr.read_tile(tile_index(I, J), t.data());
+                for (hsize_t r = 0; r < b && I * b + r < tr.L.n; ++r) {
+                    for (hsize_t c = 0; c < b && J * b + c < tr.L.n; ++c) {
+                        const T v = static_cast<T>(t[r * b + c]);
+                        const auto gi = static_cast<Eigen::Index>(I * b + r), gj = static_cast<Eigen::Index>(J * b + c);
+                        W(gi, gj) = v;
+                        W(gj, gi) = v;
+                    }
                 }
             }
         }
+    };
+    if (tr.f32) {
+        fill(0.0f);
+    } else {
+        fill(0.0);
     }
 }
 

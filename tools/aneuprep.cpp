@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
     app.fallthrough();  // --log-level/--quiet/--log-file are accepted after the subcommand too
     app.set_version_flag("--version", std::string("aneuprep ") + aneu::tool_version() + " (" +
                                           aneu::git_revision() + ")");
+    app.set_config("--config", "", "TOML file with one [section] per subcommand; command-line flags override it");
+    app.allow_config_extras(CLI::config_extras_mode::error);
     LoggingOptions log;
     add_logging_options(app, log);
     const auto args = args_of(argc, argv);
@@ -36,6 +38,13 @@ int main(int argc, char** argv) {
 
     try {
         app.parse(argc, argv);
+    } catch (const CLI::ConfigError& e) {
+        // CLI11 says "INI was not able to parse phantom.seeed": name the file and what is expected.
+        const auto* cfg = app.get_config_ptr();
+        fmt::print(stderr, "aneuprep: error: config file '{}': {} (keys are the subcommand's long option names, "
+                           "e.g. [phantom] spacing-mm = [0.4, 0.4, 0.5])\n",
+                   cfg ? cfg->as<std::string>() : std::string("?"), e.what());
+        return e.get_exit_code();
     } catch (const CLI::ParseError& e) {
         return app.exit(e);
     }
