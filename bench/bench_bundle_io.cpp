@@ -32,7 +32,9 @@ aneu::Bundle make_bundle(long n) {
         c.dof_axis[i] = static_cast<int>(i % 3);
     }
     c.precision = aneu::Precision::FLOAT32;
-    c.W32 = Eigen::MatrixXf::Random(n, n);  // values do not matter for I/O speed
+    c.W32 = aneu::TiledSymmetric<float>(n, 128);
+    float v = 0.f;
+    for (auto& x : c.W32.data()) x = (v += 1e-3f);  // values do not matter for I/O speed
     c.method = "benchmark";
     b.condensed = std::move(c);
     return b;

@@ -426,7 +426,7 @@ void write_bundle(const std::string& path, const Bundle& b, const BundleWriteOpt
             rep.progress("write", ++done, total);
         }
         if (b.condensed) {
-            detail::write_condensed_group(f, *b.condensed, opt.W_tile_size, rep);
+            detail::write_condensed_group(f, *b.condensed, rep);
             rep.progress("write", ++done, total);
         }
         f.close();

@@ -20,38 +20,23 @@ struct Layout {
     hsize_t tiles() const { return nb * (nb + 1) / 2; }
 };
 
-template <class S, class M>
-void write_tiles(H5::Group& g, const M& W, const Layout& L, Reporter& rep) {
-    const hsize_t dims[3] = {L.tiles(), L.b, L.b};
+template <class S>
+void write_tiles(H5::Group& g, const TiledSymmetric<S>& W, Reporter& rep) {
+    const auto b = static_cast<hsize_t>(W.tile_size()), nb = static_cast<hsize_t>(W.tiles_per_side());
+    const hsize_t dims[3] = {static_cast<hsize_t>(W.tile_count()), b, b};
     H5::DataSpace fspace(3, dims);
     H5::DSetCreatPropList plist;
-    const hsize_t chunk[3] = {1, L.b, L.b};
+    const hsize_t chunk[3] = {1, b, b};
     plist.setChunk(3, chunk);  // no compression: dense noise-like floats barely compress, loads must be fast
     H5::DataSet ds = g.createDataSet("W_tiles", h5::pred<S>(), fspace, plist);
     h5::write_attr(ds, "units", std::string("mm/N"));
-    const auto n = static_cast<Eigen::Index>(L.n);
-    const auto b = static_cast<Eigen::Index>(L.b);
-    std::vector<S> buf;
-    for (hsize_t I = 0; I < L.nb; ++I) {
-        // Tile row I = tiles (I,0..I), contiguous in the file: one write per tile row.
-        buf.assign((I + 1) * L.b * L.b, S(0));
-        for (hsize_t J = 0; J <= I; ++J) {
-            S* t = buf.data() + J * L.b * L.b;
-            for (Eigen::Index r = 0; r < b; ++r) {
-                const Eigen::Index gi = static_cast<Eigen::Index>(I) * b + r;
-                if (gi >= n) break;
-                for (Eigen::Index c = 0; c < b; ++c) {
-                    const Eigen::Index gj = static_cast<Eigen::Index>(J) * b + c;
-                    if (gj >= n) break;
-                    t[r * b + c] = static_cast<S>(W(std::max(gi, gj), std::min(gi, gj)));  // lower triangle
-                }
-            }
-        }
-        const hsize_t start[3] = {tile_index(I, 0), 0, 0}, count[3] = {I + 1, L.b, L.b};
+    for (hsize_t I = 0; I < nb; ++I) {
+        // Tile row I = tiles (I,0..I): contiguous in memory and in the file.
+        const hsize_t start[3] = {tile_index(I, 0), 0, 0}, count[3] = {I + 1, b, b};
         fspace.selectHyperslab(H5S_SELECT_SET, count, start);
         H5::DataSpace mspace(3, count);
-        ds.write(buf.data(), h5::pred<S>(), mspace, fspace);
-        rep.progress("write W", static_cast<std::int64_t>(I + 1), static_cast<std::int64_t>(L.nb));
+        ds.write(W.data().data() + tile_index(I, 0) * b * b, h5::pred<S>(), mspace, fspace);
+        rep.progress("write W", static_cast<std::int64_t>(I + 1), static_cast<std::int64_t>(nb));
     }
 }
 
@@ -173,47 +158,26 @@ Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> read_columns(const std::string&
     return out;
 }
 
-template <class T>
-void read_full(const TileReader& tr, Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>& W) {
-    const auto n = static_cast<Eigen::Index>(tr.L.n);
-    W.resize(n, n);
-    const hsize_t b = tr.L.b;
-    auto fill = [&](auto stored_zero) {
-        std::vector<decltype(stored_zero)> t(b * b);
-        for (hsize_t I = 0; I < tr.L.nb; ++I) {
-            for (hsize_t J = 0; J <= I; ++J) {
-                tr.read_tile(tile_index(I, J), t.data());
-                for (hsize_t r = 0; r < b && I * b + r < tr.L.n; ++r) {
-                    for (hsize_t c = 0; c < b && J * b + c < tr.L.n; ++c) {
-                        const T v = static_cast<T>(t[r * b + c]);
-                        const auto gi = static_cast<Eigen::Index>(I * b + r), gj = static_cast<Eigen::Index>(J * b + c);
-                        W(gi, gj) = v;
-                        W(gj, gi) = v;
-                    }
-                }
-            }
-        }
-    };
-    if (tr.f32) {
-        fill(0.0f);
-    } else {
-        fill(0.0);
-    }
+template <class S>
+void read_full(const TileReader& tr, TiledSymmetric<S>& W) {
+    W = TiledSymmetric<S>(static_cast<Eigen::Index>(tr.L.n), static_cast<Eigen::Index>(tr.L.b));
+    const hsize_t bb = tr.L.b * tr.L.b;
+    for (hsize_t t = 0; t < tr.L.tiles(); ++t) tr.read_tile(t, W.data().data() + t * bb);
 }
 
 }  // namespace
 
-void write_condensed_group(H5::H5File& f, const CondensedData& c, int tile, Reporter& rep) {
+void write_condensed_group(H5::H5File& f, const CondensedData& c, Reporter& rep) {
     const Eigen::Index n = c.size();
     if (n == 0) throw InputError("write_bundle: condensed: empty DOF set");
-    if (tile <= 0) throw InputError("write_bundle: W_tile_size = " + std::to_string(tile) + ", expected > 0");
     if (c.dof_axis.size() != n) throw InputError("write_bundle: condensed: dof_axis size != dof_node size");
     const bool f32 = c.precision == Precision::FLOAT32;
-    const Eigen::Index rows = f32 ? c.W32.rows() : c.W64.rows(), colsW = f32 ? c.W32.cols() : c.W64.cols();
-    if (rows != n || colsW != n) {
-        throw InputError("write_bundle: condensed: W" + std::string(f32 ? "32" : "64") + " is " +
-                         std::to_string(rows) + "x" + std::to_string(colsW) + ", expected " + std::to_string(n) +
-                         "x" + std::to_string(n) + " (the size of the DOF map)");
+    const Eigen::Index size = f32 ? c.W32.size() : c.W64.size();
+    const Eigen::Index tile = f32 ? c.W32.tile_size() : c.W64.tile_size();
+    if (size != n || tile <= 0) {
+        throw InputError("write_bundle: condensed: W" + std::string(f32 ? "32" : "64") + " is " + std::to_string(size) +
+                         "x" + std::to_string(size) + ", expected " + std::to_string(n) + "x" + std::to_string(n) +
+                         " (the size of the DOF map)");
     }
     for (Eigen::Index i = 0; i < n; ++i) {
         if (c.dof_axis[i] < 0 || c.dof_axis[i] > 2 || c.dof_node[i] < 0) {
@@ -231,11 +195,10 @@ void write_condensed_group(H5::H5File& f, const CondensedData& c, int tile, Repo
     h5::write_array(g, "dof_axis", c.dof_axis.data(), {static_cast<hsize_t>(n)}, "", 4);
     H5::Group dg = g.createGroup("diagnostics");
     for (const auto& [k, v] : c.diagnostics) h5::write_attr(dg, k, v);
-    const Layout L(static_cast<hsize_t>(n), static_cast<hsize_t>(tile));
     if (f32) {
-        write_tiles<float>(g, c.W32, L, rep);
+        write_tiles(g, c.W32, rep);
     } else {
-        write_tiles<double>(g, c.W64, L, rep);
+        write_tiles(g, c.W64, rep);
     }
 }
 
@@ -261,8 +224,12 @@ CondensedData read_condensed_group(const H5::H5File& f, const h5::Ctx& ctx, bool
         c.diagnostics.emplace_back(k, h5::read_attr_double(dg, "/condensed/diagnostics", k, ctx));
     }
     const TileReader tr = open_tiles(f, ctx, static_cast<Eigen::Index>(n));  // validates the shape
+    if (tr.f32 != (c.precision == Precision::FLOAT32)) {
+        throw InputError(ctx.where("/condensed") + ": precision = \"" + prec + "\" but W_tiles holds " +
+                         (tr.f32 ? "float32" : "float64"));
+    }
     if (with_W) {
-        if (c.precision == Precision::FLOAT32) {
+        if (tr.f32) {
             read_full(tr, c.W32);
         } else {
             read_full(tr, c.W64);

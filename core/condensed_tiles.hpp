@@ -10,7 +10,7 @@
 
 namespace aneu::detail {
 
-void write_condensed_group(H5::H5File& f, const CondensedData& c, int tile, Reporter& rep);
+void write_condensed_group(H5::H5File& f, const CondensedData& c, Reporter& rep);
 /// Reads /condensed; W (full symmetric, both triangles filled) only when with_W.
 CondensedData read_condensed_group(const H5::H5File& f, const h5::Ctx& ctx, bool with_W);
 

@@ -46,7 +46,7 @@ inline Eigen::MatrixXd random_spd(int n, unsigned seed) {
 }
 
 /// A bundle with every group present; sizes chosen so that W's edge is not a multiple of the tile size.
-inline Bundle full_bundle(Precision precision, int n_kept = 301, unsigned seed = 7) {
+inline Bundle full_bundle(Precision precision, int n_kept = 301, int tile = 64, unsigned seed = 7) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u(-10.0, 10.0);
     std::uniform_int_distribution<int> pick(0, 99);
@@ -125,9 +125,9 @@ inline Bundle full_bundle(Precision precision, int n_kept = 301, unsigned seed =
     c.precision = precision;
     const Eigen::MatrixXd W = random_spd(n_kept, seed);
     if (precision == Precision::FLOAT32) {
-        c.W32 = W.cast<float>();
+        c.W32 = TiledSymmetric<float>::from_dense(W.cast<float>(), tile);
     } else {
-        c.W64 = W;
+        c.W64 = TiledSymmetric<double>::from_dense(W, tile);
     }
     c.method = "test";
     c.diagnostics = {{"time_s", 0.5}, {"residual", 1e-12}};

@@ -14,6 +14,7 @@
 #include <Eigen/SparseCore>
 
 #include "aneu/core/image_grid.hpp"
+#include "aneu/core/tiled_symmetric.hpp"
 
 namespace aneu {
 
@@ -117,8 +118,8 @@ struct CondensedData {
     Eigen::VectorXi dof_node;    ///< #M: node of row r
     Eigen::VectorXi dof_axis;    ///< #M: axis (0,1,2) of row r
     Precision precision = Precision::FLOAT64;  ///< storage precision; also says which of W64/W32 is set
-    Eigen::MatrixXd W64;         ///< #M×#M [mm/N] when precision = FLOAT64 (only the lower triangle is used)
-    Eigen::MatrixXf W32;         ///< #M×#M [mm/N] when precision = FLOAT32 (only the lower triangle is used)
+    TiledSymmetric<double> W64;  ///< #M×#M [mm/N] when precision = FLOAT64
+    TiledSymmetric<float> W32;   ///< #M×#M [mm/N] when precision = FLOAT32
     std::string method;          ///< e.g. "sparse-cholmod-syrk"
     std::vector<std::pair<std::string, double>> diagnostics;  ///< time_s, peak_memory_bytes, residual, ...
 

@@ -13,7 +13,6 @@ namespace aneu {
 /// How to write a bundle.
 struct BundleWriteOptions {
     int deflate_level = 4;   ///< gzip level for large integer/float datasets (0 = off); W is never compressed
-    int W_tile_size = 128;   ///< edge of the square tiles W is stored in (see write_bundle)
 };
 
 /// Which groups read_bundle loads.
@@ -29,10 +28,9 @@ struct BundleParts {
 /// complete. On any failure (including an exception thrown by `rep.on_progress`, which is how a caller
 /// cancels) the temporary file is removed and an existing file at `path` is left untouched.
 ///
-/// W is stored symmetric as the lower-triangle tiles of size b (W_tile_size): dataset
-/// /condensed/W_tiles [nb(nb+1)/2, b, b], tile (I,J) with I ≥ J at index I(I+1)/2 + J, holding rows
-/// I·b.. and columns J·b.. row-major, zero-padded past #M. One HDF5 chunk per tile, so any set of columns
-/// is read without reading the rest (read_condensed_columns).
+/// W is stored as its TiledSymmetric tiles, in the same order as in memory: dataset
+/// /condensed/W_tiles [nb(nb+1)/2, b, b], one HDF5 chunk per tile, so any set of columns is read without
+/// reading the rest (read_condensed_columns).
 /// @param[in] path  output file (.h5)
 /// @param[in] b     bundle; b.meta.schema_version must be BUNDLE_SCHEMA_VERSION
 /// @throws InputError  inconsistent shapes in b, or the directory does not exist;

@@ -1,0 +1,519 @@
+// SPDX-License-Identifier: MIT
+// W = (K⁻¹)_MM by two routes (REFERENCE.md, "Condensation / inversion"):
+//  SPARSE: CHOLMOD supernodal L Lᵀ = P K Pᵀ with a METIS nested-dissection ordering; Y = L⁻¹ P E_M by a
+//          forward solve that only touches, for each kept DOF, the supernodes on its elimination-tree path;
+//          W = YᵀY accumulated supernode by supernode. Kept DOFs are ordered by pivot, so the kept DOFs
+//          below a supernode form one contiguous range and its update W[r,r] += Y_sᵀY_s is a SYRK into a
+//          contiguous block of tiles (no scatter).
+//  DENSE:  S = K_MM − K_MI K_II⁻¹ K_IM formed densely, then W = S⁻¹ by LAPACK dpotrf + dpotri.
+#include "aneu/fem/condense.hpp"
+
+#include <cblas.h>
+#include <cholmod.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <memory>
+#include <numeric>
+#include <random>
+#include <sstream>
+#include <string>
+
+#include "aneu/core/error.hpp"
+
+extern "C" {
+void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info);
+void dpotri_(const char* uplo, const int* n, double* a, const int* lda, int* info);
+}
+
+namespace aneu::fem {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::string gb(double bytes) {
+    std::ostringstream o;
+    o.precision(3);
+    o << bytes / 1e9 << " GB";
+    return o.str();
+}
+
+thread_local std::string g_cholmod_error;
+void cholmod_error_handler(int status, const char* file, int line, const char* message) {
+    g_cholmod_error = std::string(message ? message : "?") + " (status " + std::to_string(status) + ", " +
+                      (file ? file : "?") + ":" + std::to_string(line) + ")";
+}
+
+/// RAII owner of a cholmod_common, its factor and its matrices.
+struct Cholmod {
+    cholmod_common c{};
+    cholmod_factor* L = nullptr;
+    cholmod_sparse* A = nullptr;
+    Cholmod() {
+        cholmod_start(&c);
+        c.print = 0;
+        c.error_handler = cholmod_error_handler;
+        c.supernodal = CHOLMOD_SUPERNODAL;
+        c.nmethods = 1;
+        c.method[0].ordering = CHOLMOD_METIS;
+        c.postorder = 1;
+    }
+    ~Cholmod() {
+        if (L) cholmod_free_factor(&L, &c);
+        if (A) cholmod_free_sparse(&A, &c);
+        cholmod_finish(&c);
+    }
+    Cholmod(const Cholmod&) = delete;
+    Cholmod& operator=(const Cholmod&) = delete;
+};
+
+/// Lower triangle of K restricted to `keep` (old DOF -> new index, −1 dropped) as a CHOLMOD matrix.
+cholmod_sparse* lower_csc(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const std::vector<int>& newidx, int n,
+                          cholmod_common* c) {
+    // K is symmetric, so its CSR rows are CSC columns; entries (i, j ≥ i) of a row are column i's lower part.
+    std::int64_t nnz = 0;
+    for (Eigen::Index i = 0; i < K.rows(); ++i) {
+        if (newidx[static_cast<size_t>(i)] < 0) continue;
+        for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, i); it; ++it) {
+            const int j = newidx[static_cast<size_t>(it.col())];
+            nnz += j >= newidx[static_cast<size_t>(i)];
+        }
+    }
+    cholmod_sparse* A = cholmod_allocate_sparse(static_cast<size_t>(n), static_cast<size_t>(n), static_cast<size_t>(nnz), 1,
+                                                1, -1, CHOLMOD_REAL, c);
+    if (!A) throw NumericalError("condense: cannot allocate the CHOLMOD matrix (" + g_cholmod_error + ")");
+    auto* Ap = static_cast<int*>(A->p);
+    auto* Ai = static_cast<int*>(A->i);
+    auto* Ax = static_cast<double*>(A->x);
+    int k = 0;
+    for (Eigen::Index i = 0; i < K.rows(); ++i) {
+        const int col = newidx[static_cast<size_t>(i)];
+        if (col < 0) continue;
+        Ap[col] = k;
+        for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, i); it; ++it) {
+            const int row = newidx[static_cast<size_t>(it.col())];
+            if (row >= col) {
+                Ai[k] = row;
+                Ax[k++] = it.value();
+            }
+        }
+    }
+    Ap[n] = k;
+    return A;
+}
+
+void factorize(Cholmod& ch, const std::string& what) {
+    ch.L = cholmod_analyze(ch.A, &ch.c);
+    if (!ch.L) throw NumericalError("condense: CHOLMOD analysis of " + what + " failed: " + g_cholmod_error);
+}
+
+void factorize_numeric(Cholmod& ch, const std::string& what) {
+    cholmod_factorize(ch.A, ch.L, &ch.c);
+    if (ch.c.status == CHOLMOD_NOT_POSDEF) {
+        throw NumericalError("condense: " + what + " is not positive definite (CHOLMOD failed at column " +
+                             std::to_string(ch.L->minor) + " of " + std::to_string(ch.L->n) +
+                             "): check the fixed nodes and the materials");
+    }
+    if (ch.c.status < CHOLMOD_OK) throw NumericalError("condense: CHOLMOD factorization of " + what + " failed: " + g_cholmod_error);
+}
+
+/// Supernodal structure of the factor, with its elimination tree and subtree column ranges.
+struct Supernodes {
+    int nsuper = 0;
+    const int *super = nullptr, *pi = nullptr, *px = nullptr, *s = nullptr;
+    const double* x = nullptr;
+    std::vector<int> super_of;  ///< supernode of each pivot column
+    std::vector<int> first;     ///< first pivot column of each supernode's subtree
+    explicit Supernodes(const cholmod_factor* L) {
+        nsuper = static_cast<int>(L->nsuper);
+        super = static_cast<const int*>(L->super);
+        pi = static_cast<const int*>(L->pi);
+        px = static_cast<const int*>(L->px);
+        s = static_cast<const int*>(L->s);
+        x = static_cast<const double*>(L->x);
+        super_of.resize(L->n);
+        first.resize(static_cast<size_t>(nsuper));
+        for (int k = 0; k < nsuper; ++k) {
+            for (int c = super[k]; c < super[k + 1]; ++c) super_of[static_cast<size_t>(c)] = k;
+            first[static_cast<size_t>(k)] = super[k];
+        }
+        for (int k = 0; k < nsuper; ++k) {  // children precede parents: propagate subtree starts upward
+            const int p = parent(k);
+            if (p >= 0) first[static_cast<size_t>(p)] = std::min(first[static_cast<size_t>(p)], first[static_cast<size_t>(k)]);
+        }
+    }
+    int ncols(int k) const { return super[k + 1] - super[k]; }
+    int nrows(int k) const { return pi[k + 1] - pi[k]; }
+    int parent(int k) const { return nrows(k) > ncols(k) ? super_of[static_cast<size_t>(s[pi[k] + ncols(k)])] : -1; }
+};
+
+/// Range [lo, hi) of kept-DOF positions (sorted by pivot) whose pivot lies in [a, b).
+std::pair<int, int> kept_range(const std::vector<int>& pivots_sorted, int a, int b) {
+    const auto lo = std::lower_bound(pivots_sorted.begin(), pivots_sorted.end(), a) - pivots_sorted.begin();
+    const auto hi = std::lower_bound(pivots_sorted.begin(), pivots_sorted.end(), b) - pivots_sorted.begin();
+    return {static_cast<int>(lo), static_cast<int>(hi)};
+}
+
+/// Peak bytes of the live Y blocks and GEMM buffer of the forward solve, from the symbolic structure.
+double predict_y_peak(const Supernodes& sn, const std::vector<int>& piv) {
+    std::vector<char> alive(static_cast<size_t>(sn.nsuper), 0);
+    double live = 0, peak = 0;
+    auto block = [&](int t) {
+        const auto [lo, hi] = kept_range(piv, sn.first[static_cast<size_t>(t)], sn.super[t + 1]);
+        return 8.0 * sn.ncols(t) * (hi - lo);
+    };
+    for (int k = 0; k < sn.nsuper; ++k) {
+        const auto [lo, hi] = kept_range(piv, sn.first[static_cast<size_t>(k)], sn.super[k + 1]);
+        if (hi == lo) continue;
+        if (!alive[static_cast<size_t>(k)]) {
+            alive[static_cast<size_t>(k)] = 1;
+            live += block(k);
+        }
+        for (int r = sn.pi[k] + sn.ncols(k); r < sn.pi[k + 1]; ++r) {
+            const int t = sn.super_of[static_cast<size_t>(sn.s[r])];
+            if (!alive[static_cast<size_t>(t)]) {
+                alive[static_cast<size_t>(t)] = 1;
+                live += block(t);
+            }
+        }
+        peak = std::max(peak, live + 8.0 * (sn.nrows(k) - sn.ncols(k)) * (hi - lo));
+        live -= block(k);
+    }
+    return peak;
+}
+
+/// W[lo:hi, lo:hi] += AᵀA for A = ns×(hi−lo) column-major (ld ns), into the tiles of W. Returns flops.
+double syrk_into_tiles(TiledSymmetric<double>& W, int lo, int hi, int ns, const double* A) {
+    const int b = static_cast<int>(W.tile_size());
+    double flops = 0;
+    for (int I = lo / b; I <= (hi - 1) / b; ++I) {
+        const int r0 = std::max(lo, I * b) - I * b, r1 = std::min(hi, I * b + b) - I * b;
+        const int cI = I * b + r0 - lo;
+        for (int J = lo / b; J <= I; ++J) {
+            const int c0 = std::max(lo, J * b) - J * b, c1 = std::min(hi, J * b + b) - J * b;
+            const int cJ = J * b + c0 - lo;
+            double* C = W.tile(I, J);
+            if (I == J) {  // column-major view of the row-major tile: its upper part is the tile's lower part
+                cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, r1 - r0, ns, 1.0, A + static_cast<std::int64_t>(cI) * ns, ns,
+                            1.0, C + r0 * b + r0, b);
+                flops += 1.0 * (r1 - r0) * (r1 - r0 + 1) * ns;
+            } else {
+                cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, c1 - c0, r1 - r0, ns, 1.0,
+                            A + static_cast<std::int64_t>(cJ) * ns, ns, A + static_cast<std::int64_t>(cI) * ns, ns, 1.0,
+                            C + r0 * b + c0, b);
+                flops += 2.0 * (c1 - c0) * (r1 - r0) * ns;
+            }
+        }
+    }
+    return flops;
+}
+
+struct Timing {
+    double factor_s = 0, solve_s = 0, flops = 0;
+};
+
+/// SPARSE route. Returns W in pivot order; `order` receives the kept positions (into kept_free) per row.
+TiledSymmetric<double> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, int tile, std::vector<int>& order,
+                                double& y_peak_bytes, Timing& tm, Reporter& rep) {
+    const Supernodes sn(ch.L);
+    const int* Perm = static_cast<const int*>(ch.L->Perm);
+    std::vector<int> inv(ch.L->n);
+    for (size_t k = 0; k < ch.L->n; ++k) inv[static_cast<size_t>(Perm[k])] = static_cast<int>(k);
+    order.resize(kept_free.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return inv[static_cast<size_t>(kept_free[static_cast<size_t>(a)])] < inv[static_cast<size_t>(kept_free[static_cast<size_t>(b)])]; });
+    std::vector<int> piv(order.size());
+    for (size_t q = 0; q < order.size(); ++q) piv[q] = inv[static_cast<size_t>(kept_free[static_cast<size_t>(order[q])])];
+    y_peak_bytes = predict_y_peak(sn, piv);
+
+    const auto t0 = Clock::now();
+    const int m = static_cast<int>(order.size());
+    TiledSymmetric<double> W(m, tile);
+    std::vector<std::vector<double>> Y(static_cast<size_t>(sn.nsuper));
+    std::vector<double> U;
+    auto block = [&](int t, int& lo, int& hi) -> std::vector<double>& {
+        std::tie(lo, hi) = kept_range(piv, sn.first[static_cast<size_t>(t)], sn.super[t + 1]);
+        auto& B = Y[static_cast<size_t>(t)];
+        if (B.empty()) B.assign(static_cast<size_t>(sn.ncols(t)) * static_cast<size_t>(hi - lo), 0.0);
+        return B;
+    };
+    for (int k = 0; k < sn.nsuper; ++k) {
+        int lo = 0, hi = 0;
+        std::tie(lo, hi) = kept_range(piv, sn.first[static_cast<size_t>(k)], sn.super[k + 1]);
+        if (hi == lo) continue;
+        const int ns = sn.ncols(k), nsrow = sn.nrows(k), nrb = nsrow - ns, mk = hi - lo;
+        std::vector<double>& B = block(k, lo, hi);
+        // Right-hand side: the unit entries of the kept DOFs whose pivot is in this supernode.
+        for (int q = kept_range(piv, sn.super[k], sn.super[k + 1]).first; q < hi; ++q) {
+            B[static_cast<size_t>(piv[static_cast<size_t>(q)] - sn.super[k]) + static_cast<size_t>(q - lo) * ns] += 1.0;
+        }
+        const double* Lk = sn.x + sn.px[k];
+        cblas_dtrsm(CblasColMajor, CblasLeft, CblasLower, CblasNoTrans, CblasNonUnit, ns, mk, 1.0, Lk, nsrow, B.data(), ns);
+        tm.flops += 1.0 * ns * ns * mk;
+        if (nrb > 0) {
+            U.resize(static_cast<size_t>(nrb) * static_cast<size_t>(mk));
+            cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, nrb, mk, ns, 1.0, Lk + ns, nsrow, B.data(), ns, 0.0,
+                        U.data(), nrb);
+            tm.flops += 2.0 * nrb * ns * mk;
+            // Scatter −U into the ancestors' blocks, one run of rows per ancestor supernode.
+            const int* rows = sn.s + sn.pi[k] + ns;
+            for (int r = 0; r < nrb;) {
+                const int t = sn.super_of[static_cast<size_t>(rows[r])];
+                int r_end = r;
+                while (r_end < nrb && rows[r_end] < sn.super[t + 1]) ++r_end;
+                int tlo = 0, thi = 0;
+                std::vector<double>& Bt = block(t, tlo, thi);
+                const int nst = sn.ncols(t), off = lo - tlo;
+                for (int c = 0; c < mk; ++c) {
+                    double* dst = Bt.data() + static_cast<size_t>(c + off) * nst - sn.super[t];
+                    const double* src = U.data() + static_cast<size_t>(c) * nrb;
+                    for (int rr = r; rr < r_end; ++rr) dst[rows[rr]] -= src[rr];
+                }
+                r = r_end;
+            }
+        }
+        tm.flops += syrk_into_tiles(W, lo, hi, ns, B.data());
+        std::vector<double>().swap(B);
+        if (k % 64 == 0) rep.progress("condense", k, sn.nsuper);
+    }
+    W.symmetrize_diagonal_tiles();
+    tm.solve_s = since(t0);
+    rep.progress("condense", sn.nsuper, sn.nsuper);
+    return W;
+}
+
+/// DENSE route: S = K_MM − K_MI K_II⁻¹ K_IM, W = S⁻¹ (LAPACK), in the order of kept_free.
+TiledSymmetric<double> dense_w(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const std::vector<int>& free_dofs,
+                               const std::vector<int>& kept_free, int tile, Timing& tm, Reporter& rep) {
+    const int nf = static_cast<int>(free_dofs.size()), m = static_cast<int>(kept_free.size());
+    std::vector<int> kpos(static_cast<size_t>(nf), -1), ipos(static_cast<size_t>(nf), -1);
+    for (int q = 0; q < m; ++q) kpos[static_cast<size_t>(kept_free[static_cast<size_t>(q)])] = q;
+    int ni = 0;
+    for (int f = 0; f < nf; ++f)
+        if (kpos[static_cast<size_t>(f)] < 0) ipos[static_cast<size_t>(f)] = ni++;
+    // Old DOF -> interior index, and old DOF -> kept index.
+    std::vector<int> to_i(static_cast<size_t>(K.rows()), -1), to_m(static_cast<size_t>(K.rows()), -1);
+    for (int f = 0; f < nf; ++f) {
+        to_i[static_cast<size_t>(free_dofs[static_cast<size_t>(f)])] = ipos[static_cast<size_t>(f)];
+        to_m[static_cast<size_t>(free_dofs[static_cast<size_t>(f)])] = kpos[static_cast<size_t>(f)];
+    }
+    const auto t0 = Clock::now();
+    Eigen::MatrixXd S = Eigen::MatrixXd::Zero(m, m);
+    Eigen::MatrixXd KIM = Eigen::MatrixXd::Zero(ni, m);
+    for (Eigen::Index r = 0; r < K.rows(); ++r) {
+        const int rm = to_m[static_cast<size_t>(r)], ri = to_i[static_cast<size_t>(r)];
+        if (rm < 0 && ri < 0) continue;
+        for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, r); it; ++it) {
+            const int cm = to_m[static_cast<size_t>(it.col())];
+            if (cm < 0) continue;
+            if (rm >= 0) S(rm, cm) = it.value();
+            if (ri >= 0) KIM(ri, cm) = it.value();
+        }
+    }
+    if (ni > 0) {
+        Cholmod ch;
+        ch.A = lower_csc(K, to_i, ni, &ch.c);
+        factorize(ch, "K_II");
+        factorize_numeric(ch, "K_II (the interior block)");
+        tm.factor_s += since(t0);
+        constexpr int BLOCK = 256;
+        for (int c0 = 0; c0 < m; c0 += BLOCK) {
+            const int nc = std::min(BLOCK, m - c0);
+            cholmod_dense* Bd = cholmod_allocate_dense(static_cast<size_t>(ni), static_cast<size_t>(nc), static_cast<size_t>(ni), CHOLMOD_REAL, &ch.c);
+            std::copy(KIM.data() + static_cast<std::int64_t>(c0) * ni, KIM.data() + static_cast<std::int64_t>(c0 + nc) * ni, static_cast<double*>(Bd->x));
+            cholmod_dense* X = cholmod_solve(CHOLMOD_A, ch.L, Bd, &ch.c);
+            const Eigen::Map<const Eigen::MatrixXd> Xm(static_cast<const double*>(X->x), ni, nc);
+            S.middleCols(c0, nc).noalias() -= KIM.transpose() * Xm;
+            cholmod_free_dense(&X, &ch.c);
+            cholmod_free_dense(&Bd, &ch.c);
+            rep.progress("condense (Schur complement)", c0 + nc, m);
+        }
+        tm.flops += 2.0 * ni * m * m;
+    }
+    int info = 0;
+    dpotrf_("L", &m, S.data(), &m, &info);
+    if (info != 0) throw NumericalError("condense: the Schur complement is not positive definite (dpotrf info " + std::to_string(info) + ")");
+    dpotri_("L", &m, S.data(), &m, &info);
+    if (info != 0) throw NumericalError("condense: dpotri failed (info " + std::to_string(info) + ")");
+    tm.flops += 1.0 * m * m * m;  // potrf m³/3 + potri 2m³/3
+    tm.solve_s = since(t0) - tm.factor_s;
+    return TiledSymmetric<double>::from_dense(S, tile);  // reads the lower triangle dpotri wrote
+}
+
+}  // namespace
+
+std::uint64_t available_memory_bytes() {
+    std::ifstream in("/proc/meminfo");
+    std::string key;
+    std::uint64_t kb = 0;
+    std::string unit;
+    while (in >> key >> kb >> unit) {
+        if (key == "MemAvailable:") return kb * 1024;
+    }
+    return 0;
+}
+
+std::uint64_t peak_memory_bytes() {
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    while (std::getline(in, line)) {
+        if (line.rfind("VmHWM:", 0) == 0) return std::stoull(line.substr(6)) * 1024;
+    }
+    return 0;
+}
+
+void validate(const CondenseParams& p) {
+    if (p.tile_size < 8 || p.tile_size > 4096) throw InputError("condense: tile_size = " + std::to_string(p.tile_size) + ": must be in [8, 4096]");
+    if (p.memory_limit_gb < 0) throw InputError("condense: memory_limit_gb must be >= 0 (0 = automatic)");
+    if (p.residual_columns < 0) throw InputError("condense: residual_columns must be >= 0");
+}
+
+CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
+                       const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep) {
+    validate(p);
+    const auto t_all = Clock::now();
+    const Eigen::Index n = K.rows();
+    if (K.cols() != n) throw InputError("condense: K is not square");
+    std::vector<int> state(static_cast<size_t>(n), 0);  // 0 free, 1 fixed, 2 kept
+    for (Eigen::Index i = 0; i < fixed_dofs.size(); ++i) {
+        const int d = fixed_dofs[i];
+        if (d < 0 || d >= n) throw InputError("condense: fixed DOF " + std::to_string(d) + " outside [0," + std::to_string(n) + ")");
+        state[static_cast<size_t>(d)] = 1;
+    }
+    if (kept_dofs.size() == 0) throw InputError("condense: the kept DOF set is empty (no simulated node in the region?)");
+    for (Eigen::Index i = 0; i < kept_dofs.size(); ++i) {
+        const int d = kept_dofs[i];
+        if (d < 0 || d >= n) throw InputError("condense: kept DOF " + std::to_string(d) + " outside [0," + std::to_string(n) + ")");
+        if (state[static_cast<size_t>(d)] == 1) throw InputError("condense: kept DOF " + std::to_string(d) + " is fixed");
+        if (state[static_cast<size_t>(d)] == 2) throw InputError("condense: kept DOF " + std::to_string(d) + " given twice");
+        state[static_cast<size_t>(d)] = 2;
+    }
+    std::vector<int> free_dofs, newidx(static_cast<size_t>(n), -1);
+    for (Eigen::Index d = 0; d < n; ++d) {
+        if (state[static_cast<size_t>(d)] != 1) {
+            newidx[static_cast<size_t>(d)] = static_cast<int>(free_dofs.size());
+            free_dofs.push_back(static_cast<int>(d));
+        }
+    }
+    std::vector<int> kept_free(static_cast<size_t>(kept_dofs.size()));
+    for (Eigen::Index i = 0; i < kept_dofs.size(); ++i) kept_free[static_cast<size_t>(i)] = newidx[static_cast<size_t>(kept_dofs[i])];
+    const int nf = static_cast<int>(free_dofs.size()), m = static_cast<int>(kept_free.size());
+
+    // Factor of K_ff: the SPARSE route's engine, and both routes' independent residual check.
+    Cholmod ch;
+    ch.A = lower_csc(K, newidx, nf, &ch.c);
+    auto t0 = Clock::now();
+    factorize(ch, "K");
+    Timing tm;
+    const double nb = std::ceil(static_cast<double>(m) / p.tile_size);
+    const double w_bytes = 8.0 * nb * (nb + 1) / 2 * p.tile_size * p.tile_size;
+    const double w_out_bytes = p.precision == Precision::FLOAT32 ? w_bytes / 2 : 0.0;
+    double predicted = 8.0 * static_cast<double>(ch.L->xsize > 0 ? ch.L->xsize : 0) + w_bytes + w_out_bytes;
+    std::vector<int> order;
+    double y_peak = 0;
+    if (p.method == CondenseMethod::SPARSE) {
+        // The symbolic analysis fixes the supernodes, so the forward solve's peak can be predicted exactly.
+        const Supernodes sn(ch.L);
+        const int* Perm = static_cast<const int*>(ch.L->Perm);
+        std::vector<int> inv(static_cast<size_t>(nf));
+        for (int k = 0; k < nf; ++k) inv[static_cast<size_t>(Perm[k])] = k;
+        std::vector<int> piv(static_cast<size_t>(m));
+        for (int q = 0; q < m; ++q) piv[static_cast<size_t>(q)] = inv[static_cast<size_t>(kept_free[static_cast<size_t>(q)])];
+        std::sort(piv.begin(), piv.end());
+        predicted += predict_y_peak(sn, piv);
+    } else {
+        predicted += 8.0 * m * static_cast<double>(m) + 8.0 * (nf - m) * static_cast<double>(m);  // S and K_IM
+    }
+    const double avail = static_cast<double>(available_memory_bytes());
+    const double limit = p.memory_limit_gb > 0 ? p.memory_limit_gb * 1e9 : 0.9 * avail;
+    if (limit > 0 && predicted > limit) {
+        throw InputError("condense: W for " + std::to_string(m) + " kept DOFs needs about " + gb(predicted) +
+                         " (W " + gb(w_bytes) + " in double while computed, the factor and work space) but the limit is " +
+                         gb(limit) + "; condense a smaller working region, or raise --memory-limit-gb");
+    }
+    rep.info("condense: " + std::to_string(nf) + " free DOFs, " + std::to_string(m) + " kept; predicted peak " + gb(predicted));
+    factorize_numeric(ch, "K (free DOFs)");
+    tm.factor_s = since(t0);
+    // nnz(L) and its flops, for the report.
+    const double nnzL = static_cast<double>(ch.c.lnz);
+    const double fl_factor = ch.c.fl;
+
+    TiledSymmetric<double> W;
+    std::vector<int> row_kept;  // position in kept_dofs of each row of W
+    if (p.method == CondenseMethod::SPARSE) {
+        W = sparse_w(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+    } else {
+        W = dense_w(K, free_dofs, kept_free, p.tile_size, tm, rep);
+        row_kept.resize(static_cast<size_t>(m));
+        std::iota(row_kept.begin(), row_kept.end(), 0);
+    }
+
+    // Residual check: columns of W against independent sparse solves K_ff x = e_j.
+    double max_rel = 0;
+    if (p.residual_columns > 0) {
+        const int ns = std::min(p.residual_columns, m);
+        cholmod_dense* B = cholmod_zeros(static_cast<size_t>(nf), static_cast<size_t>(ns), CHOLMOD_REAL, &ch.c);
+        std::vector<int> rows(static_cast<size_t>(ns));
+        for (int j = 0; j < ns; ++j) {
+            rows[static_cast<size_t>(j)] = static_cast<int>((static_cast<std::int64_t>(j) * m) / ns + (m / ns) / 2) % m;
+            static_cast<double*>(B->x)[static_cast<std::int64_t>(j) * nf + kept_free[static_cast<size_t>(row_kept[static_cast<size_t>(rows[static_cast<size_t>(j)])])]] = 1.0;
+        }
+        cholmod_dense* X = cholmod_solve(CHOLMOD_A, ch.L, B, &ch.c);
+        const auto* xv = static_cast<const double*>(X->x);
+        for (int j = 0; j < ns; ++j) {
+            double num = 0, den = 0;
+            for (int r = 0; r < m; ++r) {
+                const double exact = xv[static_cast<std::int64_t>(j) * nf + kept_free[static_cast<size_t>(row_kept[static_cast<size_t>(r)])]];
+                const double d = W(r, rows[static_cast<size_t>(j)]) - exact;
+                num += d * d;
+                den += exact * exact;
+            }
+            max_rel = std::max(max_rel, std::sqrt(num / den));
+        }
+        cholmod_free_dense(&X, &ch.c);
+        cholmod_free_dense(&B, &ch.c);
+    }
+    const double rcond = cholmod_rcond(ch.L, &ch.c);
+
+    CondensedData out;
+    out.dof_node.resize(m);
+    out.dof_axis.resize(m);
+    for (int r = 0; r < m; ++r) {
+        const int d = kept_dofs[row_kept[static_cast<size_t>(r)]];
+        out.dof_node[r] = d / 3;
+        out.dof_axis[r] = d % 3;
+    }
+    out.precision = p.precision;
+    out.method = p.method == CondenseMethod::SPARSE ? "sparse: CHOLMOD supernodal LL^T (METIS), forward solve, SYRK per supernode"
+                                                    : "dense: Schur complement, LAPACK dpotrf + dpotri";
+    if (p.precision == Precision::FLOAT32) {
+        out.W32 = W.cast<float>();
+    } else {
+        out.W64 = std::move(W);
+    }
+    const double total = since(t_all);
+    out.diagnostics = {{"n_free_dofs", nf},
+                       {"n_kept_dofs", m},
+                       {"nnz_K_free_lower", static_cast<double>(static_cast<const int*>(ch.A->p)[nf])},
+                       {"nnz_L", nnzL},
+                       {"factor_flops", fl_factor},
+                       {"factor_s", tm.factor_s},
+                       {"w_s", tm.solve_s},
+                       {"w_flops", tm.flops},
+                       {"w_gflops_per_s", tm.solve_s > 0 ? tm.flops / tm.solve_s / 1e9 : 0.0},
+                       {"total_s", total},
+                       {"predicted_peak_bytes", predicted},
+                       {"peak_rss_bytes", static_cast<double>(peak_memory_bytes())},
+                       {"y_peak_bytes", y_peak},
+                       {"residual_max_rel", max_rel},
+                       {"residual_columns", static_cast<double>(std::min(p.residual_columns, m))},
+                       {"rcond_estimate_K", rcond},
+                       {"tile_size", p.tile_size}};
+    return out;
+}
+
+}  // namespace aneu::fem
