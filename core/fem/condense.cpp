@@ -20,6 +20,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "aneu/core/error.hpp"
 
@@ -53,13 +54,13 @@ struct Cholmod {
     cholmod_common c{};
     cholmod_factor* L = nullptr;
     cholmod_sparse* A = nullptr;
-    Cholmod() {
+    explicit Cholmod(const std::string& ordering = "metis") {
         cholmod_start(&c);
         c.print = 0;
         c.error_handler = cholmod_error_handler;
         c.supernodal = CHOLMOD_SUPERNODAL;
         c.nmethods = 1;
-        c.method[0].ordering = CHOLMOD_METIS;
+        c.method[0].ordering = ordering == "amd" ? CHOLMOD_AMD : ordering == "nesdis" ? CHOLMOD_NESDIS : CHOLMOD_METIS;
         c.postorder = 1;
     }
     ~Cholmod() {
@@ -186,8 +187,22 @@ double predict_y_peak(const Supernodes& sn, const std::vector<int>& piv) {
     return peak;
 }
 
+void syrk(int n, int k, const double* A, int lda, double* C, int ldc) {
+    cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, n, k, 1.0, A, lda, 1.0, C, ldc);
+}
+void syrk(int n, int k, const float* A, int lda, float* C, int ldc) {
+    cblas_ssyrk(CblasColMajor, CblasUpper, CblasTrans, n, k, 1.0f, A, lda, 1.0f, C, ldc);
+}
+void gemm_tn(int m, int n, int k, const double* A, const double* B, int ld, double* C, int ldc) {
+    cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, m, n, k, 1.0, A, ld, B, ld, 1.0, C, ldc);
+}
+void gemm_tn(int m, int n, int k, const float* A, const float* B, int ld, float* C, int ldc) {
+    cblas_sgemm(CblasColMajor, CblasTrans, CblasNoTrans, m, n, k, 1.0f, A, ld, B, ld, 1.0f, C, ldc);
+}
+
 /// W[lo:hi, lo:hi] += AᵀA for A = ns×(hi−lo) column-major (ld ns), into the tiles of W. Returns flops.
-double syrk_into_tiles(TiledSymmetric<double>& W, int lo, int hi, int ns, const double* A) {
+template <class T>
+double syrk_into_tiles(TiledSymmetric<T>& W, int lo, int hi, int ns, const T* A) {
     const int b = static_cast<int>(W.tile_size());
     double flops = 0;
     for (int I = lo / b; I <= (hi - 1) / b; ++I) {
@@ -196,15 +211,13 @@ double syrk_into_tiles(TiledSymmetric<double>& W, int lo, int hi, int ns, const 
         for (int J = lo / b; J <= I; ++J) {
             const int c0 = std::max(lo, J * b) - J * b, c1 = std::min(hi, J * b + b) - J * b;
             const int cJ = J * b + c0 - lo;
-            double* C = W.tile(I, J);
+            T* C = W.tile(I, J);
             if (I == J) {  // column-major view of the row-major tile: its upper part is the tile's lower part
-                cblas_dsyrk(CblasColMajor, CblasUpper, CblasTrans, r1 - r0, ns, 1.0, A + static_cast<std::int64_t>(cI) * ns, ns,
-                            1.0, C + r0 * b + r0, b);
+                syrk(r1 - r0, ns, A + static_cast<std::int64_t>(cI) * ns, ns, C + r0 * b + r0, b);
                 flops += 1.0 * (r1 - r0) * (r1 - r0 + 1) * ns;
             } else {
-                cblas_dgemm(CblasColMajor, CblasTrans, CblasNoTrans, c1 - c0, r1 - r0, ns, 1.0,
-                            A + static_cast<std::int64_t>(cJ) * ns, ns, A + static_cast<std::int64_t>(cI) * ns, ns, 1.0,
-                            C + r0 * b + c0, b);
+                gemm_tn(c1 - c0, r1 - r0, ns, A + static_cast<std::int64_t>(cJ) * ns, A + static_cast<std::int64_t>(cI) * ns, ns,
+                        C + r0 * b + c0, b);
                 flops += 2.0 * (c1 - c0) * (r1 - r0) * ns;
             }
         }
@@ -217,7 +230,10 @@ struct Timing {
 };
 
 /// SPARSE route. Returns W in pivot order; `order` receives the kept positions (into kept_free) per row.
-TiledSymmetric<double> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, int tile, std::vector<int>& order,
+/// The factor and Y are double; the final accumulation YᵀY runs in T (float32 storage: SSYRK on Y rounded
+/// to float, which keeps W's relative error near float32 rounding because every term is well scaled).
+template <class T>
+TiledSymmetric<T> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, int tile, std::vector<int>& order,
                                 double& y_peak_bytes, Timing& tm, Reporter& rep) {
     const Supernodes sn(ch.L);
     const int* Perm = static_cast<const int*>(ch.L->Perm);
@@ -232,9 +248,10 @@ TiledSymmetric<double> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, 
 
     const auto t0 = Clock::now();
     const int m = static_cast<int>(order.size());
-    TiledSymmetric<double> W(m, tile);
+    TiledSymmetric<T> W(m, tile);
     std::vector<std::vector<double>> Y(static_cast<size_t>(sn.nsuper));
     std::vector<double> U;
+    std::vector<T> Bt_buf;
     auto block = [&](int t, int& lo, int& hi) -> std::vector<double>& {
         std::tie(lo, hi) = kept_range(piv, sn.first[static_cast<size_t>(t)], sn.super[t + 1]);
         auto& B = Y[static_cast<size_t>(t)];
@@ -276,7 +293,12 @@ TiledSymmetric<double> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, 
                 r = r_end;
             }
         }
-        tm.flops += syrk_into_tiles(W, lo, hi, ns, B.data());
+        if constexpr (std::is_same_v<T, double>) {
+            tm.flops += syrk_into_tiles(W, lo, hi, ns, B.data());
+        } else {
+            Bt_buf.assign(B.begin(), B.end());
+            tm.flops += syrk_into_tiles(W, lo, hi, ns, Bt_buf.data());
+        }
         std::vector<double>().swap(B);
         if (k % 64 == 0) rep.progress("condense", k, sn.nsuper);
     }
@@ -370,6 +392,9 @@ void validate(const CondenseParams& p) {
     if (p.tile_size < 8 || p.tile_size > 4096) throw InputError("condense: tile_size = " + std::to_string(p.tile_size) + ": must be in [8, 4096]");
     if (p.memory_limit_gb < 0) throw InputError("condense: memory_limit_gb must be >= 0 (0 = automatic)");
     if (p.residual_columns < 0) throw InputError("condense: residual_columns must be >= 0");
+    if (p.ordering != "metis" && p.ordering != "nesdis" && p.ordering != "amd") {
+        throw InputError("condense: ordering = '" + p.ordering + "': expected metis, nesdis or amd");
+    }
 }
 
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
@@ -404,14 +429,15 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     const int nf = static_cast<int>(free_dofs.size()), m = static_cast<int>(kept_free.size());
 
     // Factor of K_ff: the SPARSE route's engine, and both routes' independent residual check.
-    Cholmod ch;
+    Cholmod ch(p.ordering);
     ch.A = lower_csc(K, newidx, nf, &ch.c);
     auto t0 = Clock::now();
     factorize(ch, "K");
     Timing tm;
     const double nb = std::ceil(static_cast<double>(m) / p.tile_size);
-    const double w_bytes = 8.0 * nb * (nb + 1) / 2 * p.tile_size * p.tile_size;
-    const double w_out_bytes = p.precision == Precision::FLOAT32 ? w_bytes / 2 : 0.0;
+    const double w_bytes = (p.precision == Precision::FLOAT32 ? 4.0 : 8.0) * nb * (nb + 1) / 2 * p.tile_size * p.tile_size;
+    // The DENSE route forms W in double and converts it.
+    const double w_out_bytes = p.method == CondenseMethod::DENSE && p.precision == Precision::FLOAT32 ? 2.0 * w_bytes : 0.0;
     double predicted = 8.0 * static_cast<double>(ch.L->xsize > 0 ? ch.L->xsize : 0) + w_bytes + w_out_bytes;
     std::vector<int> order;
     double y_peak = 0;
@@ -432,7 +458,7 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     const double limit = p.memory_limit_gb > 0 ? p.memory_limit_gb * 1e9 : 0.9 * avail;
     if (limit > 0 && predicted > limit) {
         throw InputError("condense: W for " + std::to_string(m) + " kept DOFs needs about " + gb(predicted) +
-                         " (W " + gb(w_bytes) + " in double while computed, the factor and work space) but the limit is " +
+                         " (W " + gb(w_bytes) + ", the factor and work space) but the limit is " +
                          gb(limit) + "; condense a smaller working region, or raise --memory-limit-gb");
     }
     rep.info("condense: " + std::to_string(nf) + " free DOFs, " + std::to_string(m) + " kept; predicted peak " + gb(predicted));
@@ -442,15 +468,27 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     const double nnzL = static_cast<double>(ch.c.lnz);
     const double fl_factor = ch.c.fl;
 
-    TiledSymmetric<double> W;
+    CondensedData out;
+    out.precision = p.precision;
     std::vector<int> row_kept;  // position in kept_dofs of each row of W
+    const bool f32 = p.precision == Precision::FLOAT32;
     if (p.method == CondenseMethod::SPARSE) {
-        W = sparse_w(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+        if (f32) {
+            out.W32 = sparse_w<float>(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+        } else {
+            out.W64 = sparse_w<double>(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+        }
     } else {
-        W = dense_w(K, free_dofs, kept_free, p.tile_size, tm, rep);
+        TiledSymmetric<double> W = dense_w(K, free_dofs, kept_free, p.tile_size, tm, rep);
+        if (f32) {
+            out.W32 = W.cast<float>();
+        } else {
+            out.W64 = std::move(W);
+        }
         row_kept.resize(static_cast<size_t>(m));
         std::iota(row_kept.begin(), row_kept.end(), 0);
     }
+    auto Wat = [&](int r, int c) { return f32 ? static_cast<double>(out.W32(r, c)) : out.W64(r, c); };
 
     // Residual check: columns of W against independent sparse solves K_ff x = e_j.
     double max_rel = 0;
@@ -468,7 +506,7 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
             double num = 0, den = 0;
             for (int r = 0; r < m; ++r) {
                 const double exact = xv[static_cast<std::int64_t>(j) * nf + kept_free[static_cast<size_t>(row_kept[static_cast<size_t>(r)])]];
-                const double d = W(r, rows[static_cast<size_t>(j)]) - exact;
+                const double d = Wat(r, rows[static_cast<size_t>(j)]) - exact;
                 num += d * d;
                 den += exact * exact;
             }
@@ -479,7 +517,6 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     }
     const double rcond = cholmod_rcond(ch.L, &ch.c);
 
-    CondensedData out;
     out.dof_node.resize(m);
     out.dof_axis.resize(m);
     for (int r = 0; r < m; ++r) {
@@ -487,14 +524,8 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
         out.dof_node[r] = d / 3;
         out.dof_axis[r] = d % 3;
     }
-    out.precision = p.precision;
     out.method = p.method == CondenseMethod::SPARSE ? "sparse: CHOLMOD supernodal LL^T (METIS), forward solve, SYRK per supernode"
                                                     : "dense: Schur complement, LAPACK dpotrf + dpotri";
-    if (p.precision == Precision::FLOAT32) {
-        out.W32 = W.cast<float>();
-    } else {
-        out.W64 = std::move(W);
-    }
     const double total = since(t_all);
     out.diagnostics = {{"n_free_dofs", nf},
                        {"n_kept_dofs", m},

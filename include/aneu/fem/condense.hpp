@@ -4,6 +4,7 @@
 /// Static condensation of the stiffness onto the simulated surface DOFs: W = (K⁻¹)_MM, the compliance
 /// seen from M (equal to the inverse of the Schur complement of K onto M). Always computed in double.
 #include <cstdint>
+#include <string>
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
@@ -22,7 +23,8 @@ enum class CondenseMethod {
 struct CondenseParams {
     CondenseMethod method = CondenseMethod::SPARSE;
     Precision precision = Precision::FLOAT32;  ///< storage precision of W (computation is double)
-    int tile_size = 128;                       ///< tile edge of the stored W (see TiledSymmetric)
+    int tile_size = 512;                       ///< tile edge of W (see TiledSymmetric): also the SYRK block size
+    std::string ordering = "metis";            ///< fill-reducing ordering of K: metis, nesdis (CHOLMOD's), amd
     double memory_limit_gb = 0.0;              ///< refuse beyond this predicted peak; 0 = 90 % of MemAvailable
     int residual_columns = 4;                  ///< columns of W checked against independent sparse solves
 };
