@@ -229,11 +229,15 @@ void write_surface(H5::Group& parent, const std::string& name, const SurfaceData
     require(s.loop_offsets.size() == 0 || s.loop_offsets.size() == s.loop_end_id.size() + 1,
             ctx + ": loop_offsets must have #loops+1 entries");
     check_index_range(s.loop_vertices, s.V.rows(), ctx + ".loop_vertices");
+    require(s.face_region.size() == 0 || s.face_region.size() == s.F.rows(), ctx + ": face_region size != number of triangles");
+    check_index_range(s.face_region, static_cast<Eigen::Index>(s.region_names.size()), ctx + ".face_region");
     H5::Group g = parent.createGroup(name);
     write_matrix(g, "vertices", s.V, "mm", deflate);
     write_matrix(g, "triangles", s.F, "", deflate);
     write_vector<int>(g, "face_label", s.face_label, "", deflate);
     h5::write_strings(g, "label_names", s.label_names);
+    write_vector<int>(g, "face_region", s.face_region, "", deflate);
+    h5::write_strings(g, "region_names", s.region_names);
     H5::Group lg = g.createGroup("loops");
     write_vector<int>(lg, "offsets", s.loop_offsets, "", deflate);
     write_vector<int>(lg, "vertices", s.loop_vertices, "", deflate);
@@ -249,6 +253,12 @@ SurfaceData read_surface(const H5::Group& parent, const std::string& name, const
     const auto nf = s.F.rows();
     s.face_label = read_vector<int>(g, p, "face_label", nf, ctx, "[F] with F = " + std::to_string(nf));
     s.label_names = h5::read_strings(g, p, "label_names", ctx);
+    s.face_region = read_vector<int>(g, p, "face_region", -1, ctx, "[F] or [0]");
+    if (s.face_region.size() != 0 && s.face_region.size() != nf) {
+        throw InputError(ctx.where(p + "/face_region") + ": shape [" + std::to_string(s.face_region.size()) +
+                         "], expected [F] with F = " + std::to_string(nf) + " or [0]");
+    }
+    s.region_names = h5::read_strings(g, p, "region_names", ctx);
     if (!h5::exists(g, "loops")) throw InputError(ctx.where(p + "/loops") + ": missing group");
     const H5::Group lg = g.openGroup("loops");
     s.loop_offsets = read_vector<int>(lg, p + "/loops", "offsets", -1, ctx, "[loops+1]");

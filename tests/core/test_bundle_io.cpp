@@ -68,6 +68,8 @@ void expect_same(const Bundle& a, const Bundle& b) {
         EXPECT_EQ(s.loop_offsets, t.loop_offsets);
         EXPECT_EQ(s.loop_vertices, t.loop_vertices);
         EXPECT_EQ(s.loop_end_id, t.loop_end_id);
+        EXPECT_EQ(s.face_region, t.face_region);
+        EXPECT_EQ(s.region_names, t.region_names);
     }
     ASSERT_TRUE(a.volume && b.volume);
     EXPECT_EQ(a.volume->nodes, b.volume->nodes);

@@ -89,6 +89,8 @@ inline Bundle full_bundle(Precision precision, int n_kept = 301, int tile = 64, 
     sf.loop_vertices = (Eigen::VectorXi(7) << 1, 2, 3, 4, 5, 6, 7).finished();
     sf.loop_end_id = (Eigen::VectorXi(2) << 0, 4).finished();
     b.surfaces["lumen"] = sf;
+    sf.face_region = Eigen::VectorXi::NullaryExpr(30, [&] { return pick(rng) % 2; });
+    sf.region_names = {"artery", "aneurysm"};
     sf.label_names = {"inner", "outer", "cap:0", "cap:4"};
     sf.face_label = Eigen::VectorXi::NullaryExpr(30, [&] { return pick(rng) % 4; });
     b.surfaces["wall"] = sf;

@@ -82,6 +82,8 @@ struct SurfaceData {
     Eigen::VectorXi loop_offsets;          ///< #loops+1 (empty if none): loop l = loop_vertices[o[l]..o[l+1])
     Eigen::VectorXi loop_vertices;         ///< boundary loop vertex indices, in order
     Eigen::VectorXi loop_end_id;           ///< #loops: EndPlane::id of each loop
+    Eigen::VectorXi face_region;           ///< #F or empty: index into region_names (artery/aneurysm)
+    std::vector<std::string> region_names; ///< e.g. {"artery","aneurysm"}; empty if face_region is
 };
 
 /// /volume: the tetrahedral mesh of the wall.

@@ -1,0 +1,64 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// File-level stages: read the previous stage's bundle, add this stage's group and provenance, write the
+/// next bundle atomically. The tools call these; tests and batch scripts can too.
+#include <array>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "aneu/core/bundle.hpp"
+#include "aneu/core/reporter.hpp"
+#include "aneu/fem/condense.hpp"
+#include "aneu/pipeline/tetmesh.hpp"
+
+namespace aneu::pipeline {
+
+/// Parameters of `aneuprep tubewall`: a synthetic wall surface of known dimensions.
+struct TubeWallParams {
+    double inner_radius_mm = 1.7;
+    double thickness_mm = 0.3;
+    double length_mm = 10.0;
+    double bend_radius_mm = 0.0;  ///< 0 = straight
+    int n_theta = 32;
+    int n_z = 40;
+};
+void validate(const TubeWallParams& p);
+std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p);
+
+/// Parameters of `aneuprep assemble`.
+struct AssembleParams {
+    int element_order = 1;          ///< 1: 4-node, 2: 10-node tetrahedra (mid-edge nodes added here)
+    double E_artery_mpa = 1.0;
+    double nu_artery = 0.45;
+    double E_aneurysm_mpa = 1.0;
+    double nu_aneurysm = 0.45;
+};
+void validate(const AssembleParams& p);
+std::vector<std::pair<std::string, std::string>> parameter_list(const AssembleParams& p);
+
+/// Parameters of `aneuprep condense` beyond the numerical ones: the working region.
+struct CondenseStageParams {
+    fem::CondenseParams numeric;
+    std::optional<std::array<double, 4>> region_sphere;  ///< x, y, z, radius [mm]
+    std::optional<std::array<double, 6>> region_box;     ///< xmin, ymin, zmin, xmax, ymax, zmax [mm]
+    std::string region_label;                            ///< only nodes of tets of this region ("" = all)
+};
+void validate(const CondenseStageParams& p);
+std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p);
+
+void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord stage, Reporter& rep = null_reporter());
+void tetmesh_file(const std::string& in, const std::string& out, const TetMeshParams& p, StageRecord stage,
+                  Reporter& rep = null_reporter());
+void assemble_file(const std::string& in, const std::string& out, const AssembleParams& p, StageRecord stage,
+                   Reporter& rep = null_reporter());
+void condense_file(const std::string& in, const std::string& out, const CondenseStageParams& p, StageRecord stage,
+                   Reporter& rep = null_reporter());
+
+/// The kept nodes of a condensation: "outer" minus "fixed", restricted to the region (all given criteria).
+/// @throws InputError if the volume lacks the node sets, or the region holds no such node
+std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p);
+
+}  // namespace aneu::pipeline

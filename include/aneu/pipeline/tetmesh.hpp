@@ -1,0 +1,48 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// `aneuprep tetmesh`: quality tetrahedral mesh of a closed, labelled wall surface.
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "aneu/core/bundle.hpp"
+#include "aneu/core/reporter.hpp"
+
+namespace aneu::pipeline {
+
+/// Parameters of `aneuprep tetmesh`.
+struct TetMeshParams {
+    std::string mesher = "tetgen";     ///< tetgen (boundary preserved) or netgen
+    double max_volume_mm3 = 0.0;       ///< upper bound on tet volume; 0 = that of a regular tet with the surface's mean edge
+    double radius_edge_max = 1.5;      ///< TetGen quality bound: circumradius / shortest edge
+    double min_dihedral_deg = 10.0;    ///< TetGen quality bound on dihedral angles
+    double timeout_s = 300.0;          ///< the mesher runs in a child process, killed after this
+};
+/// @throws InputError naming the field
+void validate(const TetMeshParams& p);
+std::vector<std::pair<std::string, std::string>> parameter_list(const TetMeshParams& p);
+
+/// Checks that a surface is closed, 2-manifold and consistently oriented (every edge in exactly two
+/// faces, once in each direction) and outward (positive enclosed volume).
+/// @throws InputError saying what is wrong and where (an edge's vertices and position)
+void check_closed_surface(const SurfaceData& s, const std::string& what);
+
+/// Tetrahedralises the closed wall surface. Surface vertices are kept as the first nodes (TetGen: no
+/// Steiner points on the boundary). Node sets: "outer", "inner" (vertices of faces labelled so) and
+/// "fixed" (vertices of faces labelled cap:*). Tet regions from the nearest surface vertex's region.
+/// Quality figures in VolumeData::quality.
+/// @throws InputError the surface is not closed/manifold/labelled; MeshingError the mesher failed or timed out
+VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& rep = null_reporter());
+
+/// Quality figures of a tetrahedral mesh: counts, min/max dihedral angle, max radius-edge ratio, slivers
+/// (min dihedral < 5°), layers of elements through the wall (graph distance inner → outer nodes).
+std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v);
+
+/// A closed wall surface of a tube for tests and examples: inner radius r_in, wall thickness t, length L
+/// along a circular arc of bend radius R (0 = straight), n_theta × n_z quads per cylinder, annular caps;
+/// labels inner, outer, cap:0, cap:1; one region "artery".
+SurfaceData tube_wall_surface(double r_in, double thickness, double length, int n_theta, int n_z,
+                              double bend_radius = 0.0);
+
+}  // namespace aneu::pipeline

@@ -1,0 +1,202 @@
+// SPDX-License-Identifier: MIT
+#include "aneu/pipeline/stages.hpp"
+
+#include <chrono>
+#include <set>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
+
+namespace aneu::pipeline {
+
+namespace {
+
+std::string num(double v) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.10g", v);
+    return b;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void finish(Bundle& b, StageRecord& stage, std::chrono::steady_clock::time_point t0, const std::string& out, Reporter& rep) {
+    stage.wall_time_s = seconds_since(t0);
+    b.meta.stages.push_back(stage);
+    write_bundle(out, b, {}, rep);
+    rep.info(stage.stage + ": wrote " + out + " in " + num(seconds_since(t0)) + " s");
+}
+
+std::string stem(const std::string& path) {
+    std::string s = path.substr(path.find_last_of('/') + 1);
+    return s.substr(0, s.find('.'));
+}
+
+}  // namespace
+
+void validate(const TubeWallParams& p) {
+    if (!(p.inner_radius_mm > 0 && p.thickness_mm > 0 && p.length_mm > 0)) throw InputError("tubewall: radius, thickness and length must be > 0");
+    if (p.n_theta < 3 || p.n_z < 1) throw InputError("tubewall: n_theta must be >= 3 and n_z >= 1");
+    if (p.bend_radius_mm != 0 && !(p.bend_radius_mm > p.inner_radius_mm + p.thickness_mm)) {
+        throw InputError("tubewall: bend_radius_mm = " + num(p.bend_radius_mm) + ": must be 0 (straight) or > inner radius + thickness");
+    }
+}
+std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p) {
+    return {{"inner_radius_mm", num(p.inner_radius_mm)}, {"thickness_mm", num(p.thickness_mm)}, {"length_mm", num(p.length_mm)},
+            {"bend_radius_mm", num(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)}};
+}
+
+void validate(const AssembleParams& p) {
+    if (p.element_order != 1 && p.element_order != 2) throw InputError("assemble: element_order = " + std::to_string(p.element_order) + ": expected 1 or 2");
+    fem::validate_materials({{"artery", p.E_artery_mpa, p.nu_artery}, {"aneurysm", p.E_aneurysm_mpa, p.nu_aneurysm}}, 2);
+}
+std::vector<std::pair<std::string, std::string>> parameter_list(const AssembleParams& p) {
+    return {{"element_order", std::to_string(p.element_order)}, {"E_artery_mpa", num(p.E_artery_mpa)}, {"nu_artery", num(p.nu_artery)},
+            {"E_aneurysm_mpa", num(p.E_aneurysm_mpa)}, {"nu_aneurysm", num(p.nu_aneurysm)}};
+}
+
+void validate(const CondenseStageParams& p) {
+    fem::validate(p.numeric);
+    if (p.region_sphere && !((*p.region_sphere)[3] > 0)) throw InputError("condense: region sphere radius must be > 0");
+    if (p.region_box) {
+        const auto& b = *p.region_box;
+        if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("condense: region box needs min < max on every axis");
+    }
+}
+std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p) {
+    const auto& n = p.numeric;
+    std::string sphere, box;
+    if (p.region_sphere) for (double x : *p.region_sphere) sphere += (sphere.empty() ? "" : ",") + num(x);
+    if (p.region_box) for (double x : *p.region_box) box += (box.empty() ? "" : ",") + num(x);
+    return {{"method", n.method == fem::CondenseMethod::SPARSE ? "sparse" : "dense"},
+            {"precision", n.precision == Precision::FLOAT32 ? "float32" : "float64"},
+            {"tile_size", std::to_string(n.tile_size)},
+            {"ordering", n.ordering},
+            {"memory_limit_gb", num(n.memory_limit_gb)},
+            {"residual_columns", std::to_string(n.residual_columns)},
+            {"region_sphere_mm", sphere},
+            {"region_box_mm", box},
+            {"region_label", p.region_label}};
+}
+
+std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
+    for (const char* s : {"outer", "fixed"})
+        if (!v.node_sets.count(s)) throw InputError(std::string("condense: /volume has no node set '") + s + "'");
+    std::set<int> fixed(v.node_sets.at("fixed").data(), v.node_sets.at("fixed").data() + v.node_sets.at("fixed").size());
+    std::vector<char> in_label(static_cast<size_t>(v.nodes.rows()), p.region_label.empty());
+    if (!p.region_label.empty()) {
+        const auto it = std::find(v.region_names.begin(), v.region_names.end(), p.region_label);
+        if (it == v.region_names.end()) throw InputError("condense: region label '" + p.region_label + "' is not a region of the mesh");
+        const int r = static_cast<int>(it - v.region_names.begin());
+        for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
+            if (v.tet_region[t] == r)
+                for (Eigen::Index a = 0; a < v.tets.cols(); ++a) in_label[static_cast<size_t>(v.tets(t, a))] = 1;
+    }
+    std::vector<int> kept;
+    const Eigen::VectorXi& outer = v.node_sets.at("outer");
+    for (Eigen::Index k = 0; k < outer.size(); ++k) {
+        const int n = outer[k];
+        if (fixed.count(n) || !in_label[static_cast<size_t>(n)]) continue;
+        const Eigen::Vector3d x = v.nodes.row(n).transpose();
+        if (p.region_sphere) {
+            const auto& s = *p.region_sphere;
+            if ((x - Eigen::Vector3d(s[0], s[1], s[2])).norm() > s[3]) continue;
+        }
+        if (p.region_box) {
+            const auto& b = *p.region_box;
+            if (x.x() < b[0] || x.y() < b[1] || x.z() < b[2] || x.x() > b[3] || x.y() > b[4] || x.z() > b[5]) continue;
+        }
+        kept.push_back(n);
+    }
+    if (kept.empty()) throw InputError("condense: the working region contains no simulated node (outer, not fixed)");
+    return kept;
+}
+
+void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord stage, Reporter& rep) {
+    validate(p);
+    const auto t0 = std::chrono::steady_clock::now();
+    Bundle b;
+    b.meta.case_id = stem(out);
+    b.surfaces["wall"] = tube_wall_surface(p.inner_radius_mm, p.thickness_mm, p.length_mm, p.n_theta, p.n_z, p.bend_radius_mm);
+    finish(b, stage, t0, out, rep);
+}
+
+void tetmesh_file(const std::string& in, const std::string& out, const TetMeshParams& p, StageRecord stage, Reporter& rep) {
+    validate(p);
+    const auto t0 = std::chrono::steady_clock::now();
+    Bundle b = read_bundle(in);
+    const auto it = b.surfaces.find("wall");
+    if (it == b.surfaces.end()) throw InputError(in + ": no /surface/wall (run `aneuprep wall` or `aneuprep tubewall` first)");
+    b.volume = tetmesh(it->second, p, rep);
+    b.fem.reset();
+    b.condensed.reset();
+    finish(b, stage, t0, out, rep);
+}
+
+void assemble_file(const std::string& in, const std::string& out, const AssembleParams& p, StageRecord stage, Reporter& rep) {
+    validate(p);
+    const auto t0 = std::chrono::steady_clock::now();
+    Bundle b = read_bundle(in);
+    if (!b.volume) throw InputError(in + ": no /volume (run `aneuprep tetmesh` first)");
+    VolumeData& v = *b.volume;
+    if (v.tets.cols() != 4) throw InputError(in + ": /volume is already quadratic; assemble a file from `tetmesh`");
+    if (!v.node_sets.count("fixed")) throw InputError(in + ": /volume has no node set 'fixed'");
+    fem::check_constrained(v.nodes, v.tets, v.node_sets.at("fixed"));
+    if (p.element_order == 2) {
+        const int n_lin = static_cast<int>(v.nodes.rows());
+        const fem::QuadraticMesh q = fem::quadratic_mesh(v.nodes, v.tets);
+        for (auto& [name, set] : v.node_sets) set = fem::quadratic_node_set(q, v.tets, n_lin, set);
+        v.nodes = q.V;
+        v.tets = q.T;
+    }
+    std::vector<Material> mats;
+    for (const auto& r : v.region_names) {
+        if (r == "artery") {
+            mats.push_back({r, p.E_artery_mpa, p.nu_artery});
+        } else if (r == "aneurysm") {
+            mats.push_back({r, p.E_aneurysm_mpa, p.nu_aneurysm});
+        } else {
+            throw InputError(in + ": region '" + r + "' has no material (expected artery or aneurysm)");
+        }
+    }
+    FemData fe;
+    fe.element_order = p.element_order;
+    const auto K = fem::assemble_stiffness(v.nodes, v.tets, v.tet_region, mats, rep);
+    fe.K = K.triangularView<Eigen::Upper>();
+    fe.K.makeCompressed();
+    fe.K_upper_only = true;
+    fe.materials = mats;
+    const Eigen::VectorXi& fixed = v.node_sets.at("fixed");
+    fe.fixed_dofs.resize(3 * fixed.size());
+    for (Eigen::Index k = 0; k < fixed.size(); ++k)
+        for (int a = 0; a < 3; ++a) fe.fixed_dofs[3 * k + a] = 3 * fixed[k] + a;
+    std::sort(fe.fixed_dofs.data(), fe.fixed_dofs.data() + fe.fixed_dofs.size());
+    rep.info("assemble: " + std::to_string(K.rows()) + " DOFs, " + std::to_string(K.nonZeros()) + " nonzeros, order " +
+             std::to_string(p.element_order));
+    b.fem = std::move(fe);
+    b.condensed.reset();
+    finish(b, stage, t0, out, rep);
+}
+
+void condense_file(const std::string& in, const std::string& out, const CondenseStageParams& p, StageRecord stage, Reporter& rep) {
+    validate(p);
+    const auto t0 = std::chrono::steady_clock::now();
+    Bundle b = read_bundle(in);
+    if (!b.volume || !b.fem) throw InputError(in + ": needs /volume and /fem (run `aneuprep assemble` first)");
+    const std::vector<int> nodes = kept_nodes(*b.volume, p);
+    Eigen::VectorXi kept(3 * static_cast<Eigen::Index>(nodes.size()));
+    for (size_t k = 0; k < nodes.size(); ++k)
+        for (int a = 0; a < 3; ++a) kept[3 * static_cast<Eigen::Index>(k) + a] = 3 * nodes[k] + a;
+    // K is stored as its upper triangle; the condensation reads both.
+    Eigen::SparseMatrix<double, Eigen::RowMajor> K = b.fem->K;
+    if (b.fem->K_upper_only) {
+        Eigen::SparseMatrix<double, Eigen::RowMajor> full = K.selfadjointView<Eigen::Upper>();
+        K = full;
+    }
+    b.condensed = fem::condense(K, b.fem->fixed_dofs, kept, p.numeric, rep);
+    finish(b, stage, t0, out, rep);
+}
+
+}  // namespace aneu::pipeline

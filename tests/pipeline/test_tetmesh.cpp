@@ -1,0 +1,155 @@
+// SPDX-License-Identifier: MIT
+// tetmesh: boundary preserved, volume conserved, node sets, quality, error paths; stage chain.
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <set>
+
+#include <Eigen/Geometry>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/fem/element.hpp"
+#include "aneu/pipeline/stages.hpp"
+#include "aneu/pipeline/tetmesh.hpp"
+#include "test_bundles.hpp"
+
+using namespace aneu;
+using namespace aneu::pipeline;
+
+namespace {
+
+double enclosed_volume(const SurfaceData& s) {
+    double v = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) v += s.V.row(s.F(f, 0)).dot(s.V.row(s.F(f, 1)).cross(s.V.row(s.F(f, 2)))) / 6.0;
+    return v;
+}
+
+double mesh_volume(const VolumeData& v, double* min_vol = nullptr) {
+    double sum = 0, mn = 1e300;
+    for (Eigen::Index t = 0; t < v.tets.rows(); ++t) {
+        Eigen::Matrix<double, 4, 3> X;
+        for (int a = 0; a < 4; ++a) X.row(a) = v.nodes.row(v.tets(t, a));
+        const double vol = fem::tet_volume(X);
+        sum += vol;
+        mn = std::min(mn, vol);
+    }
+    if (min_vol) *min_vol = mn;
+    return sum;
+}
+
+double quality(const VolumeData& v, const std::string& k) {
+    for (const auto& [n, x] : v.quality)
+        if (n == k) return x;
+    ADD_FAILURE() << "no quality figure " << k;
+    return 0;
+}
+
+std::string error_of(const std::function<void()>& f) {
+    try {
+        f();
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "no error";
+}
+
+}  // namespace
+
+class Mesher : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(Mesher, TubeWallIsFilledExactlyWithPositiveTets) {
+    const SurfaceData s = tube_wall_surface(1.7, 0.3, 4.0, 24, 12, 15.0);
+    TetMeshParams p;
+    p.mesher = GetParam();
+    const VolumeData v = tetmesh(s, p);
+    double min_vol = 0;
+    EXPECT_NEAR(mesh_volume(v, &min_vol), enclosed_volume(s), 1e-9 * enclosed_volume(s));
+    EXPECT_GT(min_vol, 0.0);
+    EXPECT_EQ(v.node_sets.at("inner").size(), 24 * 13);
+    EXPECT_EQ(v.node_sets.at("outer").size(), 24 * 13);
+    EXPECT_EQ(v.node_sets.at("fixed").size(), 2 * 2 * 24);
+    EXPECT_GT(quality(v, "min_dihedral_deg"), 0.0);
+    EXPECT_GE(quality(v, "layers_min"), 1.0);
+    EXPECT_EQ(v.tet_region.size(), v.tets.rows());
+    EXPECT_EQ(v.region_names, std::vector<std::string>{"artery"});
+    if (GetParam() == "tetgen") {  // boundary preserved: surface vertices are the first nodes, unmoved
+        EXPECT_EQ(v.nodes.topRows(s.V.rows()), s.V);
+    }
+}
+INSTANTIATE_TEST_SUITE_P(TetGenAndNetgen, Mesher, ::testing::Values("tetgen", "netgen"));
+
+TEST(TetMesh, BadSurfacesAreRefusedWithTheReason) {
+    SurfaceData s = tube_wall_surface(1.7, 0.3, 4.0, 16, 6);
+    SurfaceData open = s;
+    open.F.conservativeResize(s.F.rows() - 1, 3);
+    open.face_label.conservativeResize(s.F.rows() - 1);
+    EXPECT_NE(error_of([&] { tetmesh(open, {}); }).find("not closed: 3 boundary edges"), std::string::npos);
+    SurfaceData flipped = s;
+    flipped.F.col(1).swap(flipped.F.col(2));
+    EXPECT_NE(error_of([&] { tetmesh(flipped, {}); }).find("not positive"), std::string::npos);
+    // Two copies of the wall, the second shifted into the first: closed and oriented, but self-intersecting.
+    SurfaceData twice = s;
+    twice.V.resize(2 * s.V.rows(), 3);
+    twice.V << s.V, (s.V.rowwise() + Eigen::RowVector3d(0.55, 0.1, 0.7));
+    twice.F.resize(2 * s.F.rows(), 3);
+    twice.F << s.F, (s.F.array() + static_cast<int>(s.V.rows())).matrix();
+    twice.face_label.resize(2 * s.F.rows());
+    twice.face_label << s.face_label, s.face_label;
+    twice.face_region = Eigen::VectorXi::Zero(2 * s.F.rows());
+    const std::string m = error_of([&] { tetmesh(twice, {}); });
+    EXPECT_NE(m.find("self-intersect"), std::string::npos) << m;
+    TetMeshParams quick;
+    quick.timeout_s = 1e-3;
+    quick.max_volume_mm3 = 1e-5;
+    EXPECT_NE(error_of([&] { tetmesh(s, quick); }).find("killed"), std::string::npos);
+    TetMeshParams bad;
+    bad.mesher = "gmsh";
+    EXPECT_NE(error_of([&] { tetmesh(s, bad); }).find("mesher = 'gmsh'"), std::string::npos);
+}
+
+TEST(Stages, ChainWritesEveryGroupAndProvenance) {
+    test::TempDir d("chain");
+    TubeWallParams tw;
+    tw.n_theta = 16;
+    tw.n_z = 10;
+    StageRecord r;
+    r.stage = "tubewall";
+    tubewall_file(tw, d.file("wall.h5"), r);
+    r.stage = "tetmesh";
+    tetmesh_file(d.file("wall.h5"), d.file("vol.h5"), {}, r);
+    AssembleParams ap;
+    ap.element_order = 2;
+    r.stage = "assemble";
+    assemble_file(d.file("vol.h5"), d.file("fem.h5"), ap, r);
+    CondenseStageParams cp;
+    cp.numeric.precision = Precision::FLOAT64;
+    cp.numeric.tile_size = 64;
+    r.stage = "condense";
+    condense_file(d.file("fem.h5"), d.file("case.h5"), cp, r);
+    const Bundle b = read_bundle(d.file("case.h5"));
+    ASSERT_EQ(b.meta.stages.size(), 4u);
+    EXPECT_EQ(b.meta.stages[3].stage, "condense");
+    ASSERT_TRUE(b.volume && b.fem && b.condensed);
+    EXPECT_EQ(b.volume->tets.cols(), 10);
+    EXPECT_EQ(b.fem->element_order, 2);
+    // Kept = outer, not fixed, all three axes, with quadratic mid-edge nodes on the outer surface.
+    std::set<int> fixed(b.volume->node_sets.at("fixed").data(), b.volume->node_sets.at("fixed").data() + b.volume->node_sets.at("fixed").size());
+    size_t outer_free = 0;
+    for (Eigen::Index k = 0; k < b.volume->node_sets.at("outer").size(); ++k) outer_free += !fixed.count(b.volume->node_sets.at("outer")[k]);
+    EXPECT_EQ(static_cast<size_t>(b.condensed->size()), 3 * outer_free);
+    EXPECT_GT(outer_free, 16u * 9u);  // more than the corner nodes alone
+    // W is SPD: positive diagonal.
+    for (Eigen::Index i = 0; i < b.condensed->size(); ++i) ASSERT_GT(b.condensed->W64(i, i), 0.0);
+
+    CondenseStageParams far;
+    far.region_sphere = std::array<double, 4>{100, 100, 100, 1};
+    r.stage = "condense";
+    EXPECT_NE(error_of([&] { condense_file(d.file("fem.h5"), d.file("x.h5"), far, r); }).find("contains no simulated node"),
+              std::string::npos);
+    Bundle no_wall;
+    no_wall.meta.case_id = "x";
+    write_bundle(d.file("nowall.h5"), no_wall);
+    EXPECT_NE(error_of([&] { tetmesh_file(d.file("nowall.h5"), d.file("y.h5"), {}, r); }).find("no /surface/wall"),
+              std::string::npos);
+}
