@@ -21,4 +21,15 @@ else
 fi
 echo "== inspect $out/phantom/truth.h5"
 "$prep" inspect "$out/phantom/truth.h5"
+echo "== FEM stages on a synthetic bent tube wall (configs/tube_wall.toml; the geometry stages that turn"
+echo "   the CT into a wall surface are not built yet)"
+fem=configs/tube_wall.toml
+"$prep" --config "$fem" tubewall -o "$out/tube_wall.h5"
+"$prep" --config "$fem" tetmesh "$out/tube_wall.h5" -o "$out/tube_volume.h5"
+"$prep" --config "$fem" assemble "$out/tube_volume.h5" -o "$out/tube_fem.h5"
+"$prep" --config "$fem" condense "$out/tube_fem.h5" -o "$out/tube_case.h5"
+echo "== inspect $out/tube_case.h5 (the case bundle)"
+"$prep" inspect "$out/tube_case.h5"
+echo "== aneusim loads the case bundle"
+build/tools/aneusim "$out/tube_case.h5"
 echo "== done: outputs under $out/"

@@ -70,6 +70,14 @@ std::vector<std::pair<std::string, std::string>> contents(const FileSummary& s) 
                                                 dim(s, "/volume/tets", 0), cols == 10 ? "quadratic" : "linear",
                                                 sets.empty() ? "none" : sets));
     }
+    auto attrs_line = [&](const std::string& group) {
+        std::string line;
+        if (const H5Entry* e = s.find(group)) {
+            for (const auto& [k, v] : e->attributes) line += fmt::format("{}{}={}", line.empty() ? "" : ", ", k, v);
+        }
+        return line;
+    };
+    if (s.find("/volume/quality")) out.emplace_back("  quality", attrs_line("/volume/quality"));
     if (s.find("/fem")) {
         out.emplace_back("/fem", fmt::format("K {} DOFs, {} stored nonzeros ({}), element order {}, {} fixed DOFs",
                                              attr(s, "/fem/K", "n"), dim(s, "/fem/K/data", 0), attr(s, "/fem/K", "storage"),
@@ -81,6 +89,7 @@ std::vector<std::pair<std::string, std::string>> contents(const FileSummary& s) 
                                                    attr(s, "/condensed", "tile_size"), human_bytes(w->stored_bytes),
                                                    attr(s, "/condensed", "method")));
     }
+    if (s.find("/condensed/diagnostics")) out.emplace_back("  diagnostics", attrs_line("/condensed/diagnostics"));
     return out;
 }
 
