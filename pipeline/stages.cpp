@@ -39,13 +39,20 @@ std::string stem(const std::string& path) {
 void validate(const TubeWallParams& p) {
     if (!(p.inner_radius_mm > 0 && p.thickness_mm > 0 && p.length_mm > 0)) throw InputError("tubewall: radius, thickness and length must be > 0");
     if (p.n_theta < 3 || p.n_z < 1) throw InputError("tubewall: n_theta must be >= 3 and n_z >= 1");
+    if (p.sac_radius_mm < 0) throw InputError("tubewall: sac_radius_mm must be >= 0 (0 = no sac)");
+    if (p.sac_radius_mm > 0 && p.bend_radius_mm != 0) throw InputError("tubewall: a sac needs a straight tube (bend_radius_mm = 0)");
+    if (p.sac_radius_mm > 0 && !(p.neck_radius_mm > 0 && p.neck_radius_mm < p.sac_radius_mm)) {
+        throw InputError("tubewall: neck_radius_mm = " + num(p.neck_radius_mm) + ": must be in (0, sac_radius_mm)");
+    }
     if (p.bend_radius_mm != 0 && !(p.bend_radius_mm > p.inner_radius_mm + p.thickness_mm)) {
         throw InputError("tubewall: bend_radius_mm = " + num(p.bend_radius_mm) + ": must be 0 (straight) or > inner radius + thickness");
     }
 }
 std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p) {
     return {{"inner_radius_mm", num(p.inner_radius_mm)}, {"thickness_mm", num(p.thickness_mm)}, {"length_mm", num(p.length_mm)},
-            {"bend_radius_mm", num(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)}};
+            {"bend_radius_mm", num(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)},
+            {"sac_radius_mm", num(p.sac_radius_mm)}, {"sac_thickness_mm", num(p.sac_thickness_mm)},
+            {"neck_radius_mm", num(p.neck_radius_mm)}, {"edge_mm", num(p.edge_mm)}};
 }
 
 void validate(const AssembleParams& p) {
@@ -119,7 +126,12 @@ void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord 
     const auto t0 = std::chrono::steady_clock::now();
     Bundle b;
     b.meta.case_id = stem(out);
-    b.surfaces["wall"] = tube_wall_surface(p.inner_radius_mm, p.thickness_mm, p.length_mm, p.n_theta, p.n_z, p.bend_radius_mm);
+    if (p.sac_radius_mm > 0) {
+        b.surfaces["wall"] = tube_sac_wall_surface({p.inner_radius_mm, p.thickness_mm, p.length_mm, p.sac_radius_mm,
+                                                    p.sac_thickness_mm, p.neck_radius_mm, p.edge_mm});
+    } else {
+        b.surfaces["wall"] = tube_wall_surface(p.inner_radius_mm, p.thickness_mm, p.length_mm, p.n_theta, p.n_z, p.bend_radius_mm);
+    }
     finish(b, stage, t0, out, rep);
 }
 

@@ -21,7 +21,7 @@ else
 fi
 echo "== inspect $out/phantom/truth.h5"
 "$prep" inspect "$out/phantom/truth.h5"
-echo "== FEM stages on a synthetic bent tube wall (configs/tube_wall.toml; the geometry stages that turn"
+echo "== FEM stages on a synthetic tube wall with a sac (configs/tube_wall.toml; the geometry stages that turn"
 echo "   the CT into a wall surface are not built yet)"
 fem=configs/tube_wall.toml
 "$prep" --config "$fem" tubewall -o "$out/tube_wall.h5"

@@ -59,6 +59,10 @@ void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::
         c->add_option("--bend-radius-mm", p->bend_radius_mm, "centerline bend radius (0 = straight)")->capture_default_str();
         c->add_option("--n-theta", p->n_theta, "segments around")->capture_default_str();
         c->add_option("--n-z", p->n_z, "segments along")->capture_default_str();
+        c->add_option("--sac-radius-mm", p->sac_radius_mm, "add a spherical sac of this lumen radius (0 = none)")->capture_default_str();
+        c->add_option("--sac-thickness-mm", p->sac_thickness_mm, "sac wall thickness")->capture_default_str();
+        c->add_option("--neck-radius-mm", p->neck_radius_mm, "radius of the sac's neck")->capture_default_str();
+        c->add_option("--edge-mm", p->edge_mm, "target edge length of the surface with a sac")->capture_default_str();
     }
     {
         auto p = std::make_shared<pipeline::TetMeshParams>();

@@ -11,6 +11,7 @@
 #include "aneu/core/error.hpp"
 #include "aneu/fem/element.hpp"
 #include "aneu/pipeline/stages.hpp"
+#include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
 #include "test_bundles.hpp"
 
@@ -152,4 +153,33 @@ TEST(Stages, ChainWritesEveryGroupAndProvenance) {
     write_bundle(d.file("nowall.h5"), no_wall);
     EXPECT_NE(error_of([&] { tetmesh_file(d.file("nowall.h5"), d.file("y.h5"), {}, r); }).find("no /surface/wall"),
               std::string::npos);
+}
+
+TEST(TubeSac, WallIsClosedLabelledAndMeshesIntoTwoRegions) {
+    TubeSacParams p;  // r 1.7, t 0.3, L 12, sac R 2.5, sac wall 0.1, neck 1.5, edge 0.2
+    const SurfaceData s = tube_sac_wall_surface(p);
+    EXPECT_NO_THROW(check_closed_surface(s, "tube+sac"));
+    EXPECT_TRUE(self_intersections(s).empty());
+    EXPECT_EQ(s.region_names, (std::vector<std::string>{"artery", "aneurysm"}));
+    const Eigen::Vector3d C(p.inner_radius_mm + std::sqrt(p.sac_radius_mm * p.sac_radius_mm - p.neck_radius_mm * p.neck_radius_mm), 0,
+                            0.5 * p.length_mm);
+    int sac_faces = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        if (s.face_region[f] != 1) continue;
+        ++sac_faces;
+        const Eigen::Vector3d c = (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+        ASSERT_LT(std::abs((c - C).norm() - (p.sac_radius_mm + 0.5 * p.sac_thickness_mm)), 0.5 * p.sac_thickness_mm + p.edge_mm);
+    }
+    EXPECT_GT(sac_faces, 500);
+    const VolumeData v = tetmesh(s, {});
+    EXPECT_NEAR(mesh_volume(v), enclosed_volume(s), 1e-9 * enclosed_volume(s));
+    const Eigen::Index n_sac = (v.tet_region.array() == 1).count();
+    EXPECT_GT(n_sac, 100);
+    EXPECT_LT(n_sac, v.tets.rows() / 2);
+    // Condensing only the aneurysm's nodes keeps nodes on the sac and the ring of its neck.
+    CondenseStageParams cp;
+    cp.region_label = "aneurysm";
+    const std::vector<int> kept = kept_nodes(v, cp);
+    ASSERT_FALSE(kept.empty());
+    for (int n : kept) ASSERT_LT((v.nodes.row(n).transpose() - C).norm(), p.sac_radius_mm + p.sac_thickness_mm + 3 * p.edge_mm);
 }

@@ -24,6 +24,10 @@ struct TubeWallParams {
     double bend_radius_mm = 0.0;  ///< 0 = straight
     int n_theta = 32;
     int n_z = 40;
+    double sac_radius_mm = 0.0;      ///< > 0: add a spherical sac (straight tube only; CGAL boolean + remeshing)
+    double sac_thickness_mm = 0.1;
+    double neck_radius_mm = 1.5;
+    double edge_mm = 0.2;            ///< target edge of the remeshed surface with a sac
 };
 void validate(const TubeWallParams& p);
 std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p);

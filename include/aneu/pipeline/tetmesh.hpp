@@ -45,4 +45,18 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v);
 SurfaceData tube_wall_surface(double r_in, double thickness, double length, int n_theta, int n_z,
                               double bend_radius = 0.0);
 
+/// A tube with a spherical sac on its side, for tests and examples (CGAL corefinement + remeshing).
+struct TubeSacParams {
+    double inner_radius_mm = 1.7;
+    double thickness_mm = 0.3;       ///< artery wall
+    double length_mm = 12.0;
+    double sac_radius_mm = 2.5;      ///< inner (lumen) radius of the sac
+    double sac_thickness_mm = 0.1;   ///< sac wall (one third of the artery's, as published)
+    double neck_radius_mm = 1.5;     ///< where the sac's lumen meets the tube's
+    double edge_mm = 0.2;            ///< target edge length of the remeshed surface
+};
+/// Closed wall surface: labels inner, outer, cap:0, cap:1 and regions artery/aneurysm from the geometry.
+/// @throws InputError bad sizes; MeshingError a CGAL boolean failed
+SurfaceData tube_sac_wall_surface(const TubeSacParams& p);
+
 }  // namespace aneu::pipeline
