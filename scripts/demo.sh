@@ -25,6 +25,8 @@ echo "== FEM stages on a synthetic tube wall with a sac (configs/tube_wall.toml;
 echo "   the CT into a wall surface are not built yet)"
 fem=configs/tube_wall.toml
 "$prep" --config "$fem" tubewall -o "$out/tube_wall.h5"
+xvfb-run -a "$prep" snapshot "$out/tube_wall.h5" --color-by region -o "$out/tube_wall_regions.png"
+echo "   picture of the wall, artery/aneurysm regions: $out/tube_wall_regions.png"
 "$prep" --config "$fem" tetmesh "$out/tube_wall.h5" -o "$out/tube_volume.h5"
 "$prep" --config "$fem" assemble "$out/tube_volume.h5" -o "$out/tube_fem.h5"
 "$prep" --config "$fem" condense "$out/tube_fem.h5" -o "$out/tube_case.h5"

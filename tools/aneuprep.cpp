@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
     add_phantom_command(app, args, action);
     add_fem_commands(app, args, action);
     add_inspect_command(app, action);
+    add_snapshot_command(app, action);
 
     auto* ver = app.add_subcommand("version", "print versions of aneuclip and of every library it uses");
     ver->callback([&] {

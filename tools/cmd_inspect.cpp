@@ -4,7 +4,10 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
 #include "aneu/core/file_summary.hpp"
+#include "aneu/pipeline/snapshot.hpp"
 #include "cli_common.hpp"
 #include "commands.hpp"
 
@@ -155,6 +158,30 @@ nlohmann::json to_json(const FileSummary& s) {
 }
 
 }  // namespace
+
+void add_snapshot_command(CLI::App& app, std::function<int()>& action) {
+    struct Opts {
+        std::string file, surface = "wall", color_by = "label", png;
+    };
+    auto o = std::make_shared<Opts>();
+    auto* c = app.add_subcommand("snapshot", "render a surface of a stage file to PNG (needs X: use xvfb-run -a)");
+    c->add_option("file", o->file, "stage file (.h5)")->required();
+    c->add_option("--surface", o->surface, "which /surface/<name>")->capture_default_str();
+    c->add_option("--color-by", o->color_by, "label or region")->check(CLI::IsMember({"label", "region"}))->capture_default_str();
+    c->add_option("-o,--output", o->png, "PNG file")->required();
+    c->callback([o, &action] {
+        action = [o] {
+            return run_guarded("aneuprep snapshot", [&] {
+                BundleParts parts;
+                parts.volume = parts.fem = parts.condensed_W = parts.image = false;
+                const Bundle b = read_bundle(o->file, parts);
+                const auto it = b.surfaces.find(o->surface);
+                if (it == b.surfaces.end()) throw InputError(o->file + ": no /surface/" + o->surface);
+                pipeline::snapshot_surface(it->second, o->color_by == "region" ? pipeline::ColorBy::REGION : pipeline::ColorBy::LABEL, o->png);
+            });
+        };
+    });
+}
 
 void add_inspect_command(CLI::App& app, std::function<int()>& action) {
     struct Opts {

@@ -12,6 +12,7 @@ namespace aneu::tools {
 
 void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_inspect_command(CLI::App& app, std::function<int()>& action);
+void add_snapshot_command(CLI::App& app, std::function<int()>& action);
 void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 
 }  // namespace aneu::tools
