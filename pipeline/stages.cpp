@@ -6,17 +6,13 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
 #include "aneu/fem/assembly.hpp"
 
 namespace aneu::pipeline {
 
 namespace {
 
-std::string num(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.10g", v);
-    return b;
-}
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -26,7 +22,7 @@ void finish(Bundle& b, StageRecord& stage, std::chrono::steady_clock::time_point
     stage.wall_time_s = seconds_since(t0);
     b.meta.stages.push_back(stage);
     write_bundle(out, b, {}, rep);
-    rep.info(stage.stage + ": wrote " + out + " in " + num(seconds_since(t0)) + " s");
+    rep.info(stage.stage + ": wrote " + out + " in " + shortest(seconds_since(t0)) + " s");
 }
 
 std::string stem(const std::string& path) {
@@ -42,17 +38,17 @@ void validate(const TubeWallParams& p) {
     if (p.sac_radius_mm < 0) throw InputError("tubewall: sac_radius_mm must be >= 0 (0 = no sac)");
     if (p.sac_radius_mm > 0 && p.bend_radius_mm != 0) throw InputError("tubewall: a sac needs a straight tube (bend_radius_mm = 0)");
     if (p.sac_radius_mm > 0 && !(p.neck_radius_mm > 0 && p.neck_radius_mm < p.sac_radius_mm)) {
-        throw InputError("tubewall: neck_radius_mm = " + num(p.neck_radius_mm) + ": must be in (0, sac_radius_mm)");
+        throw InputError("tubewall: neck_radius_mm = " + shortest(p.neck_radius_mm) + ": must be in (0, sac_radius_mm)");
     }
     if (p.bend_radius_mm != 0 && !(p.bend_radius_mm > p.inner_radius_mm + p.thickness_mm)) {
-        throw InputError("tubewall: bend_radius_mm = " + num(p.bend_radius_mm) + ": must be 0 (straight) or > inner radius + thickness");
+        throw InputError("tubewall: bend_radius_mm = " + shortest(p.bend_radius_mm) + ": must be 0 (straight) or > inner radius + thickness");
     }
 }
 std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p) {
-    return {{"inner_radius_mm", num(p.inner_radius_mm)}, {"thickness_mm", num(p.thickness_mm)}, {"length_mm", num(p.length_mm)},
-            {"bend_radius_mm", num(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)},
-            {"sac_radius_mm", num(p.sac_radius_mm)}, {"sac_thickness_mm", num(p.sac_thickness_mm)},
-            {"neck_radius_mm", num(p.neck_radius_mm)}, {"edge_mm", num(p.edge_mm)}};
+    return {{"inner_radius_mm", shortest(p.inner_radius_mm)}, {"thickness_mm", shortest(p.thickness_mm)}, {"length_mm", shortest(p.length_mm)},
+            {"bend_radius_mm", shortest(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)},
+            {"sac_radius_mm", shortest(p.sac_radius_mm)}, {"sac_thickness_mm", shortest(p.sac_thickness_mm)},
+            {"neck_radius_mm", shortest(p.neck_radius_mm)}, {"edge_mm", shortest(p.edge_mm)}};
 }
 
 void validate(const AssembleParams& p) {
@@ -60,8 +56,8 @@ void validate(const AssembleParams& p) {
     fem::validate_materials({{"artery", p.E_artery_mpa, p.nu_artery}, {"aneurysm", p.E_aneurysm_mpa, p.nu_aneurysm}}, 2);
 }
 std::vector<std::pair<std::string, std::string>> parameter_list(const AssembleParams& p) {
-    return {{"element_order", std::to_string(p.element_order)}, {"E_artery_mpa", num(p.E_artery_mpa)}, {"nu_artery", num(p.nu_artery)},
-            {"E_aneurysm_mpa", num(p.E_aneurysm_mpa)}, {"nu_aneurysm", num(p.nu_aneurysm)}};
+    return {{"element_order", std::to_string(p.element_order)}, {"E_artery_mpa", shortest(p.E_artery_mpa)}, {"nu_artery", shortest(p.nu_artery)},
+            {"E_aneurysm_mpa", shortest(p.E_aneurysm_mpa)}, {"nu_aneurysm", shortest(p.nu_aneurysm)}};
 }
 
 void validate(const CondenseStageParams& p) {
@@ -75,13 +71,13 @@ void validate(const CondenseStageParams& p) {
 std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p) {
     const auto& n = p.numeric;
     std::string sphere, box;
-    if (p.region_sphere) for (double x : *p.region_sphere) sphere += (sphere.empty() ? "" : ",") + num(x);
-    if (p.region_box) for (double x : *p.region_box) box += (box.empty() ? "" : ",") + num(x);
+    if (p.region_sphere) for (double x : *p.region_sphere) sphere += (sphere.empty() ? "" : ",") + shortest(x);
+    if (p.region_box) for (double x : *p.region_box) box += (box.empty() ? "" : ",") + shortest(x);
     return {{"method", n.method == fem::CondenseMethod::SPARSE ? "sparse" : "dense"},
             {"precision", n.precision == Precision::FLOAT32 ? "float32" : "float64"},
             {"tile_size", std::to_string(n.tile_size)},
             {"ordering", n.ordering},
-            {"memory_limit_gb", num(n.memory_limit_gb)},
+            {"memory_limit_gb", shortest(n.memory_limit_gb)},
             {"residual_columns", std::to_string(n.residual_columns)},
             {"region_sphere_mm", sphere},
             {"region_box_mm", box},

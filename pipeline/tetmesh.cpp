@@ -27,6 +27,7 @@ namespace nglib {
 #endif
 
 #include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
 #include "aneu/fem/element.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
@@ -37,11 +38,6 @@ namespace {
 
 constexpr double PI = 3.14159265358979323846;
 
-std::string num(double v) {
-    char b[32];
-    std::snprintf(b, sizeof b, "%.6g", v);
-    return b;
-}
 
 // ---------------------------------------------------------------- child-process isolation
 struct RawMesh {
@@ -113,7 +109,7 @@ RawMesh run_isolated(const std::function<int(RawMesh&, std::string&)>& mesher, d
     if (timed_out) {
         ::kill(pid, SIGKILL);
         ::waitpid(pid, nullptr, 0);
-        throw MeshingError(name + ": no result after " + num(timeout_s) + " s; killed (raise --timeout-s, or check the surface)");
+        throw MeshingError(name + ": no result after " + shortest(timeout_s) + " s; killed (raise --timeout-s, or check the surface)");
     }
     int status = 0;
     ::waitpid(pid, &status, 0);
@@ -148,7 +144,7 @@ std::string tetgen_error(int code) {
 }
 
 RawMesh run_tetgen(const SurfaceData& s, const TetMeshParams& p, double max_vol) {
-    const std::string sw = "pYQq" + num(p.radius_edge_max) + "/" + num(p.min_dihedral_deg) + "a" + num(max_vol);
+    const std::string sw = "pYQq" + shortest(p.radius_edge_max) + "/" + shortest(p.min_dihedral_deg) + "a" + shortest(max_vol);
     return run_isolated(
         [&](RawMesh& out, std::string& msg) {
             // Heap objects that are never freed: this runs in the child process, which exits right after,
@@ -289,15 +285,15 @@ void validate(const TetMeshParams& p) {
 #ifndef ANEU_WITH_NETGEN
     if (p.mesher == "netgen") throw InputError("tetmesh: mesher = netgen, but this build has no Netgen (ANEU_WITH_NETGEN=OFF)");
 #endif
-    if (!(p.max_volume_mm3 >= 0)) throw InputError("tetmesh: max_volume_mm3 = " + num(p.max_volume_mm3) + ": must be >= 0 (0 = automatic)");
-    if (!(p.radius_edge_max >= 1.0)) throw InputError("tetmesh: radius_edge_max = " + num(p.radius_edge_max) + ": must be >= 1 (TetGen needs > 1 to terminate reliably)");
-    if (!(p.min_dihedral_deg >= 0 && p.min_dihedral_deg < 30)) throw InputError("tetmesh: min_dihedral_deg = " + num(p.min_dihedral_deg) + ": must be in [0, 30)");
+    if (!(p.max_volume_mm3 >= 0)) throw InputError("tetmesh: max_volume_mm3 = " + shortest(p.max_volume_mm3) + ": must be >= 0 (0 = automatic)");
+    if (!(p.radius_edge_max >= 1.0)) throw InputError("tetmesh: radius_edge_max = " + shortest(p.radius_edge_max) + ": must be >= 1 (TetGen needs > 1 to terminate reliably)");
+    if (!(p.min_dihedral_deg >= 0 && p.min_dihedral_deg < 30)) throw InputError("tetmesh: min_dihedral_deg = " + shortest(p.min_dihedral_deg) + ": must be in [0, 30)");
     if (!(p.timeout_s > 0)) throw InputError("tetmesh: timeout_s must be > 0");
 }
 
 std::vector<std::pair<std::string, std::string>> parameter_list(const TetMeshParams& p) {
-    return {{"mesher", p.mesher}, {"max_volume_mm3", num(p.max_volume_mm3)}, {"radius_edge_max", num(p.radius_edge_max)},
-            {"min_dihedral_deg", num(p.min_dihedral_deg)}, {"timeout_s", num(p.timeout_s)}};
+    return {{"mesher", p.mesher}, {"max_volume_mm3", shortest(p.max_volume_mm3)}, {"radius_edge_max", shortest(p.radius_edge_max)},
+            {"min_dihedral_deg", shortest(p.min_dihedral_deg)}, {"timeout_s", shortest(p.timeout_s)}};
 }
 
 void check_closed_surface(const SurfaceData& s, const std::string& what) {
@@ -306,7 +302,7 @@ void check_closed_surface(const SurfaceData& s, const std::string& what) {
     for (Eigen::Index f = 0; f < s.F.rows(); ++f)
         for (int k = 0; k < 3; ++k) ++directed[{s.F(f, k), s.F(f, (k + 1) % 3)}];
     auto at = [&](int v) {
-        return "(" + num(s.V(v, 0)) + ", " + num(s.V(v, 1)) + ", " + num(s.V(v, 2)) + ")";
+        return "(" + shortest(s.V(v, 0)) + ", " + shortest(s.V(v, 1)) + ", " + shortest(s.V(v, 2)) + ")";
     };
     size_t open = 0, nonmanifold = 0;
     std::string example_open, example_nm;
@@ -328,7 +324,7 @@ void check_closed_surface(const SurfaceData& s, const std::string& what) {
     for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
         vol += s.V.row(s.F(f, 0)).dot(s.V.row(s.F(f, 1)).cross(s.V.row(s.F(f, 2)))) / 6.0;
     }
-    if (!(vol > 0)) throw InputError(what + ": enclosed volume " + num(vol) + " mm^3 is not positive (faces oriented inward?)");
+    if (!(vol > 0)) throw InputError(what + ": enclosed volume " + shortest(vol) + " mm^3 is not positive (faces oriented inward?)");
 }
 
 std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
@@ -413,7 +409,7 @@ VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& re
         const Eigen::RowVector3d c = wall.V.row(wall.F(crossing[0].first, 0));
         throw InputError("tetmesh: wall surface self-intersects: " + std::string(crossing.size() >= 16 ? "16 or more" : std::to_string(crossing.size())) +
                          " pairs of faces cross, e.g. faces " + std::to_string(crossing[0].first) + " and " +
-                         std::to_string(crossing[0].second) + " near (" + num(c.x()) + ", " + num(c.y()) + ", " + num(c.z()) + ")");
+                         std::to_string(crossing[0].second) + " near (" + shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) + ")");
     }
     auto label_index = [&](const std::string& n) {
         const auto it = std::find(wall.label_names.begin(), wall.label_names.end(), n);
@@ -422,7 +418,7 @@ VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& re
     const int li = label_index("inner"), lo = label_index("outer");
     if (li < 0 || lo < 0) throw InputError("tetmesh: wall surface has no faces labelled 'inner' and 'outer' (labels: " + std::to_string(wall.label_names.size()) + ")");
     const double max_vol = p.max_volume_mm3 > 0 ? p.max_volume_mm3 : std::pow(mean_edge_length(wall), 3) / (6.0 * std::sqrt(2.0));
-    rep.info("tetmesh: " + p.mesher + " on " + std::to_string(wall.F.rows()) + " triangles, max volume " + num(max_vol) + " mm^3");
+    rep.info("tetmesh: " + p.mesher + " on " + std::to_string(wall.F.rows()) + " triangles, max volume " + shortest(max_vol) + " mm^3");
     RawMesh raw;
     if (p.mesher == "tetgen") {
         raw = run_tetgen(wall, p, max_vol);
