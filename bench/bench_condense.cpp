@@ -59,23 +59,14 @@ int main(int argc, char** argv) {
     const StructuredMesh m = tube_mesh(1.7, 2.0, 25.6, 1, n_theta, n_z);
     const auto K = assemble_stiffness(m.V, m.T, Eigen::VectorXi::Zero(m.T.rows()), {{"wall", 1.0, 0.45}});
     const double assemble_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::vector<char> is_end(static_cast<size_t>(m.V.rows()), 0);
-    std::vector<int> fixed, kept;
-    for (Eigen::Index k = 0; k < m.ends.size(); ++k) is_end[static_cast<size_t>(m.ends[k])] = 1;
-    for (Eigen::Index k = 0; k < m.ends.size(); ++k)
-        for (int a = 0; a < 3; ++a) fixed.push_back(3 * m.ends[k] + a);
-    for (Eigen::Index k = 0; k < m.outer.size(); ++k)
-        if (!is_end[static_cast<size_t>(m.outer[k])])
-            for (int a = 0; a < 3; ++a) kept.push_back(3 * m.outer[k] + a);
-    std::sort(fixed.begin(), fixed.end());
+    const WallDofSets dofs = wall_dof_sets(m);
     CondenseParams p;
     p.method = method == "dense" ? CondenseMethod::DENSE : CondenseMethod::SPARSE;
     if (const char* ts = std::getenv("ANEU_BENCH_TILE")) p.tile_size = std::stoi(ts);
     if (const char* o = std::getenv("ANEU_BENCH_ORDERING")) p.ordering = o;
     p.precision = precision == "float32" ? aneu::Precision::FLOAT32 : aneu::Precision::FLOAT64;
     const double peak = dgemm_gflops();
-    const auto c = condense(K, Eigen::Map<Eigen::VectorXi>(fixed.data(), static_cast<Eigen::Index>(fixed.size())),
-                            Eigen::Map<Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), p);
+    const auto c = condense(K, dofs.fixed, dofs.kept, p);
     nlohmann::json j{{"method", method}, {"precision", precision}, {"threads", threads}, {"nodes", m.V.rows()},
                      {"tets", m.T.rows()}, {"nnz_K", K.nonZeros()}, {"assemble_s", assemble_s},
                      {"dgemm_peak_gflops", peak}, {"blas_kernels", aneu::openblas_kernels()}};

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "aneu/fem/structured_mesh.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <functional>
@@ -67,6 +68,20 @@ StructuredMesh tube_mesh(double r_in, double r_out, double length, int n_r, int 
     m.outer = to_vec(outer);
     m.ends = to_vec(ends);
     return m;
+}
+
+WallDofSets wall_dof_sets(const StructuredMesh& m) {
+    std::vector<char> is_end(static_cast<size_t>(m.V.rows()), 0);
+    for (Eigen::Index k = 0; k < m.ends.size(); ++k) is_end[static_cast<size_t>(m.ends[k])] = 1;
+    std::vector<int> fixed, kept;
+    for (Eigen::Index k = 0; k < m.ends.size(); ++k)
+        for (int a = 0; a < 3; ++a) fixed.push_back(3 * m.ends[k] + a);
+    for (Eigen::Index k = 0; k < m.outer.size(); ++k)
+        if (!is_end[static_cast<size_t>(m.outer[k])])
+            for (int a = 0; a < 3; ++a) kept.push_back(3 * m.outer[k] + a);
+    std::sort(fixed.begin(), fixed.end());
+    std::sort(kept.begin(), kept.end());
+    return {to_vec(fixed), to_vec(kept)};
 }
 
 StructuredMesh box_mesh(double sx, double sy, double sz, int nx, int ny, int nz) {

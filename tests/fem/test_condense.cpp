@@ -34,17 +34,9 @@ Problem tube_problem(int n_theta = 16, int n_z = 10) {
     Problem p;
     p.m = tube_mesh(1.5, 1.8, 4.0, 1, n_theta, n_z);
     p.K = assemble_stiffness(p.m.V, p.m.T, Eigen::VectorXi::Zero(p.m.T.rows()), {{"wall", 1.0, 0.45}});
-    std::vector<char> is_end(static_cast<size_t>(p.m.V.rows()), 0);
-    std::vector<int> fixed, kept;
-    for (Eigen::Index k = 0; k < p.m.ends.size(); ++k) is_end[static_cast<size_t>(p.m.ends[k])] = 1;
-    for (Eigen::Index k = 0; k < p.m.ends.size(); ++k)
-        for (int a = 0; a < 3; ++a) fixed.push_back(3 * p.m.ends[k] + a);
-    for (Eigen::Index k = 0; k < p.m.outer.size(); ++k)
-        if (!is_end[static_cast<size_t>(p.m.outer[k])])
-            for (int a = 0; a < 3; ++a) kept.push_back(3 * p.m.outer[k] + a);
-    std::sort(fixed.begin(), fixed.end());
-    p.fixed = Eigen::Map<Eigen::VectorXi>(fixed.data(), static_cast<Eigen::Index>(fixed.size()));
-    p.kept = Eigen::Map<Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size()));
+    const WallDofSets d = wall_dof_sets(p.m);
+    p.fixed = d.fixed;
+    p.kept = d.kept;
     return p;
 }
 

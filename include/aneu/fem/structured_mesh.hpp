@@ -22,6 +22,13 @@ struct StructuredMesh {
 StructuredMesh tube_mesh(double r_in, double r_out, double length, int n_r, int n_theta, int n_z,
                          double theta_span = 6.283185307179586);
 
+/// DOF sets of a tube wall held at both ends: fixed = every DOF of the end nodes, kept = every DOF of the
+/// outer nodes that are not at an end (the simulated surface), both sorted.
+struct WallDofSets {
+    Eigen::VectorXi fixed, kept;
+};
+WallDofSets wall_dof_sets(const StructuredMesh& m);
+
 /// The box [0,sx]×[0,sy]×[0,sz] with nx × ny × nz cells.
 StructuredMesh box_mesh(double sx, double sy, double sz, int nx, int ny, int nz);
 
