@@ -229,25 +229,28 @@ struct Timing {
     double factor_s = 0, solve_s = 0, flops = 0;
 };
 
-/// SPARSE route. Returns W in pivot order; `order` receives the kept positions (into kept_free) per row.
-/// The factor and Y are double; the final accumulation YᵀY runs in T (float32 storage: SSYRK on Y rounded
-/// to float, which keeps W's relative error near float32 rounding because every term is well scaled).
-template <class T>
-TiledSymmetric<T> sparse_w(Cholmod& ch, const std::vector<int>& kept_free, int tile, std::vector<int>& order,
-                                double& y_peak_bytes, Timing& tm, Reporter& rep) {
-    const Supernodes sn(ch.L);
-    const int* Perm = static_cast<const int*>(ch.L->Perm);
-    std::vector<int> inv(ch.L->n);
-    for (size_t k = 0; k < ch.L->n; ++k) inv[static_cast<size_t>(Perm[k])] = static_cast<int>(k);
+/// The kept DOFs sorted by their pivot (elimination) position in the factor: `order` = positions into
+/// kept_free, `piv` = their pivots, ascending. Needs only the symbolic factor.
+void pivot_order(const cholmod_factor* L, const std::vector<int>& kept_free, std::vector<int>& order, std::vector<int>& piv) {
+    const int* Perm = static_cast<const int*>(L->Perm);
+    std::vector<int> inv(L->n);
+    for (size_t k = 0; k < L->n; ++k) inv[static_cast<size_t>(Perm[k])] = static_cast<int>(k);
     order.resize(kept_free.size());
     std::iota(order.begin(), order.end(), 0);
-    std::sort(order.begin(), order.end(), [&](int a, int b) { return inv[static_cast<size_t>(kept_free[static_cast<size_t>(a)])] < inv[static_cast<size_t>(kept_free[static_cast<size_t>(b)])]; });
-    std::vector<int> piv(order.size());
-    for (size_t q = 0; q < order.size(); ++q) piv[q] = inv[static_cast<size_t>(kept_free[static_cast<size_t>(order[q])])];
-    y_peak_bytes = predict_y_peak(sn, piv);
+    auto pivot = [&](int q) { return inv[static_cast<size_t>(kept_free[static_cast<size_t>(q)])]; };
+    std::sort(order.begin(), order.end(), [&](int a, int b) { return pivot(a) < pivot(b); });
+    piv.resize(order.size());
+    for (size_t q = 0; q < order.size(); ++q) piv[q] = pivot(order[q]);
+}
 
+/// SPARSE route: W with rows in the order of `piv` (pivot_order). The factor and Y are double; the final
+/// accumulation YᵀY runs in T (float32 storage: SSYRK on Y rounded to float, which keeps W's relative
+/// error near float32 rounding because every term is well scaled).
+template <class T>
+TiledSymmetric<T> sparse_w(Cholmod& ch, const std::vector<int>& piv, int tile, Timing& tm, Reporter& rep) {
+    const Supernodes sn(ch.L);  // after the numeric factorization: its values are set
     const auto t0 = Clock::now();
-    const int m = static_cast<int>(order.size());
+    const int m = static_cast<int>(piv.size());
     TiledSymmetric<T> W(m, tile);
     std::vector<std::vector<double>> Y(static_cast<size_t>(sn.nsuper));
     std::vector<double> U;
@@ -442,18 +445,13 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     // The DENSE route forms W in double and converts it.
     const double w_out_bytes = p.method == CondenseMethod::DENSE && p.precision == Precision::FLOAT32 ? 2.0 * w_bytes : 0.0;
     double predicted = 8.0 * static_cast<double>(ch.L->xsize > 0 ? ch.L->xsize : 0) + w_bytes + w_out_bytes;
-    std::vector<int> order;
+    std::vector<int> order, piv;
     double y_peak = 0;
     if (p.method == CondenseMethod::SPARSE) {
         // The symbolic analysis fixes the supernodes, so the forward solve's peak can be predicted exactly.
-        const Supernodes sn(ch.L);
-        const int* Perm = static_cast<const int*>(ch.L->Perm);
-        std::vector<int> inv(static_cast<size_t>(nf));
-        for (int k = 0; k < nf; ++k) inv[static_cast<size_t>(Perm[k])] = k;
-        std::vector<int> piv(static_cast<size_t>(m));
-        for (int q = 0; q < m; ++q) piv[static_cast<size_t>(q)] = inv[static_cast<size_t>(kept_free[static_cast<size_t>(q)])];
-        std::sort(piv.begin(), piv.end());
-        predicted += predict_y_peak(sn, piv);
+        pivot_order(ch.L, kept_free, order, piv);
+        y_peak = predict_y_peak(Supernodes(ch.L), piv);
+        predicted += y_peak;
     } else {
         predicted += 8.0 * m * static_cast<double>(m) + 2.0 * 8.0 * (nf - m) * 256.0;  // S and one block of solves
     }
@@ -477,10 +475,11 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     const bool f32 = p.precision == Precision::FLOAT32;
     if (p.method == CondenseMethod::SPARSE) {
         if (f32) {
-            out.W32 = sparse_w<float>(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+            out.W32 = sparse_w<float>(ch, piv, p.tile_size, tm, rep);
         } else {
-            out.W64 = sparse_w<double>(ch, kept_free, p.tile_size, row_kept, y_peak, tm, rep);
+            out.W64 = sparse_w<double>(ch, piv, p.tile_size, tm, rep);
         }
+        row_kept = order;
     } else {
         TiledSymmetric<double> W = dense_w(K, free_dofs, kept_free, p.tile_size, tm, rep);
         if (f32) {
