@@ -96,6 +96,10 @@ void write_meta(H5::H5File& f, const Meta& m) {
         }
         h5::write_strings(sg, "input_paths", paths);
         h5::write_strings(sg, "input_sha256", hashes);
+        if (!s.qa.empty()) {
+            H5::Group qg = sg.createGroup("qa");
+            for (const auto& [k, v] : s.qa) h5::write_attr(qg, k, v);
+        }
     }
 }
 
@@ -129,6 +133,10 @@ Meta read_meta_group(const H5::H5File& f, const Ctx& ctx) {
                           " entries but input_sha256 has " + std::to_string(hashes.size()));
         }
         for (size_t i = 0; i < paths.size(); ++i) s.inputs.push_back({paths[i], hashes[i]});
+        if (h5::exists(sg, "qa")) {  // optional: stages without QA figures write none
+            const H5::Group qg = sg.openGroup("qa");
+            for (const auto& k : h5::attr_names(qg)) s.qa.emplace_back(k, h5::read_attr_double(qg, p + "/qa", k, ctx));
+        }
         m.stages.push_back(std::move(s));
     }
     return m;
@@ -150,6 +158,16 @@ void write_image(H5::H5File& f, const ImageData& im, int deflate) {
     h5::write_array(g, "spacing", gr.spacing.data(), {3}, "mm", 0);
     h5::write_array(g, "direction", gr.direction.data(), {3, 3}, "1", 0);
     h5::write_strings(g, "mask_label_names", im.mask_label_names);
+    if (!im.intensity.empty()) {
+        require(im.intensity.size() == gr.voxel_count(),
+                "image.intensity has " + std::to_string(im.intensity.size()) + " voxels, grid has " +
+                    std::to_string(gr.voxel_count()));
+        h5::write_array(g, "intensity", im.intensity.data(),
+                        {static_cast<hsize_t>(gr.size[2]), static_cast<hsize_t>(gr.size[1]),
+                         static_cast<hsize_t>(gr.size[0])},
+                        "HU", deflate);
+        h5::write_attr(g, "threshold_hu", im.threshold_hu);
+    }
 
     const Centerline& c = im.centerline;
     require(c.radius.size() == c.points.rows(), "centerline.radius size != number of points");
@@ -196,6 +214,11 @@ ImageData read_image(const H5::H5File& f, const Ctx& ctx) {
                                                                  static_cast<hsize_t>(size[1]),
                                                                  static_cast<hsize_t>(size[0])}));
     im.mask_label_names = h5::read_strings(g, "/image", "mask_label_names", ctx);
+    if (h5::exists(g, "intensity")) {  // optional: written by segment
+        im.intensity = h5::read_array<float>(g, "/image", "intensity", {size[2], size[1], size[0]}, d, ctx,
+                                             "[size_k,size_j,size_i] like mask");
+        im.threshold_hu = h5::read_attr_double(g, "/image", "threshold_hu", ctx);
+    }
 
     if (!h5::exists(g, "centerline")) throw InputError(ctx.where("/image/centerline") + ": missing group");
     const H5::Group cg = g.openGroup("centerline");
@@ -242,6 +265,10 @@ void write_surface(H5::Group& parent, const std::string& name, const SurfaceData
     write_vector<int>(lg, "offsets", s.loop_offsets, "", deflate);
     write_vector<int>(lg, "vertices", s.loop_vertices, "", deflate);
     write_vector<int>(lg, "end_id", s.loop_end_id, "", deflate);
+    if (s.vertex_thickness.size() != 0) {
+        require(s.vertex_thickness.size() == s.V.rows(), ctx + ": vertex_thickness size != number of vertices");
+        write_vector<double>(g, "vertex_thickness", s.vertex_thickness, "mm", deflate);
+    }
 }
 
 SurfaceData read_surface(const H5::Group& parent, const std::string& name, const Ctx& ctx) {
@@ -264,6 +291,9 @@ SurfaceData read_surface(const H5::Group& parent, const std::string& name, const
     s.loop_offsets = read_vector<int>(lg, p + "/loops", "offsets", -1, ctx, "[loops+1]");
     s.loop_vertices = read_vector<int>(lg, p + "/loops", "vertices", -1, ctx, "[n]");
     s.loop_end_id = read_vector<int>(lg, p + "/loops", "end_id", -1, ctx, "[loops]");
+    if (h5::exists(g, "vertex_thickness")) {
+        s.vertex_thickness = read_vector<double>(g, p, "vertex_thickness", s.V.rows(), ctx, "[V] with V = " + std::to_string(s.V.rows()));
+    }
     return s;
 }
 

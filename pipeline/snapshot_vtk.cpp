@@ -6,75 +6,221 @@
 #include <vtkCamera.h>
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
+#include <vtkDiskSource.h>
+#include <vtkDoubleArray.h>
 #include <vtkIntArray.h>
 #include <vtkLookupTable.h>
 #include <vtkNew.h>
 #include <vtkPNGWriter.h>
+#include <vtkPointData.h>
 #include <vtkPoints.h>
 #include <vtkPolyData.h>
 #include <vtkPolyDataMapper.h>
 #include <vtkProperty.h>
 #include <vtkRenderWindow.h>
 #include <vtkRenderer.h>
+#include <vtkScalarBarActor.h>
+#include <vtkTextActor.h>
+#include <vtkTextProperty.h>
+#include <vtkTransform.h>
+#include <vtkTransformPolyDataFilter.h>
+#include <vtkTubeFilter.h>
 #include <vtkWindowToImageFilter.h>
+
+#include <Eigen/Dense>
 
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/snapshot.hpp"
 
 namespace aneu::pipeline {
 
-void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width, int height) {
+namespace {
+
+const double PALETTE[8][3] = {{0.85, 0.33, 0.27}, {0.95, 0.80, 0.35}, {0.30, 0.55, 0.85}, {0.40, 0.75, 0.45},
+                              {0.70, 0.50, 0.80}, {0.95, 0.55, 0.20}, {0.45, 0.80, 0.85}, {0.60, 0.60, 0.60}};
+
+vtkSmartPointer<vtkPolyData> poly_of(const SurfaceData& s) {
+    auto poly = vtkSmartPointer<vtkPolyData>::New();
+    vtkNew<vtkPoints> pts;
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i) pts->InsertNextPoint(s.V(i, 0), s.V(i, 1), s.V(i, 2));
+    vtkNew<vtkCellArray> tris;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const vtkIdType ids[3] = {s.F(f, 0), s.F(f, 1), s.F(f, 2)};
+        tris->InsertNextCell(3, ids);
+    }
+    poly->SetPoints(pts);
+    poly->SetPolys(tris);
+    return poly;
+}
+
+}  // namespace
+
+void require_snapshot_display() {
     const char* display = std::getenv("DISPLAY");
     if (!display || !*display) {
         throw InputError("snapshot: no X display (DISPLAY is unset); Debian's VTK renders through X11 only: run the "
                          "command under `xvfb-run -a`");
     }
-    vtkNew<vtkPoints> pts;
-    for (Eigen::Index i = 0; i < s.V.rows(); ++i) pts->InsertNextPoint(s.V(i, 0), s.V(i, 1), s.V(i, 2));
-    vtkNew<vtkCellArray> tris;
-    vtkNew<vtkIntArray> color;
-    const Eigen::VectorXi& c = by == ColorBy::REGION && s.face_region.size() == s.F.rows() ? s.face_region : s.face_label;
-    const int ncolors = std::max(1, c.size() ? c.maxCoeff() + 1 : 1);
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        const vtkIdType ids[3] = {s.F(f, 0), s.F(f, 1), s.F(f, 2)};
-        tris->InsertNextCell(3, ids);
-        color->InsertNextValue(c.size() ? c[f] : 0);
-    }
-    vtkNew<vtkPolyData> poly;
-    poly->SetPoints(pts);
-    poly->SetPolys(tris);
-    poly->GetCellData()->SetScalars(color);
-    vtkNew<vtkLookupTable> lut;
-    lut->SetNumberOfTableValues(ncolors);
-    const double palette[6][3] = {{0.85, 0.33, 0.27}, {0.95, 0.80, 0.35}, {0.30, 0.55, 0.85}, {0.40, 0.75, 0.45}, {0.7, 0.5, 0.8}, {0.6, 0.6, 0.6}};
-    for (int k = 0; k < ncolors; ++k) lut->SetTableValue(k, palette[k % 6][0], palette[k % 6][1], palette[k % 6][2], 1.0);
-    lut->SetTableRange(0, ncolors - 1);
-    lut->Build();
-    vtkNew<vtkPolyDataMapper> mapper;
-    mapper->SetInputData(poly);
-    mapper->SetLookupTable(lut);
-    mapper->SetScalarRange(0, ncolors - 1);
-    mapper->SetScalarModeToUseCellData();
-    vtkNew<vtkActor> actor;
-    actor->SetMapper(mapper);
-    actor->GetProperty()->EdgeVisibilityOn();
-    actor->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
-    actor->GetProperty()->SetLineWidth(0.5);
+}
+
+void snapshot_scene(const SnapshotScene& scene, const std::string& png, int width, int height) {
+    require_snapshot_display();
     vtkNew<vtkRenderer> ren;
-    ren->AddActor(actor);
     ren->SetBackground(1, 1, 1);
+    std::vector<Eigen::Vector3d> all;
+    int legend_line = 0;
+    auto legend = [&](const std::string& text, const double* rgb) {
+        vtkNew<vtkTextActor> t;
+        t->SetInput(text.c_str());
+        t->GetTextProperty()->SetFontSize(18);
+        t->GetTextProperty()->SetColor(rgb[0] * 0.8, rgb[1] * 0.8, rgb[2] * 0.8);
+        t->GetTextProperty()->BoldOn();
+        t->SetDisplayPosition(12, height - 60 - 24 * legend_line++);
+        ren->AddActor2D(t);
+    };
+    for (const auto& layer : scene.layers) {
+        const SurfaceData& s = layer.surface;
+        for (Eigen::Index i = 0; i < s.V.rows(); ++i) all.push_back(s.V.row(i).transpose());
+        auto poly = poly_of(s);
+        vtkNew<vtkPolyDataMapper> mapper;
+        mapper->SetInputData(poly);
+        vtkNew<vtkLookupTable> lut;
+        if (layer.by == ColorBy::THICKNESS && s.vertex_thickness.size() == s.V.rows()) {
+            vtkNew<vtkDoubleArray> t;
+            t->SetName("thickness [mm]");
+            for (Eigen::Index i = 0; i < s.V.rows(); ++i) t->InsertNextValue(s.vertex_thickness[i]);
+            poly->GetPointData()->SetScalars(t);
+            const double lo = s.vertex_thickness.minCoeff(), hi = std::max(lo + 1e-6, s.vertex_thickness.maxCoeff());
+            lut->SetHueRange(0.0, 0.66);  // thin = red, thick = blue
+            lut->SetTableRange(lo, hi);
+            lut->Build();
+            mapper->SetLookupTable(lut);
+            mapper->SetScalarRange(lo, hi);
+            mapper->SetScalarModeToUsePointData();
+            vtkNew<vtkScalarBarActor> bar;
+            bar->SetLookupTable(lut);
+            bar->SetTitle("thickness [mm]");
+            bar->SetNumberOfLabels(5);
+            bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
+            bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
+            bar->SetPosition(0.88, 0.1);
+            bar->SetWidth(0.1);
+            bar->SetHeight(0.8);
+            ren->AddActor2D(bar);
+        } else {
+            const bool region = layer.by == ColorBy::REGION && s.face_region.size() == s.F.rows();
+            const Eigen::VectorXi& c = region ? s.face_region : s.face_label;
+            const auto& names = region ? s.region_names : s.label_names;
+            const int ncolors = std::max<int>(1, static_cast<int>(names.size()));
+            vtkNew<vtkIntArray> color;
+            for (Eigen::Index f = 0; f < s.F.rows(); ++f) color->InsertNextValue(c.size() ? c[f] : 0);
+            poly->GetCellData()->SetScalars(color);
+            lut->SetNumberOfTableValues(ncolors);
+            for (int k = 0; k < ncolors; ++k) lut->SetTableValue(k, PALETTE[k % 8][0], PALETTE[k % 8][1], PALETTE[k % 8][2], 1.0);
+            lut->SetTableRange(0, ncolors - 1);
+            lut->Build();
+            mapper->SetLookupTable(lut);
+            mapper->SetScalarRange(0, ncolors - 1);
+            mapper->SetScalarModeToUseCellData();
+            if (layer.opacity >= 0.99)
+                for (int k = 0; k < ncolors; ++k) legend(names.empty() ? "surface" : names[static_cast<size_t>(k)], PALETTE[k % 8]);
+        }
+        vtkNew<vtkActor> actor;
+        actor->SetMapper(mapper);
+        actor->GetProperty()->SetOpacity(layer.opacity);
+        if (layer.edges) {
+            actor->GetProperty()->EdgeVisibilityOn();
+            actor->GetProperty()->SetEdgeColor(0.15, 0.15, 0.15);
+            actor->GetProperty()->SetLineWidth(0.5);
+        }
+        ren->AddActor(actor);
+    }
+    const Centerline& cl = scene.centerline;
+    if (cl.points.rows() > 1 && cl.offsets.size() > 1) {
+        vtkNew<vtkPolyData> lines;
+        vtkNew<vtkPoints> pts;
+        for (Eigen::Index i = 0; i < cl.points.rows(); ++i) {
+            pts->InsertNextPoint(cl.points(i, 0), cl.points(i, 1), cl.points(i, 2));
+            all.push_back(cl.points.row(i).transpose());
+        }
+        vtkNew<vtkCellArray> cells;
+        for (Eigen::Index l = 0; l + 1 < cl.offsets.size(); ++l) {
+            cells->InsertNextCell(cl.offsets[l + 1] - cl.offsets[l]);
+            for (int i = cl.offsets[l]; i < cl.offsets[l + 1]; ++i) cells->InsertCellPoint(i);
+        }
+        lines->SetPoints(pts);
+        lines->SetLines(cells);
+        vtkNew<vtkTubeFilter> tube;
+        tube->SetInputData(lines);
+        tube->SetRadius(0.12);
+        tube->SetNumberOfSides(10);
+        vtkNew<vtkPolyDataMapper> m;
+        m->SetInputConnection(tube->GetOutputPort());
+        m->ScalarVisibilityOff();
+        vtkNew<vtkActor> a;
+        a->SetMapper(m);
+        a->GetProperty()->SetColor(0.1, 0.1, 0.1);
+        ren->AddActor(a);
+        const double black[3] = {0.15, 0.15, 0.15};
+        legend("centerline", black);
+    }
+    for (const auto& p : scene.planes) {
+        vtkNew<vtkDiskSource> disk;
+        disk->SetInnerRadius(0);
+        disk->SetOuterRadius(1.3 * p.radius_mm);
+        disk->SetCircumferentialResolution(48);
+        vtkNew<vtkTransform> tr;
+        tr->Translate(p.point.data());
+        const Eigen::Vector3d z(0, 0, 1), axis = z.cross(p.normal);
+        const double angle = std::atan2(axis.norm(), z.dot(p.normal)) * 180.0 / 3.14159265358979323846;
+        if (axis.norm() > 1e-12) tr->RotateWXYZ(angle, axis.x(), axis.y(), axis.z());
+        else if (p.normal.z() < 0) tr->RotateWXYZ(180, 1, 0, 0);
+        vtkNew<vtkTransformPolyDataFilter> tf;
+        tf->SetInputConnection(disk->GetOutputPort());
+        tf->SetTransform(tr);
+        vtkNew<vtkPolyDataMapper> m;
+        m->SetInputConnection(tf->GetOutputPort());
+        vtkNew<vtkActor> a;
+        a->SetMapper(m);
+        a->GetProperty()->SetColor(0.2, 0.7, 0.3);
+        a->GetProperty()->SetOpacity(0.6);
+        ren->AddActor(a);
+        all.push_back(p.point);
+    }
+    if (!scene.planes.empty()) {
+        const double green[3] = {0.2, 0.7, 0.3};
+        legend("end planes", green);
+    }
+    if (!scene.title.empty()) {
+        vtkNew<vtkTextActor> t;
+        t->SetInput(scene.title.c_str());
+        t->GetTextProperty()->SetFontSize(22);
+        t->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
+        t->SetDisplayPosition(12, height - 32);
+        ren->AddActor2D(t);
+    }
     vtkNew<vtkRenderWindow> win;
     win->SetOffScreenRendering(1);
     win->AddRenderer(ren);
     win->SetSize(width, height);
-    ren->ResetCamera();
+    // Camera along the geometry's thinnest principal direction (largest projected extent), slightly tilted.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const auto& x : all) mean += x;
+    if (!all.empty()) mean /= static_cast<double>(all.size());
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (const auto& x : all) C += (x - mean) * (x - mean).transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+    Eigen::Vector3d view = es.eigenvectors().col(0), up = es.eigenvectors().col(1);
+    if (view.dot(Eigen::Vector3d(0.3, -1.0, 0.2)) < 0) view = -view;  // prefer looking from anterior (−y), as radiologists do
+    if (up.z() < 0) up = -up;
+    const Eigen::Vector3d dir = (view + 0.25 * up.cross(view) + 0.25 * up).normalized();
     vtkCamera* cam = ren->GetActiveCamera();
-    double fp[3];
-    cam->GetFocalPoint(fp);
-    const double d = cam->GetDistance();
-    cam->SetPosition(fp[0] + 0.5 * d, fp[1] - 0.8 * d, fp[2] + 0.3 * d);
-    cam->SetViewUp(0, 0, 1);
+    cam->SetFocalPoint(mean.data());
+    const Eigen::Vector3d pos = mean + 100.0 * dir;
+    cam->SetPosition(pos.data());
+    cam->SetViewUp(up.data());
     ren->ResetCamera();
+    cam->Zoom(1.15);
     win->Render();
     vtkNew<vtkWindowToImageFilter> grab;
     grab->SetInput(win);
@@ -84,6 +230,12 @@ void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, 
     w->SetInputConnection(grab->GetOutputPort());
     w->Write();
     if (w->GetErrorCode() != 0) throw IoError(png + ": cannot write the PNG");
+}
+
+void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width, int height) {
+    SnapshotScene scene;
+    scene.layers.push_back({s, by, 1.0, true});
+    snapshot_scene(scene, png, width, height);
 }
 
 }  // namespace aneu::pipeline

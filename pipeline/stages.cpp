@@ -8,29 +8,10 @@
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/fem/assembly.hpp"
+#include "stage_util.hpp"
 
 namespace aneu::pipeline {
 
-namespace {
-
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-void finish(Bundle& b, StageRecord& stage, std::chrono::steady_clock::time_point t0, const std::string& out, Reporter& rep) {
-    stage.wall_time_s = seconds_since(t0);
-    b.meta.stages.push_back(stage);
-    write_bundle(out, b, {}, rep);
-    rep.info(stage.stage + ": wrote " + out + " in " + shortest(seconds_since(t0)) + " s");
-}
-
-std::string stem(const std::string& path) {
-    std::string s = path.substr(path.find_last_of('/') + 1);
-    return s.substr(0, s.find('.'));
-}
-
-}  // namespace
 
 void validate(const TubeWallParams& p) {
     if (!(p.inner_radius_mm > 0 && p.thickness_mm > 0 && p.length_mm > 0)) throw InputError("tubewall: radius, thickness and length must be > 0");

@@ -1,17 +1,8 @@
 // SPDX-License-Identifier: MIT
-// TetGen and Netgen volume meshing of the wall surface. Each mesher runs in a forked child process that
-// sends its mesh back through a pipe: a mesher that aborts, crashes or loops forever on a bad surface
-// becomes a MeshingError in the parent, never a dead or hung tool.
-#include <fcntl.h>
-#include <poll.h>
-#include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
+// TetGen and Netgen volume meshing of the wall surface. Each mesher runs in a forked child process
+// (isolated.hpp): a mesher that aborts, crashes or loops forever on a bad surface becomes a MeshingError.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <functional>
 #include <map>
 #include <queue>
@@ -31,6 +22,7 @@ namespace nglib {
 #include "aneu/fem/element.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
+#include "isolated.hpp"
 
 namespace aneu::pipeline {
 
@@ -38,98 +30,6 @@ namespace {
 
 constexpr double PI = 3.14159265358979323846;
 
-
-// ---------------------------------------------------------------- child-process isolation
-struct RawMesh {
-    std::vector<double> points;  // 3 per point
-    std::vector<int> tets;       // 4 per tet
-};
-
-bool write_all(int fd, const void* p, size_t n) {
-    const char* c = static_cast<const char*>(p);
-    while (n > 0) {
-        const ssize_t w = ::write(fd, c, n);
-        if (w <= 0) return false;
-        c += w;
-        n -= static_cast<size_t>(w);
-    }
-    return true;
-}
-
-/// Runs `mesher` in a child; it returns 0 and fills the mesh, or an error code with a message.
-RawMesh run_isolated(const std::function<int(RawMesh&, std::string&)>& mesher, double timeout_s, const std::string& name) {
-    int fds[2];
-    if (::pipe(fds) != 0) throw MeshingError(name + ": cannot create a pipe to the mesher process");
-    const pid_t pid = ::fork();
-    if (pid < 0) throw MeshingError(name + ": cannot fork the mesher process");
-    if (pid == 0) {  // child: mesh, send, exit without running the parent's destructors
-        ::close(fds[0]);
-        const int devnull = ::open("/dev/null", O_WRONLY);
-        if (devnull >= 0) {  // meshers print progress to stdout; stdout belongs to the parent's user
-            ::dup2(devnull, 1);
-        }
-        RawMesh m;
-        std::string msg;
-        int code = 0;
-        try {
-            code = mesher(m, msg);
-        } catch (int c) {
-            code = 100 + c;
-        } catch (const std::exception& e) {
-            code = 99;
-            msg = e.what();
-        }
-        const std::int64_t hdr[4] = {code, static_cast<std::int64_t>(msg.size()), static_cast<std::int64_t>(m.points.size()),
-                                     static_cast<std::int64_t>(m.tets.size())};
-        bool ok = write_all(fds[1], hdr, sizeof hdr) && write_all(fds[1], msg.data(), msg.size()) &&
-                  write_all(fds[1], m.points.data(), m.points.size() * sizeof(double)) &&
-                  write_all(fds[1], m.tets.data(), m.tets.size() * sizeof(int));
-        ::_exit(ok ? 0 : 1);
-    }
-    ::close(fds[1]);
-    std::string buf;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
-    char chunk[1 << 16];
-    bool timed_out = false;
-    for (;;) {
-        const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now()).count();
-        if (left <= 0) {
-            timed_out = true;
-            break;
-        }
-        pollfd pf{fds[0], POLLIN, 0};
-        const int r = ::poll(&pf, 1, static_cast<int>(std::min<long long>(left, 1000)));
-        if (r < 0 && errno != EINTR) break;
-        if (r <= 0) continue;
-        const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
-        if (n <= 0) break;
-        buf.append(chunk, static_cast<size_t>(n));
-    }
-    ::close(fds[0]);
-    if (timed_out) {
-        ::kill(pid, SIGKILL);
-        ::waitpid(pid, nullptr, 0);
-        throw MeshingError(name + ": no result after " + shortest(timeout_s) + " s; killed (raise --timeout-s, or check the surface)");
-    }
-    int status = 0;
-    ::waitpid(pid, &status, 0);
-    if (WIFSIGNALED(status)) throw MeshingError(name + ": the mesher crashed (signal " + std::to_string(WTERMSIG(status)) + ")");
-    std::int64_t hdr[4];
-    if (buf.size() < sizeof hdr) throw MeshingError(name + ": the mesher process ended without a result");
-    std::memcpy(hdr, buf.data(), sizeof hdr);
-    const size_t need = sizeof hdr + static_cast<size_t>(hdr[1]) + static_cast<size_t>(hdr[2]) * sizeof(double) +
-                        static_cast<size_t>(hdr[3]) * sizeof(int);
-    if (buf.size() != need) throw MeshingError(name + ": truncated result from the mesher process");
-    const std::string msg = buf.substr(sizeof hdr, static_cast<size_t>(hdr[1]));
-    if (hdr[0] != 0) throw MeshingError(name + ": " + msg);
-    RawMesh m;
-    m.points.resize(static_cast<size_t>(hdr[2]));
-    m.tets.resize(static_cast<size_t>(hdr[3]));
-    const char* p = buf.data() + sizeof hdr + hdr[1];
-    std::memcpy(m.points.data(), p, m.points.size() * sizeof(double));
-    std::memcpy(m.tets.data(), p + m.points.size() * sizeof(double), m.tets.size() * sizeof(int));
-    return m;
-}
 
 std::string tetgen_error(int code) {
     switch (code) {
@@ -181,9 +81,9 @@ RawMesh run_tetgen(const SurfaceData& s, const TetMeshParams& p, double max_vol)
                 return 1;
             }
             out.points.assign(res.pointlist, res.pointlist + 3 * res.numberofpoints);
-            out.tets.resize(static_cast<size_t>(4 * res.numberoftetrahedra));
+            out.cells.resize(static_cast<size_t>(4 * res.numberoftetrahedra));
             for (int t = 0; t < res.numberoftetrahedra; ++t)
-                for (int a = 0; a < 4; ++a) out.tets[static_cast<size_t>(4 * t + a)] = res.tetrahedronlist[t * res.numberofcorners + a];
+                for (int a = 0; a < 4; ++a) out.cells[static_cast<size_t>(4 * t + a)] = res.tetrahedronlist[t * res.numberofcorners + a];
             return 0;
         },
         p.timeout_s, "tetmesh (TetGen)");
@@ -214,11 +114,11 @@ RawMesh run_netgen(const SurfaceData& s, const TetMeshParams& p, double max_vol)
             const int np = nglib::Ng_GetNP(m), ne = nglib::Ng_GetNE(m);
             out.points.resize(static_cast<size_t>(3 * np));
             for (int i = 0; i < np; ++i) nglib::Ng_GetPoint(m, i + 1, out.points.data() + 3 * i);
-            out.tets.resize(static_cast<size_t>(4 * ne));
+            out.cells.resize(static_cast<size_t>(4 * ne));
             for (int e = 0; e < ne; ++e) {
                 int t[10];
                 nglib::Ng_GetVolumeElement(m, e + 1, t);
-                for (int a = 0; a < 4; ++a) out.tets[static_cast<size_t>(4 * e + a)] = t[a] - 1;
+                for (int a = 0; a < 4; ++a) out.cells[static_cast<size_t>(4 * e + a)] = t[a] - 1;
             }
             nglib::Ng_DeleteMesh(m);
             nglib::Ng_Exit();
@@ -428,10 +328,10 @@ VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& re
 #endif
     }
     VolumeData v;
-    const auto np = static_cast<Eigen::Index>(raw.points.size() / 3), nt = static_cast<Eigen::Index>(raw.tets.size() / 4);
+    const auto np = static_cast<Eigen::Index>(raw.points.size() / 3), nt = static_cast<Eigen::Index>(raw.cells.size() / 4);
     if (nt == 0) throw MeshingError("tetmesh: the mesher produced no tetrahedra from " + std::to_string(wall.F.rows()) + " faces");
     v.nodes = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(raw.points.data(), np, 3);
-    v.tets = Eigen::Map<Eigen::Matrix<int, Eigen::Dynamic, 4, Eigen::RowMajor>>(raw.tets.data(), nt, 4);
+    v.tets = Eigen::Map<Eigen::Matrix<int, Eigen::Dynamic, 4, Eigen::RowMajor>>(raw.cells.data(), nt, 4);
     int flipped = 0;
     for (Eigen::Index t = 0; t < nt; ++t) {  // consistent positive orientation
         Eigen::Matrix<double, 4, 3> X;

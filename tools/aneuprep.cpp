@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
     const auto args = args_of(argc, argv);
     std::function<int()> action;
     add_phantom_command(app, args, action);
+    add_geometry_commands(app, args, action);
     add_fem_commands(app, args, action);
     add_inspect_command(app, action);
     add_snapshot_command(app, action);

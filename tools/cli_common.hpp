@@ -10,6 +10,7 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "aneu/core/bundle.hpp"
 #include "aneu/core/reporter.hpp"
 
 namespace aneu::tools {
@@ -37,6 +38,18 @@ Reporter make_log_reporter();
 /// Runs `body` for command `name`: an aneu::InputError prints "<name>: error: <message>" and returns 2,
 /// any other aneu::Error or std::exception returns 1; success returns 0.
 int run_guarded(const std::string& name, const std::function<void()>& body);
+
+/// Input and output files of a stage subcommand.
+struct StageIo {
+    std::string input, output;
+};
+
+/// Registers a stage subcommand with an optional positional input and a required -o output. `run`
+/// receives the files and the provenance record; `params` validates the options and lists them.
+CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action,
+                        const std::string& name, const std::string& help, bool has_input,
+                        std::function<void(const StageIo&, StageRecord)> run,
+                        std::function<std::vector<std::pair<std::string, std::string>>()> params);
 
 /// argv as a vector of strings.
 std::vector<std::string> args_of(int argc, char** argv);

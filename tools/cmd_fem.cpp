@@ -10,36 +10,6 @@
 
 namespace aneu::tools {
 
-namespace {
-
-struct StageIo {
-    std::string input, output;
-};
-
-/// Registers a stage subcommand with an optional positional input and a required -o output. `run`
-/// receives the files and returns the parameter list for provenance after validating them.
-CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action,
-                        const std::string& name, const std::string& help, bool has_input,
-                        std::function<void(const StageIo&, StageRecord)> run,
-                        std::function<std::vector<std::pair<std::string, std::string>>()> params) {
-    auto io = std::make_shared<StageIo>();
-    auto* c = app.add_subcommand(name, help);
-    if (has_input) c->add_option("input", io->input, "input stage file (.h5)")->required();
-    c->add_option("-o,--output", io->output, "output stage file (.h5), written atomically")->required();
-    c->callback([io, &action, args, name, run, params, has_input] {
-        action = [io, args, name, run, params, has_input] {
-            return run_guarded("aneuprep " + name, [&] {
-                std::vector<std::string> inputs;
-                if (has_input) inputs.push_back(io->input);
-                run(*io, make_stage_record(name, shell_join(args), params(), inputs));
-            });
-        };
-    });
-    return c;
-}
-
-}  // namespace
-
 void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action) {
     {
         auto p = std::make_shared<pipeline::TubeWallParams>();

@@ -14,5 +14,6 @@ void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, st
 void add_inspect_command(CLI::App& app, std::function<int()>& action);
 void add_snapshot_command(CLI::App& app, std::function<int()>& action);
 void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
+void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 
 }  // namespace aneu::tools

@@ -18,6 +18,9 @@
 
 namespace aneu {
 
+/// (name, value) figures: QA numbers, quality statistics, diagnostics.
+using NamedValues = std::vector<std::pair<std::string, double>>;
+
 /// Schema version written by this build and the only one it reads.
 inline constexpr int BUNDLE_SCHEMA_VERSION = 1;
 /// Value of the /meta attribute `format`, to tell our files from other HDF5 files.
@@ -39,6 +42,7 @@ struct StageRecord {
     std::vector<std::pair<std::string, std::string>> parameters;  ///< every parameter, defaults included
     std::vector<InputFile> inputs;
     double wall_time_s = 0.0;
+    std::vector<std::pair<std::string, double>> qa;  ///< the stage's QA figures (voxel counts, edge stats, ...)
 };
 
 /// /meta: identity of the case and the provenance of every stage that contributed to the file.
@@ -69,6 +73,8 @@ struct ImageData {
     ImageGrid grid;
     std::vector<std::uint8_t> mask;              ///< grid.voxel_count() labels, i fastest
     std::vector<std::string> mask_label_names;   ///< name of label value v at [v]; [0] = "background"
+    std::vector<float> intensity;                ///< empty, or grid.voxel_count() smoothed CT values [HU]
+    double threshold_hu = 0.0;                   ///< lumen threshold on `intensity` (when it is set)
     Centerline centerline;
     std::vector<EndPlane> planes;
 };
@@ -84,6 +90,7 @@ struct SurfaceData {
     Eigen::VectorXi loop_end_id;           ///< #loops: EndPlane::id of each loop
     Eigen::VectorXi face_region;           ///< #F or empty: index into region_names (artery/aneurysm)
     std::vector<std::string> region_names; ///< e.g. {"artery","aneurysm"}; empty if face_region is
+    Eigen::VectorXd vertex_thickness;      ///< #V or empty: wall thickness at the vertex [mm] (wall stage)
 };
 
 /// /volume: the tetrahedral mesh of the wall.

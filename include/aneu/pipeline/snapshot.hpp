@@ -3,13 +3,36 @@
 /// @file
 /// Pictures of stage results (VTK, rendered off screen to PNG).
 #include <string>
+#include <vector>
 
 #include "aneu/core/bundle.hpp"
 
 namespace aneu::pipeline {
 
 /// What colours the faces of a surface snapshot.
-enum class ColorBy { LABEL, REGION };
+enum class ColorBy { LABEL, REGION, THICKNESS };
+
+/// One surface of a snapshot.
+struct SnapshotLayer {
+    SurfaceData surface;
+    ColorBy by = ColorBy::LABEL;  ///< THICKNESS uses SurfaceData::vertex_thickness (colour bar in mm)
+    double opacity = 1.0;
+    bool edges = true;
+};
+/// A picture: surfaces, optionally a centerline (tubes) and end planes (discs with their normals), a title.
+struct SnapshotScene {
+    std::vector<SnapshotLayer> layers;
+    Centerline centerline;
+    std::vector<EndPlane> planes;
+    std::string title;
+};
+/// Renders a scene to PNG off screen. The camera looks along the direction in which the geometry is
+/// thinnest (its smallest principal axis), slightly from above, so the whole vessel tree is in view.
+/// @throws InputError no X display (DISPLAY unset; run under `xvfb-run -a`); IoError the PNG cannot be written
+void snapshot_scene(const SnapshotScene& scene, const std::string& png, int width = 1200, int height = 900);
+
+/// @throws InputError when no X display is available for rendering (DISPLAY unset), with the remedy.
+void require_snapshot_display();
 
 /// Renders a surface to a PNG, faces coloured by label or region, from a camera looking at the surface's
 /// centre along −y with +z up, one view. Debian's VTK renders through X11 only: needs a display

@@ -1,0 +1,83 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// Triangle-surface operations of the geometry stages: VTK (isosurface, clip, smoothing, decimation,
+/// file readers, voxelisation; surface_vtk.cpp), CGAL and Netgen (remeshing, distance queries;
+/// remesh.cpp, wall_cgal.cpp) and plain mesh topology (mesh_topology.cpp). Standard/Eigen types only.
+#include <array>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "aneu/core/bundle.hpp"
+#include "aneu/core/image_grid.hpp"
+
+namespace aneu::pipeline {
+
+// ---------------------------------------------------------------- VTK
+/// Isosurface of `field` at `level` (VTK flying edges, sub-voxel by linear interpolation), in the grid's
+/// physical frame (VTK ignores the direction: the vertices are mapped through ImageGrid::point). Faces
+/// are oriented with normals pointing out of the region where field > level (`above_is_inside`) or out
+/// of the region where field < level. Only the largest connected piece is kept if `largest_only`.
+SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_inside, bool largest_only = true);
+
+/// Cuts the surface at end planes: near each plane (within `reach` × (radius + 1 mm) of its point), the part on
+/// the plane's outer side is removed, the cut being exact (linear scalar = signed distance to the plane).
+/// Of what remains, the largest connected piece is kept. Boundary loops lie in the planes.
+SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach = 3.0);
+
+/// Non-shrinking smoothing (VTK windowed sinc, Taubin); boundary vertices do not move.
+void smooth_surface(SurfaceData& s, int iterations, double passband);
+
+/// Quadric decimation to about `target_triangles` (meant for closed surfaces: boundaries are not constrained).
+void decimate(SurfaceData& s, std::size_t target_triangles);
+
+/// Reads a triangle surface from STL, VTP, OBJ or PLY (by extension); coincident points are merged,
+/// polygons triangulated.
+/// @throws InputError unsupported extension, unreadable file, no triangles
+SurfaceData read_mesh_file(const std::string& path);
+
+/// Writes a surface as VTP (face labels and regions as cell data) or STL, by extension.
+void write_mesh_file(const std::string& path, const SurfaceData& s);
+
+/// Voxelises a closed surface on an axis-aligned grid of the given spacing covering its bounding box plus
+/// `margin` (VTK stencil): 1 inside, 0 outside.
+Volume<std::uint8_t> voxelize(const SurfaceData& closed, double spacing, double margin);
+
+// ---------------------------------------------------------------- topology and measures (plain)
+/// Boundary loops (ordered vertex cycles) of an oriented triangle surface.
+/// @throws InputError the surface is not an oriented 2-manifold (an edge in more than two faces, or two
+///         faces using it in the same direction; the message names the vertices and the position)
+std::vector<std::vector<int>> boundary_loops(const SurfaceData& s);
+
+/// Keeps the faces with keep[f] != 0 and drops unused vertices (labels, regions follow; loops dropped).
+SurfaceData sub_surface(const SurfaceData& s, const std::vector<char>& keep);
+
+/// Adds a planar fan cap (a centre vertex and a triangle per loop edge) over every boundary loop, labelled
+/// with the given label; returns the first cap face index.
+Eigen::Index cap_loops(SurfaceData& s, const std::vector<std::vector<int>>& loops, const std::vector<int>& cap_labels);
+
+/// Edge-length and angle figures of a triangle surface: triangles, vertices, edge mean/sd/min/max [mm],
+/// min angle [deg], fraction of triangles with min angle below 25° and below 15°.
+NamedValues triangle_quality(const SurfaceData& s);
+
+/// Signed volume enclosed by a closed surface (positive when outward-oriented).
+double enclosed_volume(const SurfaceData& s);
+
+// ---------------------------------------------------------------- CGAL / Netgen
+/// Remeshes a surface to a target edge length, keeping its boundary loops in place (as polylines):
+/// "netgen" (Netgen's STL surface mesher, in a child process with a timeout) or "cgal" (CGAL isotropic
+/// remeshing). Open surfaces are capped before and uncapped after, so each boundary loop stays in its
+/// plane. Labels/regions are not carried (the caller labels the result).
+/// @throws MeshingError the mesher failed; InputError unknown method
+SurfaceData remesh(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s = 300.0);
+
+/// Distances from points to a triangle surface (CGAL AABB tree): distance, nearest face, nearest point.
+struct NearestOnSurface {
+    Eigen::VectorXd distance;
+    Eigen::VectorXi face;
+    Eigen::MatrixX3d point;
+};
+NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d& points);
+
+}  // namespace aneu::pipeline

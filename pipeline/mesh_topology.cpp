@@ -1,0 +1,174 @@
+// SPDX-License-Identifier: MIT
+// Plain topology and measures of triangle surfaces (no heavy library needed).
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include <Eigen/Geometry>
+
+#include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
+
+namespace aneu::pipeline {
+
+namespace {
+std::string where(const SurfaceData& s, int a, int b) {
+    const Eigen::Vector3d x = 0.5 * (s.V.row(a) + s.V.row(b)).transpose();
+    return "edge (" + std::to_string(a) + ", " + std::to_string(b) + ") at (" + shortest(x.x()) + ", " + shortest(x.y()) + ", " +
+           shortest(x.z()) + ") mm";
+}
+}  // namespace
+
+std::vector<std::vector<int>> boundary_loops(const SurfaceData& s) {
+    // Directed edge a→b of each face; an edge is interior when b→a also exists.
+    std::map<std::pair<int, int>, int> directed;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
+            if (!directed.emplace(std::make_pair(a, b), static_cast<int>(f)).second) {
+                throw InputError("surface: not an oriented 2-manifold: " + where(s, a, b) +
+                                 " is used twice in the same direction (non-manifold edge or inconsistent orientation)");
+            }
+        }
+    // Boundary half-edges b→a (reversed so that the loop runs with the hole on its left... kept as the face's direction).
+    std::map<int, int> next;  // boundary edge a→b of a face whose twin is missing: loop step a → b
+    for (const auto& [e, f] : directed) {
+        (void)f;
+        if (directed.count({e.second, e.first})) continue;
+        if (!next.emplace(e.first, e.second).second) {
+            throw InputError("surface: not a 2-manifold: vertex " + std::to_string(e.first) + " at (" + shortest(s.V(e.first, 0)) + ", " +
+                             shortest(s.V(e.first, 1)) + ", " + shortest(s.V(e.first, 2)) +
+                             ") mm starts two boundary edges (two boundaries touch there)");
+        }
+    }
+    std::vector<std::vector<int>> loops;
+    std::map<int, bool> used;
+    for (const auto& [a, b] : next) {
+        (void)b;
+        if (used[a]) continue;
+        std::vector<int> loop;
+        int v = a;
+        while (!used[v]) {
+            used[v] = true;
+            loop.push_back(v);
+            const auto it = next.find(v);
+            if (it == next.end()) throw InputError("surface: a boundary is not a closed loop near vertex " + std::to_string(v));
+            v = it->second;
+        }
+        if (v != a) throw InputError("surface: boundary loops share vertex " + std::to_string(v));
+        loops.push_back(std::move(loop));
+    }
+    return loops;
+}
+
+SurfaceData sub_surface(const SurfaceData& s, const std::vector<char>& keep) {
+    SurfaceData o;
+    std::vector<int> map(static_cast<size_t>(s.V.rows()), -1);
+    int nv = 0, nf = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        if (!keep[static_cast<size_t>(f)]) continue;
+        ++nf;
+        for (int k = 0; k < 3; ++k)
+            if (map[static_cast<size_t>(s.F(f, k))] < 0) map[static_cast<size_t>(s.F(f, k))] = nv++;
+    }
+    o.V.resize(nv, 3);
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i)
+        if (map[static_cast<size_t>(i)] >= 0) o.V.row(map[static_cast<size_t>(i)]) = s.V.row(i);
+    o.F.resize(nf, 3);
+    o.face_label.resize(nf);
+    const bool reg = s.face_region.size() == s.F.rows();
+    if (reg) o.face_region.resize(nf);
+    int g = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        if (!keep[static_cast<size_t>(f)]) continue;
+        for (int k = 0; k < 3; ++k) o.F(g, k) = map[static_cast<size_t>(s.F(f, k))];
+        o.face_label[g] = s.face_label.size() ? s.face_label[f] : 0;
+        if (reg) o.face_region[g] = s.face_region[f];
+        ++g;
+    }
+    o.label_names = s.label_names;
+    o.region_names = s.region_names;
+    if (s.vertex_thickness.size() == s.V.rows()) {
+        o.vertex_thickness.resize(nv);
+        for (Eigen::Index i = 0; i < s.V.rows(); ++i)
+            if (map[static_cast<size_t>(i)] >= 0) o.vertex_thickness[map[static_cast<size_t>(i)]] = s.vertex_thickness[i];
+    }
+    return o;
+}
+
+Eigen::Index cap_loops(SurfaceData& s, const std::vector<std::vector<int>>& loops, const std::vector<int>& cap_labels) {
+    const Eigen::Index f0 = s.F.rows();
+    Eigen::Index nf = f0, nv = s.V.rows();
+    for (const auto& l : loops) nf += static_cast<Eigen::Index>(l.size());
+    s.V.conservativeResize(nv + static_cast<Eigen::Index>(loops.size()), 3);
+    s.F.conservativeResize(nf, 3);
+    s.face_label.conservativeResize(nf);
+    const bool reg = s.face_region.size() == f0;
+    if (reg) s.face_region.conservativeResize(nf);
+    Eigen::Index f = f0;
+    for (size_t q = 0; q < loops.size(); ++q) {
+        const auto& l = loops[q];
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        for (int v : l) c += s.V.row(v).transpose();
+        c /= static_cast<double>(l.size());
+        s.V.row(nv) = c.transpose();
+        for (size_t i = 0; i < l.size(); ++i) {
+            // The loop runs along its faces' edges a→b; the cap uses b→a to stay consistently oriented.
+            s.F.row(f) << l[(i + 1) % l.size()], l[i], static_cast<int>(nv);
+            s.face_label[f] = cap_labels[q];
+            if (reg) s.face_region[f] = 0;
+            ++f;
+        }
+        ++nv;
+    }
+    return f0;
+}
+
+NamedValues triangle_quality(const SurfaceData& s) {
+    double sum = 0, sum2 = 0, lo = 1e300, hi = 0, min_angle = 180;
+    std::size_t ne = 0, below25 = 0, below15 = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const Eigen::Vector3d x[3] = {s.V.row(s.F(f, 0)), s.V.row(s.F(f, 1)), s.V.row(s.F(f, 2))};
+        double fmin = 180;
+        for (int k = 0; k < 3; ++k) {
+            const Eigen::Vector3d e = x[(k + 1) % 3] - x[k];
+            const double L = e.norm();
+            sum += L;
+            sum2 += L * L;
+            lo = std::min(lo, L);
+            hi = std::max(hi, L);
+            ++ne;
+            const Eigen::Vector3d u = x[(k + 1) % 3] - x[k], w = x[(k + 2) % 3] - x[k];
+            const double ang = std::atan2(u.cross(w).norm(), u.dot(w)) * 180.0 / 3.14159265358979323846;
+            fmin = std::min(fmin, ang);
+        }
+        min_angle = std::min(min_angle, fmin);
+        below25 += fmin < 25.0;
+        below15 += fmin < 15.0;
+    }
+    // Every interior edge was counted twice (once per face); the statistics are per face-edge.
+    const double mean = ne ? sum / static_cast<double>(ne) : 0.0;
+    const double sd = ne ? std::sqrt(std::max(0.0, sum2 / static_cast<double>(ne) - mean * mean)) : 0.0;
+    const double nf = std::max<double>(1.0, static_cast<double>(s.F.rows()));
+    return {{"triangles", static_cast<double>(s.F.rows())},
+            {"vertices", static_cast<double>(s.V.rows())},
+            {"edge_mean_mm", mean},
+            {"edge_sd_mm", sd},
+            {"edge_min_mm", ne ? lo : 0.0},
+            {"edge_max_mm", hi},
+            {"min_angle_deg", s.F.rows() ? min_angle : 0.0},
+            {"fraction_min_angle_below_25deg", static_cast<double>(below25) / nf},
+            {"fraction_min_angle_below_15deg", static_cast<double>(below15) / nf}};
+}
+
+double enclosed_volume(const SurfaceData& s) {
+    double v = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+        v += a.dot(b.cross(c)) / 6.0;
+    }
+    return v;
+}
+
+}  // namespace aneu::pipeline

@@ -1,0 +1,171 @@
+// SPDX-License-Identifier: MIT
+// Surface remeshing to a target edge length: Netgen's STL surface mesher (the published method) or CGAL
+// isotropic remeshing. Open surfaces are capped with planar fans first, so that every boundary loop is a
+// crease of a closed surface that both meshers keep; the caps are removed after.
+#include <cmath>
+
+#include <Eigen/Dense>
+
+#ifdef ANEU_WITH_NETGEN
+namespace nglib {
+#include <nglib.h>
+}
+#endif
+
+#include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
+#include "isolated.hpp"
+
+namespace aneu::pipeline {
+
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // remesh_cgal.cpp
+
+namespace {
+
+struct LoopPlane {
+    Eigen::Vector3d c, n;
+    double radius;
+};
+
+/// Least-squares plane of a loop (PCA), normal along the loop's winding.
+LoopPlane plane_of(const SurfaceData& s, const std::vector<int>& loop) {
+    LoopPlane p;
+    p.c.setZero();
+    for (int v : loop) p.c += s.V.row(v).transpose();
+    p.c /= static_cast<double>(loop.size());
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    p.radius = 0;
+    for (int v : loop) {
+        const Eigen::Vector3d d = s.V.row(v).transpose() - p.c;
+        C += d * d.transpose();
+        p.radius = std::max(p.radius, d.norm());
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+    p.n = es.eigenvectors().col(0);
+    Eigen::Vector3d w = Eigen::Vector3d::Zero();  // vector area of the loop
+    for (size_t i = 0; i < loop.size(); ++i)
+        w += (s.V.row(loop[i]).transpose() - p.c).cross(s.V.row(loop[(i + 1) % loop.size()]).transpose() - p.c);
+    if (p.n.dot(w) < 0) p.n = -p.n;
+    return p;
+}
+
+#ifdef ANEU_WITH_NETGEN
+SurfaceData remesh_netgen(const SurfaceData& capped, double edge_mm, double timeout_s) {
+    RawMesh raw = run_isolated(
+        [&](RawMesh& out, std::string& msg) {
+            nglib::Ng_Init();
+            nglib::Ng_STL_Geometry* geom = nglib::Ng_STL_NewGeometry();
+            for (Eigen::Index f = 0; f < capped.F.rows(); ++f) {
+                double p[3][3];
+                for (int k = 0; k < 3; ++k)
+                    for (int d = 0; d < 3; ++d) p[k][d] = capped.V(capped.F(f, k), d);
+                const Eigen::Vector3d a = capped.V.row(capped.F(f, 0)), b = capped.V.row(capped.F(f, 1)), c = capped.V.row(capped.F(f, 2));
+                Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+                nglib::Ng_STL_AddTriangle(geom, p[0], p[1], p[2], n.data());
+            }
+            if (nglib::Ng_STL_InitSTLGeometry(geom) != nglib::NG_OK) {
+                msg = "Netgen could not build an STL geometry from the surface";
+                return 1;
+            }
+            nglib::Ng_Mesh* m = nglib::Ng_NewMesh();
+            nglib::Ng_Meshing_Parameters mp;
+            mp.maxh = edge_mm;
+            mp.minh = 0.2 * edge_mm;
+            mp.grading = 0.2;
+            mp.optsteps_2d = 5;
+            if (nglib::Ng_STL_MakeEdges(geom, m, &mp) != nglib::NG_OK) {
+                msg = "Netgen could not find the surface's edges";
+                return 1;
+            }
+            if (nglib::Ng_STL_GenerateSurfaceMesh(geom, m, &mp) != nglib::NG_OK) {
+                msg = "Netgen surface meshing failed";
+                return 1;
+            }
+            const int np = nglib::Ng_GetNP(m), nse = nglib::Ng_GetNSE(m);
+            out.points.resize(static_cast<size_t>(3 * np));
+            for (int i = 0; i < np; ++i) nglib::Ng_GetPoint(m, i + 1, out.points.data() + 3 * i);
+            out.cells.resize(static_cast<size_t>(3 * nse));
+            for (int e = 0; e < nse; ++e) {
+                int t[8];
+                if (nglib::Ng_GetSurfaceElement(m, e + 1, t) != nglib::NG_TRIG) {
+                    msg = "Netgen produced a non-triangular surface element";
+                    return 1;
+                }
+                for (int a = 0; a < 3; ++a) out.cells[static_cast<size_t>(3 * e + a)] = t[a] - 1;
+            }
+            nglib::Ng_DeleteMesh(m);
+            nglib::Ng_Exit();
+            return 0;
+        },
+        timeout_s, "surface remesh (Netgen)");
+    SurfaceData s;
+    const auto np = static_cast<Eigen::Index>(raw.points.size() / 3), nt = static_cast<Eigen::Index>(raw.cells.size() / 3);
+    s.V = Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>(raw.points.data(), np, 3);
+    s.F = Eigen::Map<Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>>(raw.cells.data(), nt, 3);
+    // Netgen may keep unused STL points: compact.
+    std::vector<char> all(static_cast<size_t>(nt), 1);
+    s.face_label = Eigen::VectorXi::Zero(nt);
+    s = sub_surface(s, all);
+    if (enclosed_volume(s) < 0) s.F.col(1).swap(s.F.col(2));
+    return s;
+}
+#endif
+
+}  // namespace
+
+SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& method, double timeout_s) {
+    if (!(edge_mm > 0)) throw InputError("remesh: target edge must be > 0 mm");
+    if (method != "netgen" && method != "cgal") throw InputError("remesh: method = '" + method + "': expected netgen or cgal");
+    const auto loops = boundary_loops(in);
+    std::vector<LoopPlane> planes;
+    for (const auto& l : loops) planes.push_back(plane_of(in, l));
+    SurfaceData capped = in;
+    capped.face_label = Eigen::VectorXi::Zero(in.F.rows());
+    capped.label_names = {"surface"};
+    capped.face_region.resize(0);
+    std::vector<int> cap_label;
+    for (size_t q = 0; q < loops.size(); ++q) cap_label.push_back(static_cast<int>(q + 1));
+    cap_loops(capped, loops, cap_label);
+    const bool outward = enclosed_volume(capped) > 0;
+
+    SurfaceData out;
+    if (method == "cgal") {
+        out = remesh_cgal(capped, edge_mm);
+    } else {
+#ifdef ANEU_WITH_NETGEN
+        out = remesh_netgen(capped, edge_mm, timeout_s);
+        if (!outward) out.F.col(1).swap(out.F.col(2));
+        // Cap faces: all three vertices in a loop's plane, within its radius, normal along the plane's.
+        for (Eigen::Index f = 0; f < out.F.rows(); ++f) {
+            const Eigen::Vector3d a = out.V.row(out.F(f, 0)), b = out.V.row(out.F(f, 1)), c = out.V.row(out.F(f, 2));
+            const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+            for (size_t q = 0; q < planes.size(); ++q) {
+                const auto& p = planes[q];
+                const double tol = 1e-6 * (1.0 + p.radius);
+                bool on = std::abs(n.dot(p.n)) > 0.999;
+                for (const Eigen::Vector3d* x : {&a, &b, &c}) on = on && std::abs(p.n.dot(*x - p.c)) < tol && (*x - p.c).norm() < 1.5 * p.radius;
+                if (on) {
+                    out.face_label[f] = static_cast<int>(q + 1);
+                    break;
+                }
+            }
+        }
+#else
+        (void)timeout_s;
+        throw InputError("remesh: method = netgen, but this build has no Netgen (ANEU_WITH_NETGEN=OFF)");
+#endif
+    }
+    std::vector<char> keep(static_cast<size_t>(out.F.rows()));
+    for (Eigen::Index f = 0; f < out.F.rows(); ++f) keep[static_cast<size_t>(f)] = out.face_label[f] == 0;
+    SurfaceData open = sub_surface(out, keep);
+    const auto new_loops = boundary_loops(open);
+    if (new_loops.size() != loops.size()) {
+        throw MeshingError("remesh (" + method + "): the result has " + std::to_string(new_loops.size()) + " boundary loop(s), the input " +
+                           std::to_string(loops.size()) + " (a cap was not kept as a separate face)");
+    }
+    open.label_names = {"surface"};
+    return open;
+}
+
+}  // namespace aneu::pipeline

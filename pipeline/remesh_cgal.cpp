@@ -1,0 +1,107 @@
+// SPDX-License-Identifier: MIT
+// CGAL side of the geometry stages: isotropic remeshing (with boundary loops kept as polylines) and
+// point-to-surface distance queries through an AABB tree. CGAL lives in this translation unit only.
+#include <CGAL/AABB_face_graph_triangle_primitive.h>
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/remesh.h>
+#include <CGAL/Surface_mesh.h>
+
+#include "aneu/core/error.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
+
+namespace aneu::pipeline {
+
+namespace {
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = K::Point_3;
+using Mesh = CGAL::Surface_mesh<Point>;
+namespace PMP = CGAL::Polygon_mesh_processing;
+
+Mesh to_cgal(const SurfaceData& s, const std::string& what) {
+    Mesh m;
+    std::vector<Mesh::Vertex_index> vi;
+    vi.reserve(static_cast<size_t>(s.V.rows()));
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i) vi.push_back(m.add_vertex(Point(s.V(i, 0), s.V(i, 1), s.V(i, 2))));
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const auto fd = m.add_face(vi[static_cast<size_t>(s.F(f, 0))], vi[static_cast<size_t>(s.F(f, 1))], vi[static_cast<size_t>(s.F(f, 2))]);
+        if (fd == Mesh::null_face()) throw InputError(what + ": face " + std::to_string(f) + " cannot be added (non-manifold surface)");
+    }
+    return m;
+}
+
+SurfaceData from_cgal(const Mesh& m) {
+    SurfaceData s;
+    s.V.resize(static_cast<Eigen::Index>(m.number_of_vertices()), 3);
+    std::vector<int> map(m.num_vertices(), -1);
+    int nv = 0;
+    for (auto v : m.vertices()) {
+        map[v.idx()] = nv;
+        const Point& p = m.point(v);
+        s.V.row(nv++) << p.x(), p.y(), p.z();
+    }
+    s.F.resize(static_cast<Eigen::Index>(m.number_of_faces()), 3);
+    Eigen::Index f = 0;
+    for (auto fd : m.faces()) {
+        int k = 0;
+        for (auto v : CGAL::vertices_around_face(m.halfedge(fd), m)) s.F(f, k++) = map[v.idx()];
+        ++f;
+    }
+    s.face_label = Eigen::VectorXi::Zero(s.F.rows());
+    s.label_names = {"surface"};
+    return s;
+}
+}  // namespace
+
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm) {
+    Mesh m = to_cgal(capped, "remesh (CGAL)");
+    // Patches: label 0 is the surface, labels >= 1 the caps; edges between patches are constrained so
+    // each boundary polyline (in its plane) survives, resampled to the target length.
+    auto patch = m.add_property_map<Mesh::Face_index, int>("f:patch", 0).first;
+    for (auto fd : m.faces()) put(patch, fd, capped.face_label[static_cast<Eigen::Index>(fd.idx())]);
+    auto constrained = m.add_property_map<Mesh::Edge_index, bool>("e:constrained", false).first;
+    for (auto e : m.edges()) {
+        const auto h0 = m.halfedge(e), h1 = m.opposite(h0);
+        if (m.is_border(h0) || m.is_border(h1)) {
+            put(constrained, e, true);
+            continue;
+        }
+        put(constrained, e, get(patch, m.face(h0)) != get(patch, m.face(h1)));
+    }
+    PMP::isotropic_remeshing(faces(m), edge_mm, m,
+                             CGAL::parameters::number_of_iterations(6)
+                                 .edge_is_constrained_map(constrained)
+                                 .protect_constraints(false)
+                                 .face_patch_map(patch)
+                                 .number_of_relaxation_steps(2));
+    m.collect_garbage();
+    SurfaceData out = from_cgal(m);
+    Eigen::Index f = 0;
+    for (auto fd : m.faces()) out.face_label[f++] = get(patch, fd);
+    return out;
+}
+
+NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d& points) {
+    Mesh m = to_cgal(s, "distance query");
+    using Primitive = CGAL::AABB_face_graph_triangle_primitive<Mesh>;
+    using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
+    Tree tree(faces(m).first, faces(m).second, m);
+    tree.accelerate_distance_queries();
+    NearestOnSurface r;
+    const Eigen::Index n = points.rows();
+    r.distance.resize(n);
+    r.face.resize(n);
+    r.point.resize(n, 3);
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (Eigen::Index i = 0; i < n; ++i) {
+        const Point q(points(i, 0), points(i, 1), points(i, 2));
+        const auto [p, fd] = tree.closest_point_and_primitive(q);
+        r.distance[i] = std::sqrt(CGAL::squared_distance(p, q));
+        r.face[i] = static_cast<int>(fd.idx());
+        r.point.row(i) << p.x(), p.y(), p.z();
+    }
+    return r;
+}
+
+}  // namespace aneu::pipeline

@@ -1,0 +1,32 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Internal to pipeline/: the common end of every file-level stage.
+#include <chrono>
+#include <string>
+
+#include "aneu/core/bundle.hpp"
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/reporter.hpp"
+#include "aneu/core/text.hpp"
+
+namespace aneu::pipeline {
+
+inline double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+/// Records the stage (with its wall time) in /meta and writes the bundle atomically.
+inline void finish(Bundle& b, StageRecord& stage, std::chrono::steady_clock::time_point t0, const std::string& out, Reporter& rep) {
+    stage.wall_time_s = seconds_since(t0);
+    b.meta.stages.push_back(stage);
+    write_bundle(out, b, {}, rep);
+    rep.info(stage.stage + ": wrote " + out + " in " + shortest(seconds_since(t0)) + " s");
+}
+
+/// File name without directory and extensions ("cases/a.seg.h5" -> "a").
+inline std::string stem(const std::string& path) {
+    std::string s = path.substr(path.find_last_of('/') + 1);
+    return s.substr(0, s.find('.'));
+}
+
+}  // namespace aneu::pipeline

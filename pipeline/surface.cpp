@@ -1,0 +1,390 @@
+// SPDX-License-Identifier: MIT
+// `surface`: lumen surface from a segmentation (sub-voxel isosurface of the smoothed CT restricted to the
+// segmented lumen, cut at the end planes, windowed-sinc smoothing, remeshing) or from another tool's
+// surface (open ends, or flat caps removed); then the artery/aneurysm label of every face and the end id of
+// every boundary loop.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <queue>
+
+#include <Eigen/Dense>
+
+#include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
+#include "aneu/pipeline/geometry.hpp"
+#include "aneu/pipeline/image_filters.hpp"
+#include "aneu/pipeline/image_io.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
+
+namespace aneu::pipeline {
+
+namespace {
+
+constexpr double PI = 3.14159265358979323846;
+
+Eigen::Vector3d centroid(const SurfaceData& s, Eigen::Index f) {
+    return (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+}
+double area(const SurfaceData& s, Eigen::Index f) {
+    const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+    return 0.5 * (b - a).cross(c - a).norm();
+}
+
+/// Face neighbours across edges.
+std::vector<std::vector<int>> face_adjacency(const SurfaceData& s) {
+    std::map<std::pair<int, int>, std::vector<int>> edge_faces;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
+            edge_faces[{std::min(a, b), std::max(a, b)}].push_back(static_cast<int>(f));
+        }
+    std::vector<std::vector<int>> adj(static_cast<size_t>(s.F.rows()));
+    for (const auto& [e, fs] : edge_faces) {
+        (void)e;
+        for (int a : fs)
+            for (int b : fs)
+                if (a != b) adj[static_cast<size_t>(a)].push_back(b);
+    }
+    return adj;
+}
+
+/// Boundary loops of the surface matched to the nearest end plane; fills loop_* of `s`.
+void label_loops(SurfaceData& s, const std::vector<EndPlane>& planes) {
+    const auto loops = boundary_loops(s);
+    std::vector<int> off{0}, verts, ids;
+    for (const auto& l : loops) {
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        for (int v : l) c += s.V.row(v).transpose();
+        c /= static_cast<double>(l.size());
+        int best = -1;
+        double bd = 1e300;
+        for (const auto& p : planes) {
+            const double d = (c - p.point).norm() + 10.0 * std::abs(p.normal.dot(c - p.point));
+            if (d < bd) {
+                bd = d;
+                best = p.id;
+            }
+        }
+        if (best < 0) throw MeshingError("surface: a boundary loop at (" + shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) + ") mm matches no end plane");
+        verts.insert(verts.end(), l.begin(), l.end());
+        off.push_back(static_cast<int>(verts.size()));
+        ids.push_back(best);
+    }
+    s.loop_offsets = Eigen::Map<Eigen::VectorXi>(off.data(), static_cast<Eigen::Index>(off.size()));
+    s.loop_vertices = Eigen::Map<Eigen::VectorXi>(verts.data(), static_cast<Eigen::Index>(verts.size()));
+    s.loop_end_id = Eigen::Map<Eigen::VectorXi>(ids.data(), static_cast<Eigen::Index>(ids.size()));
+}
+
+/// Remesh, label (automatic or overridden), loops, QA.
+void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporter& rep) {
+    smooth_surface(s, p.smoothing_iterations, p.smoothing_passband);
+    rep.info("surface: remeshing " + std::to_string(s.F.rows()) + " triangles to " + shortest(p.edge_mm) + " mm edges (" + p.remesher + ")");
+    SurfaceData m = remesh(s, p.edge_mm, p.remesher, p.timeout_s);
+    std::string how = "automatic";
+    if (p.aneurysm_sphere) {
+        const auto& q = *p.aneurysm_sphere;
+        m.face_label.resize(m.F.rows());
+        for (Eigen::Index f = 0; f < m.F.rows(); ++f) m.face_label[f] = (centroid(m, f) - Eigen::Vector3d(q[0], q[1], q[2])).norm() < q[3];
+        how = "sphere";
+    } else if (!p.aneurysm_labelmap.empty()) {
+        const Volume<std::uint8_t> lm = read_image<std::uint8_t>(p.aneurysm_labelmap);
+        m.face_label.resize(m.F.rows());
+        for (Eigen::Index f = 0; f < m.F.rows(); ++f) {
+            const Eigen::Vector3d c = centroid(m, f);
+            const auto ci = lm.grid.continuous_index({c.x(), c.y(), c.z()});
+            const std::int64_t i = std::llround(ci[0]), j = std::llround(ci[1]), k = std::llround(ci[2]);
+            const bool in = i >= 0 && j >= 0 && k >= 0 && i < lm.grid.size[0] && j < lm.grid.size[1] && k < lm.grid.size[2];
+            m.face_label[f] = in && lm.data[lm.grid.linear(i, j, k)] != 0;
+        }
+        how = "labelmap";
+    } else {
+        m.face_label = label_aneurysm(m, r.image.centerline, p.aneurysm_ratio_high, p.aneurysm_ratio_low);
+    }
+    m.label_names = {"artery", "aneurysm"};
+    m.face_region = m.face_label;
+    m.region_names = m.label_names;
+    label_loops(m, r.image.planes);
+    r.lumen = std::move(m);
+    for (auto& q : triangle_quality(r.lumen)) r.qa.push_back(q);
+    double a_art = 0, a_sac = 0;
+    for (Eigen::Index f = 0; f < r.lumen.F.rows(); ++f) (r.lumen.face_label[f] ? a_sac : a_art) += area(r.lumen, f);
+    r.qa.emplace_back("area_artery_mm2", a_art);
+    r.qa.emplace_back("area_aneurysm_mm2", a_sac);
+    r.qa.emplace_back("boundary_loops", static_cast<double>(r.lumen.loop_end_id.size()));
+    r.qa.emplace_back("aneurysm_label_from_override", how == "automatic" ? 0.0 : 1.0);
+    rep.info("surface: " + std::to_string(r.lumen.F.rows()) + " triangles, aneurysm " + shortest(a_sac) + " mm² (" + how + "), artery " +
+             shortest(a_art) + " mm², " + std::to_string(r.lumen.loop_end_id.size()) + " open ends");
+}
+
+}  // namespace
+
+void validate(const SurfaceParams& p) {
+    if (!(p.edge_mm > 0)) throw InputError("surface: --edge-mm must be > 0");
+    if (p.remesher != "netgen" && p.remesher != "cgal") throw InputError("surface: --remesher = '" + p.remesher + "': expected netgen or cgal");
+    if (p.smoothing_iterations < 0) throw InputError("surface: --smoothing-iterations must be >= 0");
+    if (!(p.smoothing_passband > 0 && p.smoothing_passband < 2)) throw InputError("surface: --smoothing-passband must be in (0, 2)");
+    if (!(p.aneurysm_ratio_high >= p.aneurysm_ratio_low && p.aneurysm_ratio_low > 1.0)) {
+        throw InputError("surface: need --aneurysm-ratio-high >= --aneurysm-ratio-low > 1");
+    }
+    if (p.aneurysm_sphere && !((*p.aneurysm_sphere)[3] > 0)) throw InputError("surface: --aneurysm-sphere radius must be > 0");
+    if (p.aneurysm_sphere && !p.aneurysm_labelmap.empty()) throw InputError("surface: give --aneurysm-sphere or --aneurysm-labelmap, not both");
+    if (!(p.timeout_s > 0)) throw InputError("surface: --timeout-s must be > 0");
+}
+
+std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p) {
+    std::string sphere;
+    if (p.aneurysm_sphere)
+        for (double x : *p.aneurysm_sphere) sphere += (sphere.empty() ? "" : ",") + shortest(x);
+    return {{"edge_mm", shortest(p.edge_mm)},
+            {"remesher", p.remesher},
+            {"smoothing_iterations", std::to_string(p.smoothing_iterations)},
+            {"smoothing_passband", shortest(p.smoothing_passband)},
+            {"iso_hu", p.iso_hu != 0 ? shortest(p.iso_hu) : "segmentation threshold"},
+            {"aneurysm_ratio_high", shortest(p.aneurysm_ratio_high)},
+            {"aneurysm_ratio_low", shortest(p.aneurysm_ratio_low)},
+            {"aneurysm_sphere", sphere.empty() ? "none" : sphere},
+            {"aneurysm_labelmap", p.aneurysm_labelmap.empty() ? "none" : p.aneurysm_labelmap},
+            {"timeout_s", shortest(p.timeout_s)}};
+}
+
+Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low) {
+    const Eigen::Index nf = s.F.rows();
+    Eigen::VectorXd ratio(nf);
+    for (Eigen::Index f = 0; f < nf; ++f) {
+        const Eigen::Vector3d x = centroid(s, f);
+        double best = 1e300, rad = 1.0;
+        for (Eigen::Index l = 0; l + 1 < c.offsets.size(); ++l)
+            for (int i = c.offsets[l]; i + 1 < c.offsets[l + 1]; ++i) {
+                const Eigen::Vector3d a = c.points.row(i).transpose(), b = c.points.row(i + 1).transpose();
+                const double L2 = (b - a).squaredNorm();
+                const double t = L2 > 0 ? std::clamp((x - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
+                const double d = (x - (a + t * (b - a))).norm();
+                if (d < best) {
+                    best = d;
+                    rad = (1 - t) * c.radius[i] + t * c.radius[i + 1];
+                }
+            }
+        ratio[f] = best / std::max(rad, 1e-6);
+    }
+    // Hysteresis: faces above `high` seed the sac; it grows over neighbours above `low`.
+    Eigen::VectorXi label = Eigen::VectorXi::Zero(nf);
+    const auto adj = face_adjacency(s);
+    std::queue<int> q;
+    for (Eigen::Index f = 0; f < nf; ++f)
+        if (ratio[f] > high) {
+            label[f] = 1;
+            q.push(static_cast<int>(f));
+        }
+    while (!q.empty()) {
+        const int f = q.front();
+        q.pop();
+        for (int g : adj[static_cast<size_t>(f)])
+            if (!label[g] && ratio[g] > low) {
+                label[g] = 1;
+                q.push(g);
+            }
+    }
+    // Holes in the sac label (a few faces below `low` surrounded by sac) are sac too: fill artery pieces
+    // that touch no boundary loop and are small.
+    std::vector<int> comp(static_cast<size_t>(nf), -1);
+    std::vector<char> on_boundary(static_cast<size_t>(nf), 0);
+    for (Eigen::Index f = 0; f < nf; ++f) on_boundary[static_cast<size_t>(f)] = adj[static_cast<size_t>(f)].size() < 3;
+    for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
+        if (label[f0] || comp[static_cast<size_t>(f0)] >= 0) continue;
+        std::vector<int> piece{static_cast<int>(f0)};
+        comp[static_cast<size_t>(f0)] = 1;
+        bool touches = false;
+        for (size_t i = 0; i < piece.size(); ++i) {
+            touches = touches || on_boundary[static_cast<size_t>(piece[i])];
+            for (int g : adj[static_cast<size_t>(piece[i])])
+                if (!label[g] && comp[static_cast<size_t>(g)] < 0) {
+                    comp[static_cast<size_t>(g)] = 1;
+                    piece.push_back(g);
+                }
+        }
+        if (!touches)
+            for (int f : piece) label[f] = 1;
+    }
+    return label;
+}
+
+std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s) {
+    const Eigen::Index nf = s.F.rows();
+    Eigen::MatrixX3d n(nf, 3);
+    for (Eigen::Index f = 0; f < nf; ++f) {
+        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+        n.row(f) = (b - a).cross(c - a).normalized().transpose();
+    }
+    const auto adj = face_adjacency(s);
+    const double cos_flat = std::cos(0.5 * PI / 180.0), cos_crease = std::cos(20.0 * PI / 180.0);
+    std::vector<int> region(static_cast<size_t>(nf), -1);
+    std::vector<std::vector<int>> caps;
+    const double scale = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).norm();
+    for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
+        if (region[static_cast<size_t>(f0)] >= 0) continue;
+        const Eigen::Vector3d n0 = n.row(f0).transpose(), x0 = s.V.row(s.F(f0, 0)).transpose();
+        std::vector<int> piece{static_cast<int>(f0)};
+        region[static_cast<size_t>(f0)] = static_cast<int>(f0);
+        for (size_t i = 0; i < piece.size(); ++i)
+            for (int g : adj[static_cast<size_t>(piece[i])]) {
+                if (region[static_cast<size_t>(g)] >= 0 || n.row(g).dot(n0) < cos_flat) continue;
+                bool coplanar = true;
+                for (int k = 0; k < 3; ++k) coplanar = coplanar && std::abs(n0.dot(s.V.row(s.F(g, k)).transpose() - x0)) < 1e-4 * scale;
+                if (!coplanar) continue;
+                region[static_cast<size_t>(g)] = static_cast<int>(f0);
+                piece.push_back(g);
+            }
+        if (piece.size() < 2) continue;
+        // A cap: every face across its border makes a crease with it.
+        bool crease = true;
+        double a = 0;
+        for (int f : piece) {
+            a += area(s, f);
+            for (int g : adj[static_cast<size_t>(f)])
+                if (region[static_cast<size_t>(g)] != static_cast<int>(f0) && n.row(g).dot(n0) > cos_crease) crease = false;
+        }
+        if (crease && a > 0.05) caps.push_back(std::move(piece));
+    }
+    return caps;
+}
+
+LumenResult lumen_from_segmentation(const ImageData& seg, const SurfaceParams& p, Reporter& rep) {
+    validate(p);
+    if (seg.intensity.size() != seg.grid.voxel_count()) {
+        throw InputError("surface: the input's /image has no smoothed intensity (run `aneuprep segment` first, or give a surface mesh)");
+    }
+    if (seg.planes.empty()) throw InputError("surface: the input's /image has no end planes");
+    LumenResult r;
+    r.image = seg;
+    const ImageGrid& g = seg.grid;
+    const double level = p.iso_hu != 0 ? p.iso_hu : seg.threshold_hu;
+    // The field: the smoothed CT near the segmented lumen (two voxels around it), well below the level
+    // elsewhere, so other bright structures (bone, other vessels) give no surface; deep inside the lumen at
+    // least the level, so that a filled hole gives none either.
+    Volume<std::uint8_t> mask{g, seg.mask};
+    const auto dist_out = [&] {
+        Volume<std::uint8_t> inv{g, std::vector<std::uint8_t>(seg.mask.size())};
+        for (size_t l = 0; l < inv.data.size(); ++l) inv.data[l] = seg.mask[l] == 0;
+        return inside_distance_mm(inv);  // distance of background voxels to the lumen
+    }();
+    const Volume<float> dist_in = inside_distance_mm(mask);
+    const double smax = std::max({g.spacing[0], g.spacing[1], g.spacing[2]});
+    Volume<float> field{g, seg.intensity};
+    const float low = static_cast<float>(level - 100.0);
+    for (size_t l = 0; l < field.data.size(); ++l) {
+        if (!seg.mask[l] && dist_out.data[l] > 2.01 * smax) field.data[l] = std::min(field.data[l], low);
+        if (seg.mask[l] && dist_in.data[l] > 1.99 * smax) field.data[l] = std::max(field.data[l], static_cast<float>(level + 1.0));
+    }
+    SurfaceData iso = isosurface(field, level, true, true);
+    r.qa.emplace_back("iso_level_hu", level);
+    r.qa.emplace_back("isosurface_triangles", static_cast<double>(iso.F.rows()));
+    SurfaceData cut = clip_at_planes(iso, seg.planes);
+    r.qa.emplace_back("clipped_triangles", static_cast<double>(cut.F.rows()));
+    const auto loops = boundary_loops(cut);
+    if (loops.size() != seg.planes.size()) {
+        rep.warn("surface: the cut surface has " + std::to_string(loops.size()) + " open ends for " + std::to_string(seg.planes.size()) +
+                 " end planes (a plane may not cut its vessel cleanly)");
+    }
+    finish_lumen(r, std::move(cut), p, rep);
+    return r;
+}
+
+LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Reporter& rep) {
+    validate(p);
+    LumenResult r;
+    SurfaceData s = read_mesh_file(path);
+    std::vector<std::vector<int>> loops;
+    try {
+        loops = boundary_loops(s);
+    } catch (const InputError& e) {
+        throw InputError(path + ": " + e.what());
+    }
+    r.qa.emplace_back("input_triangles", static_cast<double>(s.F.rows()));
+    r.qa.emplace_back("input_open_ends", static_cast<double>(loops.size()));
+    if (loops.empty()) {
+        const auto caps = detect_flat_caps(s);
+        if (caps.empty()) {
+            throw InputError(path + ": the surface is closed and has no flat end cap to remove (a lumen surface needs open ends or flat caps)");
+        }
+        std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1);
+        for (const auto& c : caps)
+            for (int f : c) keep[static_cast<size_t>(f)] = 0;
+        s = sub_surface(s, keep);
+        loops = boundary_loops(s);
+        r.qa.emplace_back("input_caps_removed", static_cast<double>(caps.size()));
+        rep.info("surface: removed " + std::to_string(caps.size()) + " flat end caps from " + path);
+    }
+    if (loops.size() < 2) throw InputError(path + ": the surface has " + std::to_string(loops.size()) + " open end(s); a vessel needs at least 2");
+    // Orient outward: the capped surface must enclose a positive volume.
+    {
+        SurfaceData capped = s;
+        cap_loops(capped, loops, std::vector<int>(loops.size(), 0));
+        if (enclosed_volume(capped) < 0) {
+            s.F.col(1).swap(s.F.col(2));
+            loops = boundary_loops(s);
+        }
+    }
+    // End planes from the loops: centroid, outward normal (against the loop's vector area in face order),
+    // radius of the circle of equal area.
+    std::vector<EndPlane> planes;
+    double rmin = 1e300;
+    for (size_t q = 0; q < loops.size(); ++q) {
+        const auto& l = loops[q];
+        Eigen::Vector3d c = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero();
+        for (int v : l) c += s.V.row(v).transpose();
+        c /= static_cast<double>(l.size());
+        for (size_t i = 0; i < l.size(); ++i) w += (s.V.row(l[i]).transpose() - c).cross(s.V.row(l[(i + 1) % l.size()]).transpose() - c);
+        EndPlane e;
+        e.id = static_cast<int>(q);
+        e.point = c;
+        e.normal = -w.normalized();
+        e.radius_mm = std::sqrt(0.5 * w.norm() / PI);
+        rmin = std::min(rmin, e.radius_mm);
+        planes.push_back(e);
+    }
+    // Project each loop into its plane (flat caps give planar loops; open ends of other tools may not be).
+    for (size_t q = 0; q < loops.size(); ++q)
+        for (int v : loops[q]) {
+            const Eigen::Vector3d x = s.V.row(v).transpose();
+            s.V.row(v) = (x - planes[q].normal.dot(x - planes[q].point) * planes[q].normal).transpose();
+        }
+    // Centerline: voxelise the capped surface, minimal paths between the ends.
+    SurfaceData capped = s;
+    cap_loops(capped, loops, std::vector<int>(loops.size(), 0));
+    const double h = std::min(0.5 * p.edge_mm, rmin / 4.0);
+    Volume<std::uint8_t> mask = voxelize(capped, h, 2 * h);
+    const Volume<float> dist = inside_distance_mm(mask);
+    std::vector<std::vector<size_t>> ends(planes.size());
+    for (std::int64_t k = 0; k < mask.grid.size[2]; ++k)
+        for (std::int64_t j = 0; j < mask.grid.size[1]; ++j)
+            for (std::int64_t i = 0; i < mask.grid.size[0]; ++i) {
+                const size_t l = mask.grid.linear(i, j, k);
+                if (!mask.data[l]) continue;
+                const auto x3 = mask.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                const Eigen::Vector3d x(x3[0], x3[1], x3[2]);
+                for (size_t q = 0; q < planes.size(); ++q)
+                    if (std::abs(planes[q].normal.dot(x - planes[q].point)) < 1.5 * h && (x - planes[q].point).norm() < 1.5 * planes[q].radius_mm) {
+                        ends[q].push_back(l);
+                    }
+            }
+    for (size_t q = 0; q < ends.size(); ++q)
+        if (ends[q].empty()) throw InputError(path + ": open end " + std::to_string(q) + " encloses no voxel (is it a real vessel end?)");
+    // The largest end first (the root of the minimal paths), ids kept.
+    std::vector<size_t> order(planes.size());
+    for (size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return planes[a].radius_mm > planes[b].radius_mm; });
+    std::vector<std::vector<size_t>> ends_sorted;
+    for (size_t q : order) ends_sorted.push_back(ends[q]);
+    const CenterlineResult cl = centerline_from_ends(mask, dist, {}, ends_sorted, 0.0);
+    r.image.grid = mask.grid;
+    r.image.mask = mask.data;
+    r.image.mask_label_names = {"background", "lumen"};
+    r.image.centerline = cl.centerline;
+    r.image.planes = planes;
+    r.qa.emplace_back("voxelisation_spacing_mm", h);
+    finish_lumen(r, std::move(s), p, rep);
+    return r;
+}
+
+}  // namespace aneu::pipeline
