@@ -10,7 +10,6 @@
 #include <itkOtsuThresholdCalculator.h>
 #include <itkRelabelComponentImageFilter.h>
 #include <itkScalarImageToHistogramGenerator.h>
-#include <itkSignedMaurerDistanceMapImageFilter.h>
 
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/image_filters.hpp"
@@ -84,21 +83,6 @@ Volume<std::uint8_t> fill_holes(const Volume<std::uint8_t>& m) {
     f->SetFullyConnected(true);
     update(f, "hole filling");
     return from_itk<std::uint8_t>(f->GetOutput());
-}
-
-Volume<float> inside_distance_mm(const Volume<std::uint8_t>& m) {
-    auto f = itk::SignedMaurerDistanceMapImageFilter<Img<std::uint8_t>, Img<float>>::New();
-    f->SetInput(to_itk(m));
-    f->SetBackgroundValue(0);
-    f->SetInsideIsPositive(true);
-    f->SetSquaredDistance(false);
-    f->SetUseImageSpacing(true);
-    update(f, "distance map");
-    Volume<float> d = from_itk<float>(f->GetOutput());
-    // Maurer's map measures to the nearest voxel of the other class; inside voxels get the distance to the
-    // nearest background voxel centre, which is what we return; outside voxels get 0.
-    for (size_t i = 0; i < d.data.size(); ++i) d.data[i] = m.data[i] ? std::max(d.data[i], 0.0f) : 0.0f;
-    return d;
 }
 
 double otsu_threshold(const Volume<float>& v, const std::vector<std::uint8_t>& roi) {

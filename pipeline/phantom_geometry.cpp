@@ -55,6 +55,8 @@ double box_distance(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, const 
     return (x.cwiseMax(lo).cwiseMin(hi) - x).norm();
 }
 
+}  // namespace
+
 double vessel_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x) {
     double best = std::numeric_limits<double>::infinity();
     for (const auto& v : g.vessels) {
@@ -69,6 +71,8 @@ double vessel_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x) {
 double sac_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x) {
     return g.sac ? (x - g.sac->centre).norm() - g.sac->radius_mm : std::numeric_limits<double>::infinity();
 }
+
+namespace {
 
 /// (|(x−c)/r| − 1)·min(r): 1-Lipschitz, so a lower bound of the distance to the ellipsoid's surface.
 double bone_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x) {

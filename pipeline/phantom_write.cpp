@@ -24,33 +24,11 @@ namespace {
 
 constexpr double HU_MIN = -1024.0, HU_MAX = 3071.0;
 
+
 json vec_json(const Eigen::Vector3d& v) { return json::array({v[0], v[1], v[2]}); }
 
 json grid_json(const ImageGrid& g) {
     return {{"size", g.size}, {"origin_mm", g.origin}, {"spacing_mm", g.spacing}, {"direction_row_major", g.direction}};
-}
-
-/// CT intensities: tissue + partial-volume lumen and bone, blurred by the PSF, plus seeded noise.
-Volume<std::int16_t> synthesize_ct(const PhantomParams& p, const Rasterized& r) {
-    Volume<float> ct;
-    ct.grid = r.labels.grid;
-    const size_t n = ct.grid.voxel_count();
-    ct.data.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        ct.data[i] = static_cast<float>(p.tissue_hu + r.lumen_fraction[i] * (p.lumen_hu - p.tissue_hu) +
-                                        r.bone_fraction[i] * (p.bone_hu - p.tissue_hu));
-    }
-    ct = gaussian_blur(ct, p.psf_sigma_mm);
-    std::mt19937_64 rng(p.seed);
-    std::normal_distribution<double> noise(0.0, 1.0);
-    Volume<std::int16_t> out;
-    out.grid = ct.grid;
-    out.data.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        const double v = ct.data[i] + (p.noise_sd_hu > 0 ? p.noise_sd_hu * noise(rng) : 0.0);
-        out.data[i] = static_cast<std::int16_t>(std::lround(std::clamp(v, HU_MIN, HU_MAX)));
-    }
-    return out;
 }
 
 json truth_json(const PhantomParams& p, const PhantomGeometry& g, const Rasterized& r,
@@ -100,6 +78,29 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }
 
 }  // namespace
+
+Volume<std::int16_t> synthesize_ct(const PhantomParams& p, const Rasterized& r) {
+    Volume<float> ct;
+    ct.grid = r.labels.grid;
+    const size_t n = ct.grid.voxel_count();
+    ct.data.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        ct.data[i] = static_cast<float>(p.tissue_hu + r.lumen_fraction[i] * (p.lumen_hu - p.tissue_hu) +
+                                        r.bone_fraction[i] * (p.bone_hu - p.tissue_hu));
+    }
+    ct = gaussian_blur(ct, p.psf_sigma_mm);
+    std::mt19937_64 rng(p.seed);
+    std::normal_distribution<double> noise(0.0, 1.0);
+    Volume<std::int16_t> out;
+    out.grid = ct.grid;
+    out.data.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        const double v = ct.data[i] + (p.noise_sd_hu > 0 ? p.noise_sd_hu * noise(rng) : 0.0);
+        out.data[i] = static_cast<std::int16_t>(std::lround(std::clamp(v, HU_MIN, HU_MAX)));
+    }
+    return out;
+}
+
 
 void write_phantom(const PhantomParams& p, const PhantomOutputs& outputs, const std::string& out_dir,
                    StageRecord stage, Reporter& rep) {

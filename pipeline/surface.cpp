@@ -81,6 +81,11 @@ void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporte
     smooth_surface(s, p.smoothing_iterations, p.smoothing_passband);
     rep.info("surface: remeshing " + std::to_string(s.F.rows()) + " triangles to " + shortest(p.edge_mm) + " mm edges (" + p.remesher + ")");
     SurfaceData m = remesh(s, p.edge_mm, p.remesher, p.timeout_s);
+    // The centerline's radius becomes the maximal inscribed sphere's: the distance from each point to the
+    // surface (sub-voxel; the voxel distance map only bounds it within a voxel).
+    Centerline& cl = r.image.centerline;
+    const NearestOnSurface mis = nearest_on_surface(m, cl.points);
+    cl.radius = mis.distance;
     std::string how = "automatic";
     if (p.aneurysm_sphere) {
         const auto& q = *p.aneurysm_sphere;

@@ -182,26 +182,66 @@ SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_i
 
 SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach) {
     auto poly = to_vtk(s);
-    vtkNew<vtkDoubleArray> sc;
-    sc->SetNumberOfValues(s.V.rows());
-    for (Eigen::Index i = 0; i < s.V.rows(); ++i) {
-        const Eigen::Vector3d x = s.V.row(i).transpose();
-        double g = -1e30;  // > 0: beyond some plane, within its reach
-        for (const auto& p : planes) {
-            const double R = reach * (p.radius_mm + 1.0);
-            const double d = p.normal.dot(x - p.point);
-            if ((x - p.point).norm() < R) g = std::max(g, d);
+    // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
+    // the vertices beyond the plane that reach it through an edge crossing the plane within `reach` ×
+    // (radius + 1 mm) of its point. Another vessel passing beyond the plane elsewhere is kept.
+    const Eigen::Index nv = s.V.rows();
+    std::vector<std::vector<int>> adj(static_cast<size_t>(nv));
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            adj[static_cast<size_t>(s.F(f, k))].push_back(s.F(f, (k + 1) % 3));
+            adj[static_cast<size_t>(s.F(f, (k + 1) % 3))].push_back(s.F(f, k));
         }
-        sc->SetValue(i, g > -1e29 ? g : -1.0);
+    std::vector<double> scalar(static_cast<size_t>(nv), -1.0);
+    for (const auto& p : planes) {
+        const double R = reach * (p.radius_mm + 1.0);
+        std::vector<double> d(static_cast<size_t>(nv));
+        for (Eigen::Index i = 0; i < nv; ++i) d[static_cast<size_t>(i)] = p.normal.dot(s.V.row(i).transpose() - p.point);
+        std::vector<int> comp(static_cast<size_t>(nv), -1);
+        std::vector<char> cut_here;  // per component: crosses the plane within the disc
+        for (Eigen::Index v0 = 0; v0 < nv; ++v0) {
+            if (d[static_cast<size_t>(v0)] <= 0 || comp[static_cast<size_t>(v0)] >= 0) continue;
+            const int id = static_cast<int>(cut_here.size());
+            cut_here.push_back(0);
+            std::vector<int> stack{static_cast<int>(v0)};
+            comp[static_cast<size_t>(v0)] = id;
+            while (!stack.empty()) {
+                const int u = stack.back();
+                stack.pop_back();
+                for (int w : adj[static_cast<size_t>(u)]) {
+                    if (d[static_cast<size_t>(w)] > 0) {
+                        if (comp[static_cast<size_t>(w)] < 0) {
+                            comp[static_cast<size_t>(w)] = id;
+                            stack.push_back(w);
+                        }
+                        continue;
+                    }
+                    const double t = d[static_cast<size_t>(u)] / (d[static_cast<size_t>(u)] - d[static_cast<size_t>(w)]);
+                    const Eigen::Vector3d x = (1 - t) * s.V.row(u).transpose() + t * s.V.row(w).transpose();
+                    if ((x - p.point).norm() < R) cut_here[static_cast<size_t>(id)] = 1;
+                }
+            }
+        }
+        for (Eigen::Index v = 0; v < nv; ++v) {
+            const int c = comp[static_cast<size_t>(v)];
+            bool near_cut = c >= 0 && cut_here[static_cast<size_t>(c)];
+            if (!near_cut && c < 0)  // a vertex before the plane next to a removed piece keeps its exact distance
+                for (int w : adj[static_cast<size_t>(v)]) {
+                    const int cw = comp[static_cast<size_t>(w)];
+                    near_cut = near_cut || (cw >= 0 && cut_here[static_cast<size_t>(cw)]);
+                }
+            if (near_cut) scalar[static_cast<size_t>(v)] = std::max(scalar[static_cast<size_t>(v)], d[static_cast<size_t>(v)]);
+        }
     }
+    vtkNew<vtkDoubleArray> sc;
+    sc->SetNumberOfValues(nv);
+    for (Eigen::Index i = 0; i < nv; ++i) sc->SetValue(i, scalar[static_cast<size_t>(i)]);
     poly->GetPointData()->SetScalars(sc);
     vtkNew<vtkClipPolyData> clip;
     clip->SetInputData(poly);
     clip->SetValue(0.0);
     clip->InsideOutOn();  // keep scalar <= 0
     clip->Update();
-    // Vertices within the reach but far from the plane's vessel could flip the scalar discontinuously across
-    // an edge; the connectivity filter then drops the detached bits.
     vtkNew<vtkTriangleFilter> tri;
     tri->SetInputConnection(clip->GetOutputPort());
     tri->Update();
@@ -235,8 +275,14 @@ void smooth_surface(SurfaceData& s, int iterations, double passband) {
     f->NonManifoldSmoothingOn();
     f->NormalizeCoordinatesOn();
     f->Update();
+    // The filter's "no boundary smoothing" still lets boundary vertices drift (measured ~0.02 mm off their
+    // cut plane): put them back.
+    std::vector<char> fixed(static_cast<size_t>(s.V.rows()), 0);
+    for (const auto& l : boundary_loops(s))
+        for (int v : l) fixed[static_cast<size_t>(v)] = 1;
     vtkPoints* p = f->GetOutput()->GetPoints();
     for (Eigen::Index i = 0; i < s.V.rows(); ++i) {
+        if (fixed[static_cast<size_t>(i)]) continue;
         double x[3];
         p->GetPoint(i, x);
         s.V.row(i) << x[0], x[1], x[2];

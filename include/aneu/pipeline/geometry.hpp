@@ -77,7 +77,7 @@ struct SurfaceParams {
     double smoothing_passband = 0.1;
     double iso_hu = 0.0;                  ///< isosurface level on the smoothed CT; 0 = the segmentation's threshold
     double aneurysm_ratio_high = 1.6;     ///< a face is surely sac when its centerline distance > this × local radius
-    double aneurysm_ratio_low = 1.2;      ///< ... and the sac grows over connected faces above this
+    double aneurysm_ratio_low = 1.4;      ///< ... and the sac grows over connected faces above this
     std::optional<std::array<double, 4>> aneurysm_sphere;  ///< override: faces whose centroid is inside are the sac
     std::string aneurysm_labelmap;        ///< override: image whose non-zero voxels are the sac
     double timeout_s = 300.0;             ///< Netgen runs in a child process, killed after this

@@ -31,8 +31,10 @@ Components connected_components(const Volume<std::uint8_t>& m);
 /// Fills cavities of a binary mask (background regions not connected to the image border).
 Volume<std::uint8_t> fill_holes(const Volume<std::uint8_t>& m);
 
-/// Euclidean distance [mm] from every foreground voxel centre to the nearest background voxel centre
-/// (ITK's Maurer distance map, spacing-aware); 0 on background voxels.
+/// Exact Euclidean distance [mm] from every foreground voxel centre to the nearest background voxel centre
+/// (separable squared-distance transform of Felzenszwalb & Huttenlocher, spacing-aware; distance_map.cpp);
+/// 0 on background voxels. Voxels beyond the grid do not count as background. ITK's signed Maurer map
+/// measures to the object's own contour voxels instead, which is not the radius this needs.
 Volume<float> inside_distance_mm(const Volume<std::uint8_t>& m);
 
 /// Otsu's threshold of the values of `v` where `roi` is non-zero (all voxels if `roi` is empty).

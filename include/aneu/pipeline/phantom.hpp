@@ -97,6 +97,14 @@ struct Rasterized {
 /// @param[in] supersampling  sub-samples per voxel edge, used only for voxels the surface can cross
 Rasterized rasterize(const PhantomGeometry& g, const ImageGrid& grid, int supersampling);
 
+/// CT intensities [HU] of a rasterised phantom: tissue + partial-volume lumen and bone, blurred by the
+/// PSF, plus seeded noise (what write_phantom writes).
+Volume<std::int16_t> synthesize_ct(const PhantomParams& p, const Rasterized& r);
+
+/// Signed distance to the sac sphere and to the vessel capsules separately (negative inside).
+double sac_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x);
+double vessel_sdf(const PhantomGeometry& g, const Eigen::Vector3d& x);
+
 /// Where the vessel centerlines leave the grid's box: one plane per end, outward normal along the
 /// centerline tangent, ids in order of the vessels.
 std::vector<EndPlane> true_end_planes(const PhantomGeometry& g, const ImageGrid& grid);

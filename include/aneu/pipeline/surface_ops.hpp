@@ -21,8 +21,9 @@ namespace aneu::pipeline {
 /// of the region where field < level. Only the largest connected piece is kept if `largest_only`.
 SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_inside, bool largest_only = true);
 
-/// Cuts the surface at end planes: near each plane (within `reach` × (radius + 1 mm) of its point), the part on
-/// the plane's outer side is removed, the cut being exact (linear scalar = signed distance to the plane).
+/// Cuts the surface at end planes: for each plane, the pieces beyond it that cross it within `reach` ×
+/// (radius + 1 mm) of its point are removed (another vessel passing beyond the plane elsewhere is kept); the
+/// cut is exact (linear scalar = signed distance to the plane) and its vertices are snapped into the plane.
 /// Of what remains, the largest connected piece is kept. Boundary loops lie in the planes.
 SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach = 3.0);
 

@@ -1,0 +1,433 @@
+// SPDX-License-Identifier: MIT
+// Geometry stages against phantoms of known truth: segmentation Dice, end planes, lumen surface distance
+// to the analytic surface, mesh quality, aneurysm labelling, wall thickness and checks, oblique frames,
+// surfaces from other tools, bad inputs.
+#include <cmath>
+#include <filesystem>
+#include <map>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "aneu/core/error.hpp"
+#include "aneu/pipeline/geometry.hpp"
+#include "aneu/pipeline/image_filters.hpp"
+#include "aneu/pipeline/image_io.hpp"
+#include "aneu/pipeline/phantom.hpp"
+#include "aneu/pipeline/surface_checks.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
+#include "aneu/pipeline/tetmesh.hpp"
+
+namespace fs = std::filesystem;
+using namespace aneu;
+using namespace aneu::pipeline;
+
+namespace {
+
+constexpr double PI = 3.14159265358979323846;
+
+// Acceptance figures of the geometry issue.
+constexpr double DICE_DEFAULT = 0.95, DICE_NOISY_BONE = 0.90;
+constexpr double SURFACE_MEAN_MM = 0.10, SURFACE_P95_MM = 0.25;
+constexpr double EDGE_REL_TOL = 0.15, MIN_ANGLE_DEG = 15.0, FRACTION_BELOW_25 = 0.01;
+constexpr double SAC_FOUND = 0.90, ARTERY_MISLABELLED = 0.05;
+constexpr double PLANE_ANGLE_DEG = 10.0;
+constexpr double THICK_ARTERY_TOL = 0.10, THICK_SAC_TOL = 0.15;
+
+struct Case {
+    PhantomParams params;
+    PhantomGeometry geom;
+    Volume<float> ct;
+    Volume<std::uint8_t> truth;
+};
+
+Case make_case(const PhantomParams& p) {
+    Case c;
+    c.params = p;
+    c.geom = make_phantom_geometry(p);
+    const Rasterized r = rasterize(c.geom, make_phantom_grid(p), p.supersampling);
+    const Volume<std::int16_t> ct = synthesize_ct(p, r);
+    c.ct.grid = ct.grid;
+    c.ct.data.assign(ct.data.begin(), ct.data.end());
+    c.truth = r.labels;
+    return c;
+}
+
+double value(const NamedValues& qa, const std::string& k) {
+    for (const auto& [n, v] : qa)
+        if (n == k) return v;
+    ADD_FAILURE() << "no QA figure " << k;
+    return std::nan("");
+}
+
+/// Dice of the lumen mask (on a sub-grid of the truth's, same geometry) against truth labels artery|aneurysm.
+double dice(const ImageData& im, const Volume<std::uint8_t>& truth) {
+    size_t a = 0, b = 0, ab = 0;
+    // The segmentation grid is the truth grid or a crop of it: map by physical position.
+    for (std::int64_t k = 0; k < truth.grid.size[2]; ++k)
+        for (std::int64_t j = 0; j < truth.grid.size[1]; ++j)
+            for (std::int64_t i = 0; i < truth.grid.size[0]; ++i) {
+                const auto x = truth.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                const auto ci = im.grid.continuous_index(x);
+                const std::int64_t ii = std::llround(ci[0]), jj = std::llround(ci[1]), kk = std::llround(ci[2]);
+                const bool in = ii >= 0 && jj >= 0 && kk >= 0 && ii < im.grid.size[0] && jj < im.grid.size[1] && kk < im.grid.size[2];
+                const bool s = in && im.mask[im.grid.linear(ii, jj, kk)] != 0;
+                const auto t = truth.data[truth.grid.linear(i, j, k)];
+                const bool tr = t == ARTERY || t == ANEURYSM;
+                a += s;
+                b += tr;
+                ab += s && tr;
+            }
+    return 2.0 * static_cast<double>(ab) / static_cast<double>(a + b);
+}
+
+/// Distances of the vertices to the analytic lumen surface: mean and 95th percentile, ignoring vertices
+/// on the cut ends (the analytic capsules continue past the planes).
+std::pair<double, double> surface_error(const SurfaceData& s, const PhantomGeometry& g) {
+    std::vector<char> on_loop(static_cast<size_t>(s.V.rows()), 0);
+    for (Eigen::Index i = 0; i < s.loop_vertices.size(); ++i) on_loop[static_cast<size_t>(s.loop_vertices[i])] = 1;
+    std::vector<double> d;
+    for (Eigen::Index v = 0; v < s.V.rows(); ++v)
+        if (!on_loop[static_cast<size_t>(v)]) d.push_back(std::abs(lumen_sdf(g, s.V.row(v).transpose())));
+    std::sort(d.begin(), d.end());
+    double mean = 0;
+    for (double x : d) mean += x;
+    return {mean / static_cast<double>(d.size()), d[static_cast<size_t>(0.95 * static_cast<double>(d.size() - 1))]};
+}
+
+Eigen::Vector3d centroid(const SurfaceData& s, Eigen::Index f) {
+    return (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+}
+double area(const SurfaceData& s, Eigen::Index f) {
+    const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+    return 0.5 * (b - a).cross(c - a).norm();
+}
+
+/// Fraction of the true sac area labelled aneurysm, and of the true artery area labelled aneurysm. A face
+/// belongs to the sac when it lies nearer the sac sphere than the vessel capsules.
+std::pair<double, double> labelling(const SurfaceData& s, const PhantomGeometry& g) {
+    double sac = 0, sac_ok = 0, art = 0, art_bad = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const Eigen::Vector3d x = centroid(s, f);
+        const bool true_sac = std::abs(sac_sdf(g, x)) < std::abs(vessel_sdf(g, x));
+        const double a = area(s, f);
+        const bool lab = s.face_label[f] == 1;
+        if (true_sac) {
+            sac += a;
+            sac_ok += lab ? a : 0;
+        } else {
+            art += a;
+            art_bad += lab ? a : 0;
+        }
+    }
+    return {sac_ok / sac, art_bad / art};
+}
+
+/// Unit tangent of the nearest vessel centerline at x.
+Eigen::Vector3d true_tangent(const PhantomGeometry& g, const Eigen::Vector3d& x, double* dist) {
+    double best = 1e300;
+    Eigen::Vector3d t = Eigen::Vector3d::UnitX();
+    for (const auto& v : g.vessels)
+        for (Eigen::Index i = 0; i + 1 < v.points.rows(); ++i) {
+            const Eigen::Vector3d a = v.points.row(i).transpose(), b = v.points.row(i + 1).transpose();
+            const double s = std::clamp((x - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
+            const double d = (x - (a + s * (b - a))).norm();
+            if (d < best) {
+                best = d;
+                t = (b - a).normalized();
+            }
+        }
+    *dist = best;
+    return t;
+}
+
+void expect_planes_found(const Case& c, const std::vector<EndPlane>& planes) {
+    const auto truth = true_end_planes(c.geom, c.truth.grid);
+    ASSERT_EQ(planes.size(), truth.size());
+    for (const auto& t : truth) {
+        const auto it = std::min_element(planes.begin(), planes.end(),
+                                         [&](const EndPlane& a, const EndPlane& b) { return (a.point - t.point).norm() < (b.point - t.point).norm(); });
+        double d = 0;
+        const Eigen::Vector3d tan = true_tangent(c.geom, it->point, &d);
+        const double angle = std::acos(std::min(1.0, std::abs(tan.dot(it->normal)))) * 180 / PI;
+        EXPECT_LT(angle, PLANE_ANGLE_DEG) << "end " << t.id;
+        EXPECT_GT(it->normal.dot(t.normal), 0.5) << "end " << t.id << ": normal must point out of the ROI";
+        EXPECT_LT(d, 0.3 * t.radius_mm) << "end " << t.id << ": plane point off the true centerline";
+        EXPECT_LT((it->point - t.point).norm(), 4.0 * t.radius_mm + 2.0) << "end " << t.id;
+        EXPECT_NEAR(it->radius_mm, t.radius_mm, 0.25 * t.radius_mm) << "end " << t.id;
+    }
+}
+
+void expect_surface_standard(const SurfaceData& s, const PhantomGeometry& g, double edge, const std::string& what) {
+    const auto [mean, p95] = surface_error(s, g);
+    EXPECT_LE(mean, SURFACE_MEAN_MM) << what;
+    EXPECT_LE(p95, SURFACE_P95_MM) << what;
+    const NamedValues q = triangle_quality(s);
+    EXPECT_NEAR(value(q, "edge_mean_mm"), edge, EDGE_REL_TOL * edge) << what;
+    EXPECT_GE(value(q, "min_angle_deg"), MIN_ANGLE_DEG) << what;
+    EXPECT_LT(value(q, "fraction_min_angle_below_25deg"), FRACTION_BELOW_25) << what;
+    const auto [sac_found, art_bad] = labelling(s, g);
+    EXPECT_GE(sac_found, SAC_FOUND) << what;
+    EXPECT_LE(art_bad, ARTERY_MISLABELLED) << what;
+    std::printf("%s: distance mean %.4f p95 %.4f mm; edge mean %.3f; min angle %.1f; <25deg %.4f; sac found %.3f; artery mislabelled %.4f\n",
+                what.c_str(), mean, p95, value(q, "edge_mean_mm"), value(q, "min_angle_deg"), value(q, "fraction_min_angle_below_25deg"), sac_found,
+                art_bad);
+}
+
+/// The default phantom, segmented and surfaced once for all tests of this file.
+struct Default {
+    Case c = make_case(PhantomParams{});
+    Segmentation seg = segment_volume(c.ct, SegmentParams{});
+};
+const Default& default_case() {
+    static const Default d;
+    return d;
+}
+const LumenResult& default_lumen(const std::string& remesher) {
+    static std::map<std::string, LumenResult> cache;
+    auto it = cache.find(remesher);
+    if (it == cache.end()) {
+        SurfaceParams p;
+        p.remesher = remesher;
+        it = cache.emplace(remesher, lumen_from_segmentation(default_case().seg.image, p)).first;
+    }
+    return it->second;
+}
+
+}  // namespace
+
+TEST(Segment, DefaultPhantomDiceAndEnds) {
+    const auto& d = default_case();
+    const double dc = dice(d.seg.image, d.c.truth);
+    std::printf("default phantom: Dice %.4f, threshold %.1f HU\n", dc, value(d.seg.qa, "threshold_hu"));
+    EXPECT_GE(dc, DICE_DEFAULT);
+    expect_planes_found(d.c, d.seg.image.planes);
+    // The centerline is a tree: the parent from end 0 to end 1 and the branch.
+    EXPECT_EQ(d.seg.image.centerline.offsets.size(), 3);
+}
+
+TEST(Segment, NoisyPhantomWithBone) {
+    PhantomParams p;
+    p.with_bone = true;
+    p.noise_sd_hu = 30.0;
+    p.seed = 7;
+    const Case c = make_case(p);
+    const Segmentation s = segment_volume(c.ct, SegmentParams{});
+    const double dc = dice(s.image, c.truth);
+    std::printf("noisy phantom with bone: Dice %.4f, threshold %.1f HU\n", dc, value(s.qa, "threshold_hu"));
+    EXPECT_GE(dc, DICE_NOISY_BONE);
+    expect_planes_found(c, s.image.planes);
+}
+
+TEST(Segment, GivenThresholdSeedRoiAndPlanes) {
+    const auto& d = default_case();
+    SegmentParams p;
+    p.threshold_hu = 220.0;
+    p.seeds_mm = {{d.c.geom.vessels[0].points(d.c.geom.vessels[0].points.rows() / 2, 0), d.c.geom.vessels[0].points(d.c.geom.vessels[0].points.rows() / 2, 1),
+                   d.c.geom.vessels[0].points(d.c.geom.vessels[0].points.rows() / 2, 2)}};
+    p.roi_mm = std::array<double, 6>{-11, -10, -6, 11, 10, 9};
+    const Segmentation s = segment_volume(d.c.ct, p);
+    EXPECT_EQ(value(s.qa, "threshold_hu"), 220.0);
+    EXPECT_LT(s.image.grid.voxel_count(), d.c.ct.grid.voxel_count());
+    // Inside the ROI the mask agrees with the truth.
+    EXPECT_GE(dice(s.image, [&] {
+                  Volume<std::uint8_t> t = d.c.truth;  // truth restricted to the ROI box
+                  for (std::int64_t k = 0; k < t.grid.size[2]; ++k)
+                      for (std::int64_t j = 0; j < t.grid.size[1]; ++j)
+                          for (std::int64_t i = 0; i < t.grid.size[0]; ++i) {
+                              const auto x = t.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                              const bool in = x[0] >= -11 && x[0] <= 11 && x[1] >= -10 && x[1] <= 10 && x[2] >= -6 && x[2] <= 9;
+                              if (!in) t.data[t.grid.linear(i, j, k)] = 0;
+                          }
+                  return t;
+              }()),
+              DICE_DEFAULT);
+    // Given planes replace the detected ones.
+    SegmentParams q;
+    EndPlane e;
+    e.id = 0;
+    e.point = Eigen::Vector3d(1, 2, 3);
+    e.normal = Eigen::Vector3d(0, 0, 1);
+    e.radius_mm = 2;
+    q.planes = {e};
+    const Segmentation s2 = segment_volume(d.c.ct, q);
+    ASSERT_EQ(s2.image.planes.size(), 1u);
+    EXPECT_EQ(s2.image.planes[0].point, e.point);
+}
+
+TEST(Surface, NetgenMeetsTheStandard) {
+    const auto& d = default_case();
+    const LumenResult& r = default_lumen("netgen");
+    expect_surface_standard(r.lumen, d.c.geom, 0.4, "netgen");
+    EXPECT_EQ(r.lumen.loop_end_id.size(), 3);
+}
+
+TEST(Surface, CgalMeetsTheStandard) {
+    const auto& d = default_case();
+    const LumenResult& r = default_lumen("cgal");
+    expect_surface_standard(r.lumen, d.c.geom, 0.4, "cgal");
+    EXPECT_EQ(r.lumen.loop_end_id.size(), 3);
+    // Every boundary loop lies in its end plane.
+    for (Eigen::Index l = 0; l < r.lumen.loop_end_id.size(); ++l) {
+        const auto& pl = r.image.planes[static_cast<size_t>(r.lumen.loop_end_id[l])];
+        for (int i = r.lumen.loop_offsets[l]; i < r.lumen.loop_offsets[l + 1]; ++i)
+            EXPECT_NEAR(pl.normal.dot(r.lumen.V.row(r.lumen.loop_vertices[i]).transpose() - pl.point), 0.0, 1e-6);
+    }
+}
+
+TEST(Surface, OverridesOfTheAneurysmLabel) {
+    const auto& d = default_case();
+    SurfaceParams p;
+    p.remesher = "cgal";
+    const auto& sac = *d.c.geom.sac;
+    p.aneurysm_sphere = std::array<double, 4>{sac.centre.x(), sac.centre.y(), sac.centre.z(), sac.radius_mm + 0.3};
+    const LumenResult r = lumen_from_segmentation(d.seg.image, p);
+    for (Eigen::Index f = 0; f < r.lumen.F.rows(); ++f)
+        EXPECT_EQ(r.lumen.face_label[f], (centroid(r.lumen, f) - sac.centre).norm() < sac.radius_mm + 0.3 ? 1 : 0);
+}
+
+TEST(Surface, ObliqueAnisotropicPhantomInPhysicalFrame) {
+    PhantomParams p;
+    p.oblique_deg = {10.0, -15.0, 20.0};
+    p.spacing_mm = {0.35, 0.45, 0.5};
+    p.fov_mm = {30.0, 26.0, 22.0};
+    const Case c = make_case(p);
+    const Segmentation s = segment_volume(c.ct, SegmentParams{});
+    EXPECT_GE(dice(s.image, c.truth), DICE_DEFAULT);
+    expect_planes_found(c, s.image.planes);
+    SurfaceParams sp;
+    sp.remesher = "cgal";
+    const LumenResult r = lumen_from_segmentation(s.image, sp);
+    expect_surface_standard(r.lumen, c.geom, 0.4, "oblique");
+}
+
+TEST(Surface, StlFromAnotherToolOpenAndCapped) {
+    const auto& d = default_case();
+    const LumenResult& ref = default_lumen("cgal");
+    const fs::path dir = fs::temp_directory_path() / ("aneu_stl_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    // Open ends.
+    write_mesh_file((dir / "open.stl").string(), ref.lumen);
+    SurfaceParams p;
+    p.remesher = "cgal";
+    const LumenResult open = lumen_from_mesh((dir / "open.stl").string(), p);
+    expect_surface_standard(open.lumen, d.c.geom, 0.4, "stl-open");
+    EXPECT_EQ(open.lumen.loop_end_id.size(), 3);
+    // Flat caps, detected and removed.
+    SurfaceData capped = ref.lumen;
+    cap_loops(capped, boundary_loops(capped), {0, 0, 0});
+    write_mesh_file((dir / "capped.stl").string(), capped);
+    const LumenResult cap = lumen_from_mesh((dir / "capped.stl").string(), p);
+    EXPECT_EQ(value(cap.qa, "input_caps_removed"), 3.0);
+    expect_surface_standard(cap.lumen, d.c.geom, 0.4, "stl-capped");
+    // And the wall from it.
+    WallParams w;
+    w.grid_spacing_mm = 0.08;
+    const WallResult wr = make_wall(cap.lumen, cap.image.planes, w);
+    EXPECT_NO_THROW(check_closed_surface(wr.wall, "wall"));
+    fs::remove_all(dir);
+}
+
+TEST(Wall, ClosedThicknessAndBlend) {
+    const LumenResult& r = default_lumen("cgal");
+    WallParams p;
+    p.grid_spacing_mm = 0.06;
+    const WallResult w = make_wall(r.lumen, r.image.planes, p);
+    EXPECT_NO_THROW(check_closed_surface(w.wall, "wall"));
+    EXPECT_TRUE(self_intersections(w.wall, 1).empty());
+    const double ta = value(w.qa, "thickness_artery_median_mm"), ts = value(w.qa, "thickness_aneurysm_median_mm");
+    std::printf("wall: median thickness artery %.4f (target 0.4), aneurysm %.4f (target %.4f); gradient max %.3f (blend allows %.3f)\n", ta, ts,
+                0.4 / 3, value(w.qa, "thickness_gradient_max"), value(w.qa, "thickness_gradient_blend_allows"));
+    EXPECT_NEAR(ta, 0.4, THICK_ARTERY_TOL * 0.4);
+    EXPECT_NEAR(ts, 0.4 / 3, THICK_SAC_TOL * 0.4 / 3);
+    EXPECT_LE(value(w.qa, "thickness_gradient_max"), 2.0 * value(w.qa, "thickness_gradient_blend_allows"));
+    // Labels: inner, outer, one cap per end.
+    EXPECT_EQ(w.wall.label_names.size(), 5u);
+}
+
+TEST(GeometryErrors, BadInputsAreInputErrors) {
+    const auto& d = default_case();
+    EXPECT_THROW(segment("/nonexistent/ct.nii.gz", SegmentParams{}), InputError);
+    SegmentParams roi;
+    roi.roi_mm = std::array<double, 6>{100, 100, 100, 110, 110, 110};
+    EXPECT_THROW(segment_volume(d.c.ct, roi), InputError);
+    SegmentParams seed;
+    seed.seeds_mm = {{0.0, 8.0, -6.0}};  // tissue
+    EXPECT_THROW(segment_volume(d.c.ct, seed), InputError);
+    SegmentParams thr;
+    thr.threshold_hu = 5000.0;
+    EXPECT_THROW(segment_volume(d.c.ct, thr), InputError);
+    // A closed surface without flat caps (a sphere), and a non-manifold one.
+    const fs::path dir = fs::temp_directory_path() / ("aneu_bad_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    SurfaceData sphere;
+    {
+        PhantomParams p;
+        Volume<float> v = make_case(p).ct;
+        for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
+            for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
+                for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
+                    const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                    v.data[v.grid.linear(i, j, k)] = static_cast<float>(3.0 - std::sqrt(x[0] * x[0] + x[1] * x[1] + (x[2] - 2) * (x[2] - 2)));
+                }
+        sphere = isosurface(v, 0.0, true);
+    }
+    write_mesh_file((dir / "sphere.stl").string(), sphere);
+    try {
+        (void)lumen_from_mesh((dir / "sphere.stl").string(), SurfaceParams{});
+        ADD_FAILURE() << "a closed surface without caps was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("no flat end cap"), std::string::npos) << e.what();
+    }
+    SurfaceData nm;
+    nm.V.resize(5, 3);
+    nm.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 1;
+    nm.F.resize(3, 3);
+    nm.F << 0, 1, 2, 1, 0, 3, 0, 1, 4;  // edge 0-1 in three faces
+    nm.face_label = Eigen::VectorXi::Zero(3);
+    write_mesh_file((dir / "nonmanifold.stl").string(), nm);
+    try {
+        (void)lumen_from_mesh((dir / "nonmanifold.stl").string(), SurfaceParams{});
+        ADD_FAILURE() << "a non-manifold surface was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("manifold"), std::string::npos) << e.what();
+    }
+    fs::remove_all(dir);
+}
+
+TEST(ImageFilters, InsideDistanceOfACylinder) {
+    Volume<std::uint8_t> m;
+    m.grid.size = {40, 40, 20};
+    m.grid.spacing = {0.4, 0.4, 0.5};
+    m.data.assign(m.grid.voxel_count(), 0);
+    for (std::int64_t k = 0; k < 20; ++k)
+        for (std::int64_t j = 0; j < 40; ++j)
+            for (std::int64_t i = 0; i < 40; ++i) {
+                const double x = static_cast<double>(i - 20) * 0.4, y = static_cast<double>(j - 20) * 0.4;
+                if (x * x + y * y < 4.0 - 1e-9) m.data[m.grid.linear(i, j, k)] = 1;
+            }
+    const Volume<float> d = inside_distance_mm(m);
+    // Nearest background voxel centre of the axis voxel: (±2.0, 0) mm.
+    EXPECT_NEAR(d.data[m.grid.linear(20, 20, 10)], 2.0, 1e-5);
+    EXPECT_EQ(d.data[m.grid.linear(0, 0, 10)], 0.0f);
+}
+TEST(Debug, LoopsInPlanes) {
+    const auto& d = default_case();
+    const ImageData& seg = d.seg.image;
+    Volume<float> field{seg.grid, seg.intensity};
+    SurfaceData iso = isosurface(field, seg.threshold_hu, true, true);
+    SurfaceData cut = clip_at_planes(iso, seg.planes);
+    auto report = [&](const SurfaceData& s, const char* what) {
+        for (const auto& l : boundary_loops(s)) {
+            double mx = 0; int best = 0; double bd = 1e9;
+            Eigen::Vector3d c = Eigen::Vector3d::Zero(); for (int v : l) c += s.V.row(v).transpose(); c /= l.size();
+            for (size_t q = 0; q < seg.planes.size(); ++q) if ((seg.planes[q].point - c).norm() < bd) { bd = (seg.planes[q].point - c).norm(); best = q; }
+            for (int v : l) mx = std::max(mx, std::abs(seg.planes[best].normal.dot(s.V.row(v).transpose() - seg.planes[best].point)));
+            std::printf("%s: loop %zu verts, plane %d, max off %.3g\n", what, l.size(), best, mx);
+        }
+    };
+    report(cut, "cut");
+    smooth_surface(cut, 20, 0.1);
+    report(cut, "smoothed");
+    report(remesh(cut, 0.4, "cgal"), "remeshed");
+}
