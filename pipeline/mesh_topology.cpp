@@ -172,3 +172,60 @@ double enclosed_volume(const SurfaceData& s) {
 }
 
 }  // namespace aneu::pipeline
+
+namespace aneu::pipeline {
+
+namespace {
+double min_angle_of(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    auto ang = [](const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
+        const Eigen::Vector3d u = q - p, w = r - p;
+        return std::atan2(u.cross(w).norm(), u.dot(w));
+    };
+    return std::min({ang(a, b, c), ang(b, c, a), ang(c, a, b)});
+}
+}  // namespace
+
+int improve_min_angle(SurfaceData& s, double max_dihedral_deg, int passes) {
+    const double cos_max = std::cos(max_dihedral_deg * 3.14159265358979323846 / 180.0);
+    int total = 0;
+    for (int pass = 0; pass < passes; ++pass) {
+        // Directed edge → face, to find each interior edge's two faces.
+        std::map<std::pair<int, int>, int> face_of;
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) face_of[{s.F(f, k), s.F(f, (k + 1) % 3)}] = static_cast<int>(f);
+        std::vector<char> touched(static_cast<size_t>(s.F.rows()), 0);
+        int flips = 0;
+        for (const auto& [e, f0] : face_of) {
+            const int a = e.first, b = e.second;
+            if (a > b) continue;
+            const auto it = face_of.find({b, a});
+            if (it == face_of.end()) continue;  // boundary edge: kept
+            const int f1 = it->second;
+            if (touched[static_cast<size_t>(f0)] || touched[static_cast<size_t>(f1)]) continue;
+            auto third = [&](int f) {
+                for (int k = 0; k < 3; ++k)
+                    if (s.F(f, k) != a && s.F(f, k) != b) return s.F(f, k);
+                return -1;
+            };
+            const int c = third(f0), d = third(f1);  // f0 = (a, b, c), f1 = (b, a, d)
+            if (c == d || face_of.count({c, d}) || face_of.count({d, c})) continue;
+            const Eigen::Vector3d A = s.V.row(a), B = s.V.row(b), C = s.V.row(c), D = s.V.row(d);
+            const Eigen::Vector3d n0 = (B - A).cross(C - A), n1 = (A - B).cross(D - B);
+            if (n0.normalized().dot(n1.normalized()) < cos_max) continue;  // not flat enough: a flip would change the shape
+            const double before = std::min(min_angle_of(A, B, C), min_angle_of(B, A, D));
+            const double after = std::min(min_angle_of(A, D, C), min_angle_of(B, C, D));
+            // New faces (a, d, c) and (b, c, d) must face the same way as the old ones.
+            const Eigen::Vector3d m0 = (D - A).cross(C - A), m1 = (C - B).cross(D - B);
+            if (after <= before + 1e-9 || m0.dot(n0 + n1) <= 0 || m1.dot(n0 + n1) <= 0) continue;
+            s.F.row(f0) << a, d, c;
+            s.F.row(f1) << b, c, d;
+            touched[static_cast<size_t>(f0)] = touched[static_cast<size_t>(f1)] = 1;
+            ++flips;
+        }
+        total += flips;
+        if (flips == 0) break;
+    }
+    return total;
+}
+
+}  // namespace aneu::pipeline

@@ -73,7 +73,7 @@ SurfaceData remesh_netgen(const SurfaceData& capped, double edge_mm, double time
             mp.maxh = edge_mm;
             mp.minh = 0.2 * edge_mm;
             mp.grading = 0.2;
-            mp.optsteps_2d = 5;
+            mp.optsteps_2d = 10;
             if (nglib::Ng_STL_MakeEdges(geom, m, &mp) != nglib::NG_OK) {
                 msg = "Netgen could not find the surface's edges";
                 return 1;
@@ -111,6 +111,39 @@ SurfaceData remesh_netgen(const SurfaceData& capped, double edge_mm, double time
     return s;
 }
 #endif
+
+/// Moves every interior vertex towards the centroid of its neighbours within its tangent plane, then onto
+/// the reference surface (its nearest point); boundary vertices stay.
+void relax_tangentially(SurfaceData& s, const SurfaceData& reference, int iterations) {
+    const Eigen::Index nv = s.V.rows();
+    std::vector<char> boundary(static_cast<size_t>(nv), 0);
+    for (const auto& l : boundary_loops(s))
+        for (int v : l) boundary[static_cast<size_t>(v)] = 1;
+    std::vector<std::vector<int>> nb(static_cast<size_t>(nv));
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) nb[static_cast<size_t>(s.F(f, k))].push_back(s.F(f, (k + 1) % 3));
+    for (int it = 0; it < iterations; ++it) {
+        Eigen::MatrixX3d N = Eigen::MatrixX3d::Zero(nv, 3);
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+            const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+            const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+            for (int k = 0; k < 3; ++k) N.row(s.F(f, k)) += n;
+        }
+        Eigen::MatrixX3d X = s.V;
+        for (Eigen::Index v = 0; v < nv; ++v) {
+            if (boundary[static_cast<size_t>(v)] || nb[static_cast<size_t>(v)].empty()) continue;
+            Eigen::Vector3d c = Eigen::Vector3d::Zero();
+            for (int w : nb[static_cast<size_t>(v)]) c += s.V.row(w).transpose();
+            c /= static_cast<double>(nb[static_cast<size_t>(v)].size());
+            const Eigen::Vector3d n = N.row(v).transpose().normalized();
+            const Eigen::Vector3d d = c - s.V.row(v).transpose();
+            X.row(v) += (d - n.dot(d) * n).transpose();
+        }
+        const NearestOnSurface p = nearest_on_surface(reference, X);
+        for (Eigen::Index v = 0; v < nv; ++v)
+            if (!boundary[static_cast<size_t>(v)]) s.V.row(v) = p.point.row(v);
+    }
+}
 
 }  // namespace
 
@@ -165,6 +198,11 @@ SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& met
                            std::to_string(loops.size()) + " (a cap was not kept as a separate face)");
     }
     open.label_names = {"surface"};
+    // Both meshers leave a few thin triangles, mostly along the boundary loops (measured: 11.7° Netgen,
+    // 14.6° CGAL): tangential relaxation of the interior vertices, projected back onto the surface, then
+    // edge flips between nearly flat neighbours.
+    relax_tangentially(open, in, 3);
+    improve_min_angle(open);
     return open;
 }
 

@@ -70,11 +70,11 @@ SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm) {
         put(constrained, e, get(patch, m.face(h0)) != get(patch, m.face(h1)));
     }
     PMP::isotropic_remeshing(faces(m), edge_mm, m,
-                             CGAL::parameters::number_of_iterations(6)
+                             CGAL::parameters::number_of_iterations(10)
                                  .edge_is_constrained_map(constrained)
                                  .protect_constraints(false)
                                  .face_patch_map(patch)
-                                 .number_of_relaxation_steps(2));
+                                 .number_of_relaxation_steps(3));
     m.collect_garbage();
     SurfaceData out = from_cgal(m);
     Eigen::Index f = 0;

@@ -446,8 +446,10 @@ Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, 
         }
         if (label == 0) label = seeds.empty() ? auto_component(cc) : -1;
         if (label < 0) {
-            throw InputError("segment: no --seed lies in the lumen (their smoothed intensities are below the automatic threshold " +
-                             shortest(t0) + " HU); move the seeds or give --threshold-hu");
+            const auto& s0 = seeds.front();
+            throw InputError("segment: --seed " + vec3(p.seeds_mm.front()) + " mm is not in the lumen: its smoothed intensity " +
+                             shortest(sm.data[g.linear(s0[0], s0[1], s0[2])]) + " HU is below the automatic threshold " + shortest(t0) +
+                             " HU (no seed is above it); move the seeds or give --threshold-hu");
         }
         std::vector<float> vals;
         for (size_t l = 0; l < n; ++l)

@@ -381,7 +381,35 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
     std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return planes[a].radius_mm > planes[b].radius_mm; });
     std::vector<std::vector<size_t>> ends_sorted;
     for (size_t q : order) ends_sorted.push_back(ends[q]);
-    const CenterlineResult cl = centerline_from_ends(mask, dist, {}, ends_sorted, 0.0);
+    CenterlineResult cl = centerline_from_ends(mask, dist, {}, ends_sorted, 0.0);
+    // The paths start and stop at the voxels nearest the planes: continue each end branch to its plane's
+    // point, so that faces at the cut ends measure their distance to the centerline, not to its tip.
+    {
+        Centerline& c = cl.centerline;
+        std::vector<Eigen::Vector3d> pts;
+        std::vector<double> rad;
+        std::vector<int> off{0};
+        for (Eigen::Index b = 0; b + 1 < c.offsets.size(); ++b) {
+            if (b == 0) {
+                pts.push_back(planes[order[0]].point);
+                rad.push_back(planes[order[0]].radius_mm);
+            }
+            for (int i = c.offsets[b]; i < c.offsets[b + 1]; ++i) {
+                pts.push_back(c.points.row(i).transpose());
+                rad.push_back(c.radius[i]);
+            }
+            pts.push_back(planes[order[static_cast<size_t>(b + 1)]].point);  // branch b ends at end b + 1
+            rad.push_back(planes[order[static_cast<size_t>(b + 1)]].radius_mm);
+            off.push_back(static_cast<int>(pts.size()));
+        }
+        c.points.resize(static_cast<Eigen::Index>(pts.size()), 3);
+        c.radius.resize(static_cast<Eigen::Index>(pts.size()));
+        for (size_t i = 0; i < pts.size(); ++i) {
+            c.points.row(static_cast<Eigen::Index>(i)) = pts[i].transpose();
+            c.radius[static_cast<Eigen::Index>(i)] = rad[i];
+        }
+        c.offsets = Eigen::Map<Eigen::VectorXi>(off.data(), static_cast<Eigen::Index>(off.size()));
+    }
     r.image.grid = mask.grid;
     r.image.mask = mask.data;
     r.image.mask_label_names = {"background", "lumen"};

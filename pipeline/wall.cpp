@@ -168,8 +168,9 @@ void zip_annulus(const Eigen::MatrixX3d& V, std::vector<int> in, std::vector<int
         const Eigen::Vector3d d = V.row(v).transpose() - c;
         return std::atan2(d.dot(w), d.dot(u));
     };
-    // Both loops counter-clockwise about n, starting at their smallest angle.
-    auto prepare = [&](std::vector<int>& l) {
+    // Both loops counter-clockwise about n; the inner starts at its smallest angle, the outer at the vertex
+    // nearest that angle, so the two sweeps run side by side.
+    auto ccw = [&](std::vector<int>& l) {
         double turn = 0;
         for (size_t i = 0; i < l.size(); ++i) {
             double d = ang(l[(i + 1) % l.size()]) - ang(l[i]);
@@ -178,39 +179,46 @@ void zip_annulus(const Eigen::MatrixX3d& V, std::vector<int> in, std::vector<int
             turn += d;
         }
         if (turn < 0) std::reverse(l.begin(), l.end());
-        const auto it = std::min_element(l.begin(), l.end(), [&](int a, int b) { return ang(a) < ang(b); });
-        std::rotate(l.begin(), it, l.end());
     };
-    prepare(in);
-    prepare(out);
-    // Unwrapped angles a[0..n] (a[n] = a[0] + 2π) of each loop.
-    auto unwrap = [&](const std::vector<int>& l) {
+    auto wrap = [](double d) {
+        while (d > PI) d -= 2 * PI;
+        while (d <= -PI) d += 2 * PI;
+        return d;
+    };
+    ccw(in);
+    ccw(out);
+    std::rotate(in.begin(), std::min_element(in.begin(), in.end(), [&](int a, int b) { return ang(a) < ang(b); }), in.end());
+    const double a0 = ang(in[0]);
+    std::rotate(out.begin(), std::min_element(out.begin(), out.end(), [&](int a, int b) { return std::abs(wrap(ang(a) - a0)) < std::abs(wrap(ang(b) - a0)); }),
+                out.end());
+    // Unwrapped angles a[0..n] (a[n] = a[0] + 2π), the outer's measured from a0.
+    auto unwrap = [&](const std::vector<int>& l, double start) {
         std::vector<double> a(l.size() + 1);
-        a[0] = ang(l[0]);
-        for (size_t i = 1; i < l.size(); ++i) {
-            double d = ang(l[i]) - ang(l[i - 1]);
-            if (d < -PI) d += 2 * PI;
-            if (d > PI) d -= 2 * PI;
-            a[i] = a[i - 1] + d;
-        }
+        a[0] = start;
+        for (size_t i = 1; i < l.size(); ++i) a[i] = a[i - 1] + wrap(ang(l[i]) - ang(l[i - 1]));
         a[l.size()] = a[0] + 2 * PI;
         return a;
     };
-    const std::vector<double> ai = unwrap(in), ao = unwrap(out);
+    const std::vector<double> ai = unwrap(in, a0), ao = unwrap(out, a0 + wrap(ang(out[0]) - a0));
     size_t i = 0, o = 0;
     const size_t ni = in.size(), no = out.size();
+    std::vector<Eigen::Vector3i> strip;
     while (i < ni || o < no) {
         const bool adv_in = o >= no || (i < ni && ai[i + 1] <= ao[o + 1]);
-        Eigen::Vector3i f;
         if (adv_in) {
-            f = {in[i % ni], in[(i + 1) % ni], out[o % no]};
+            strip.emplace_back(in[i % ni], in[(i + 1) % ni], out[o % no]);
             ++i;
         } else {
-            f = {in[i % ni], out[(o + 1) % no], out[o % no]};
+            strip.emplace_back(in[i % ni], out[(o + 1) % no], out[o % no]);
             ++o;
         }
-        const Eigen::Vector3d nn = (V.row(f[1]) - V.row(f[0])).transpose().cross((V.row(f[2]) - V.row(f[0])).transpose());
-        if (nn.dot(n) < 0) std::swap(f[1], f[2]);
+    }
+    // One orientation for the whole strip (a per-face choice would break consistency where a face folds;
+    // the self-intersection check reports such a face).
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const auto& f : strip) sum += (V.row(f[1]) - V.row(f[0])).transpose().cross((V.row(f[2]) - V.row(f[0])).transpose());
+    for (auto f : strip) {
+        if (sum.dot(n) < 0) std::swap(f[1], f[2]);
         faces.push_back(f);
     }
 }

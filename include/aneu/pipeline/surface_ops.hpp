@@ -62,6 +62,11 @@ Eigen::Index cap_loops(SurfaceData& s, const std::vector<std::vector<int>>& loop
 /// min angle [deg], fraction of triangles with min angle below 25° and below 15°.
 NamedValues triangle_quality(const SurfaceData& s);
 
+/// Flips interior edges between nearly coplanar faces (dihedral below `max_dihedral_deg`) where that raises
+/// the smaller of the two faces' minimum angles; boundary edges stay. Labels/regions of flipped faces are
+/// those of the faces they replace. Returns the number of flips.
+int improve_min_angle(SurfaceData& s, double max_dihedral_deg = 10.0, int passes = 5);
+
 /// Signed volume enclosed by a closed surface (positive when outward-oriented).
 double enclosed_volume(const SurfaceData& s);
 
