@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-// VTK side of the geometry stages: isosurface, clipping at end planes, smoothing, decimation, mesh file
+// VTK side of the geometry stages: isosurface, clipping at end planes, smoothing, mesh file
 // readers/writers and voxelisation. VTK lives in this translation unit (and snapshot_vtk.cpp) only.
 #include <algorithm>
 #include <cmath>
@@ -24,7 +24,6 @@
 #include <vtkPolyData.h>
 #include <vtkPolyDataConnectivityFilter.h>
 #include <vtkPolyDataToImageStencil.h>
-#include <vtkQuadricDecimation.h>
 #include <vtkSTLReader.h>
 #include <vtkSTLWriter.h>
 #include <vtkTriangleFilter.h>
@@ -287,20 +286,6 @@ void smooth_surface(SurfaceData& s, int iterations, double passband) {
         p->GetPoint(i, x);
         s.V.row(i) << x[0], x[1], x[2];
     }
-}
-
-void decimate(SurfaceData& s, std::size_t target_triangles) {
-    if (static_cast<std::size_t>(s.F.rows()) <= target_triangles) return;
-    auto poly = to_vtk(s);
-    vtkNew<vtkQuadricDecimation> d;
-    d->SetInputData(poly);
-    d->SetTargetReduction(1.0 - static_cast<double>(target_triangles) / static_cast<double>(s.F.rows()));
-    d->VolumePreservationOn();
-    d->Update();
-    SurfaceData out = from_vtk(d->GetOutput());
-    out.label_names = s.label_names;
-    out.face_label = Eigen::VectorXi::Zero(out.F.rows());
-    s = std::move(out);
 }
 
 SurfaceData read_mesh_file(const std::string& path) {

@@ -356,13 +356,11 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     const double t_field = std::chrono::duration<double>(clock::now() - t0).count();
     r.qa.emplace_back("time_distance_field_s", t_field);
 
-    // Outer surface: isosurface φ = 0 (outward = towards φ > 0), decimated, cut at the planes, remeshed.
+    // Outer surface: isosurface φ = 0 (outward = towards φ > 0), cut at the planes, remeshed.
     SurfaceData outer = isosurface(phi, 0.0, false, true);
     r.qa.emplace_back("outer_isosurface_triangles", static_cast<double>(outer.F.rows()));
-    double outer_area = 0;
-    for (Eigen::Index f = 0; f < outer.F.rows(); ++f)
-        outer_area += 0.5 * (outer.V.row(outer.F(f, 1)) - outer.V.row(outer.F(f, 0))).cross(outer.V.row(outer.F(f, 2)) - outer.V.row(outer.F(f, 0))).norm();
-    decimate(outer, static_cast<std::size_t>(4.0 * outer_area / (0.433 * edge * edge)));
+    // Not decimated before remeshing: VTK's quadric and DecimatePro decimations were both measured to leave
+    // non-manifold edges on this surface; CGAL remeshes the fine isosurface directly.
     outer = clip_at_planes(outer, planes);
     const auto outer_loops = boundary_loops(outer);
     if (outer_loops.size() != static_cast<size_t>(lumen.loop_end_id.size())) {

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 /// @file
-/// Triangle-surface operations of the geometry stages: VTK (isosurface, clip, smoothing, decimation,
+/// Triangle-surface operations of the geometry stages: VTK (isosurface, clip, smoothing,
 /// file readers, voxelisation; surface_vtk.cpp), CGAL and Netgen (remeshing, distance queries;
 /// remesh.cpp, wall_cgal.cpp) and plain mesh topology (mesh_topology.cpp). Standard/Eigen types only.
 #include <array>
@@ -29,9 +29,6 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
 
 /// Non-shrinking smoothing (VTK windowed sinc, Taubin); boundary vertices do not move.
 void smooth_surface(SurfaceData& s, int iterations, double passband);
-
-/// Quadric decimation to about `target_triangles` (meant for closed surfaces: boundaries are not constrained).
-void decimate(SurfaceData& s, std::size_t target_triangles);
 
 /// Reads a triangle surface from STL, VTP, OBJ or PLY (by extension); coincident points are merged,
 /// polygons triangulated.
