@@ -31,6 +31,7 @@
 
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/snapshot.hpp"
+#include "vtk_convert.hpp"
 
 namespace aneu::pipeline {
 
@@ -38,20 +39,6 @@ namespace {
 
 const double PALETTE[8][3] = {{0.85, 0.33, 0.27}, {0.95, 0.80, 0.35}, {0.30, 0.55, 0.85}, {0.40, 0.75, 0.45},
                               {0.70, 0.50, 0.80}, {0.95, 0.55, 0.20}, {0.45, 0.80, 0.85}, {0.60, 0.60, 0.60}};
-
-vtkSmartPointer<vtkPolyData> poly_of(const SurfaceData& s) {
-    auto poly = vtkSmartPointer<vtkPolyData>::New();
-    vtkNew<vtkPoints> pts;
-    for (Eigen::Index i = 0; i < s.V.rows(); ++i) pts->InsertNextPoint(s.V(i, 0), s.V(i, 1), s.V(i, 2));
-    vtkNew<vtkCellArray> tris;
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        const vtkIdType ids[3] = {s.F(f, 0), s.F(f, 1), s.F(f, 2)};
-        tris->InsertNextCell(3, ids);
-    }
-    poly->SetPoints(pts);
-    poly->SetPolys(tris);
-    return poly;
-}
 
 }  // namespace
 
@@ -81,7 +68,7 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
     for (const auto& layer : scene.layers) {
         const SurfaceData& s = layer.surface;
         for (Eigen::Index i = 0; i < s.V.rows(); ++i) all.push_back(s.V.row(i).transpose());
-        auto poly = poly_of(s);
+        auto poly = to_vtk(s);
         vtkNew<vtkPolyDataMapper> mapper;
         mapper->SetInputData(poly);
         vtkNew<vtkLookupTable> lut;
