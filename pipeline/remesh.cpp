@@ -19,7 +19,7 @@ namespace nglib {
 
 namespace aneu::pipeline {
 
-SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // remesh_cgal.cpp
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // geometry_cgal.cpp
 
 namespace {
 

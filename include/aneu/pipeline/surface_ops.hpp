@@ -3,7 +3,7 @@
 /// @file
 /// Triangle-surface operations of the geometry stages: VTK (isosurface, clip, smoothing,
 /// file readers, voxelisation; surface_vtk.cpp), CGAL and Netgen (remeshing, distance queries;
-/// remesh.cpp, wall_cgal.cpp) and plain mesh topology (mesh_topology.cpp). Standard/Eigen types only.
+/// remesh.cpp, geometry_cgal.cpp) and plain mesh topology (mesh_topology.cpp). Standard/Eigen types only.
 #include <array>
 #include <string>
 #include <utility>

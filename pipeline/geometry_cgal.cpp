@@ -1,14 +1,17 @@
 // SPDX-License-Identifier: MIT
-// CGAL side of the geometry stages: isotropic remeshing (with boundary loops kept as polylines) and
-// point-to-surface distance queries through an AABB tree. CGAL lives in this translation unit only.
+// CGAL side of the geometry stages: isotropic remeshing (with boundary loops kept as polylines),
+// point-to-surface distance queries through an AABB tree, and the self-intersection check. One
+// SurfaceData → Surface_mesh conversion serves all three.
 #include <CGAL/AABB_face_graph_triangle_primitive.h>
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/remesh.h>
+#include <CGAL/Polygon_mesh_processing/self_intersections.h>
 #include <CGAL/Surface_mesh.h>
 
 #include "aneu/core/error.hpp"
+#include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
 
 namespace aneu::pipeline {
@@ -26,10 +29,23 @@ Mesh to_cgal(const SurfaceData& s, const std::string& what) {
     for (Eigen::Index i = 0; i < s.V.rows(); ++i) vi.push_back(m.add_vertex(Point(s.V(i, 0), s.V(i, 1), s.V(i, 2))));
     for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
         const auto fd = m.add_face(vi[static_cast<size_t>(s.F(f, 0))], vi[static_cast<size_t>(s.F(f, 1))], vi[static_cast<size_t>(s.F(f, 2))]);
-        if (fd == Mesh::null_face()) throw InputError(what + ": face " + std::to_string(f) + " cannot be added (non-manifold surface)");
+        if (fd == Mesh::null_face()) throw InputError(what + ": face " + std::to_string(f) + " cannot be added (non-manifold)");
     }
     return m;
 }
+
+/// Output iterator that stops collecting after `max` pairs (CGAL keeps calling it; extra pairs are dropped).
+struct PairCollector {
+    std::vector<std::pair<int, int>>* out;
+    std::size_t max;
+    PairCollector& operator*() { return *this; }
+    PairCollector& operator++() { return *this; }
+    PairCollector operator++(int) { return *this; }
+    PairCollector& operator=(const std::pair<Mesh::Face_index, Mesh::Face_index>& p) {
+        if (out->size() < max) out->emplace_back(static_cast<int>(p.first.idx()), static_cast<int>(p.second.idx()));
+        return *this;
+    }
+};
 
 SurfaceData from_cgal(const Mesh& m) {
     SurfaceData s;
@@ -102,6 +118,13 @@ NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d
         r.point.row(i) << p.x(), p.y(), p.z();
     }
     return r;
+}
+
+std::vector<std::pair<int, int>> self_intersections(const SurfaceData& s, std::size_t max_pairs) {
+    const Mesh m = to_cgal(s, "surface");
+    std::vector<std::pair<int, int>> pairs;
+    PMP::self_intersections(m, PairCollector{&pairs, max_pairs});
+    return pairs;
 }
 
 }  // namespace aneu::pipeline
