@@ -1,14 +1,184 @@
 // SPDX-License-Identifier: MIT
 #include "aneu/sim/model.hpp"
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <map>
+#include <numeric>
+#include <unordered_map>
+
+#include <Eigen/Geometry>
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 
 namespace aneu::sim {
+namespace {
 
-SimModel load_model(const std::string& bundle_path, const std::optional<RegionSphere>& region) {
+// Mid-edge slot (4..9) of the 10-node tetrahedron for the corner pair (a,b) (element.hpp ordering).
+int mid_slot(int a, int b) {
+    if (a > b) std::swap(a, b);
+    static constexpr int slot[4][4] = {{-1, 4, 6, 7}, {4, -1, 5, 8}, {6, 5, -1, 9}, {7, 8, 9, -1}};
+    return slot[a][b];
+}
+
+std::string fmt3(const Eigen::Vector3d& p) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf, "(%.3f, %.3f, %.3f)", p.x(), p.y(), p.z());
+    return buf;
+}
+
+// Chains the undirected edges into closed loops (edges of a vertex used twice at most are expected).
+std::vector<std::vector<int>> chain_loops(const std::vector<std::array<int, 2>>& edges) {
+    std::unordered_map<int, std::vector<int>> nb;
+    for (const auto& e : edges) {
+        nb[e[0]].push_back(e[1]);
+        nb[e[1]].push_back(e[0]);
+    }
+    std::vector<int> starts;
+    for (const auto& [v, l] : nb) starts.push_back(v);
+    std::sort(starts.begin(), starts.end());  // deterministic
+    std::unordered_map<int, char> used;
+    std::vector<std::vector<int>> loops;
+    for (int s : starts) {
+        if (used[s]) continue;
+        std::vector<int> loop{s};
+        used[s] = 1;
+        int prev = -1, cur = s;
+        for (;;) {
+            int next = -1;
+            for (int w : nb[cur])
+                if (w != prev && !used[w]) {
+                    next = w;
+                    break;
+                }
+            if (next < 0) break;
+            used[next] = 1;
+            loop.push_back(next);
+            prev = cur;
+            cur = next;
+        }
+        if (loop.size() >= 3) loops.push_back(std::move(loop));
+    }
+    return loops;
+}
+
+}  // namespace
+
+SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
+                           const std::vector<std::string>& region_names, const std::vector<int>& row_of_dof) {
+    static constexpr int FACES[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};  // outward for positive tets
+    const bool quadratic = tets.cols() == 10;
+    struct Seen {
+        int count = 0;
+        Eigen::Index tet = 0;
+        int face = 0;
+    };
+    std::map<std::array<int, 3>, Seen> seen;
+    for (Eigen::Index e = 0; e < tets.rows(); ++e) {
+        for (int f = 0; f < 4; ++f) {
+            std::array<int, 3> key{tets(e, FACES[f][0]), tets(e, FACES[f][1]), tets(e, FACES[f][2])};
+            std::sort(key.begin(), key.end());
+            Seen& s = seen[key];
+            ++s.count;
+            s.tet = e;
+            s.face = f;
+        }
+    }
+    auto condensed = [&](int n) {
+        for (int a = 0; a < 3; ++a)
+            if (row_of_dof[static_cast<size_t>(3 * n + a)] < 0) return false;
+        return true;
+    };
+    std::vector<std::array<int, 3>> tris;  // volume node ids
+    std::vector<int> tri_region;
+    for (const auto& [key, s] : seen) {
+        if (s.count != 1) continue;
+        const int* lf = FACES[s.face];
+        const int c0 = tets(s.tet, lf[0]), c1 = tets(s.tet, lf[1]), c2 = tets(s.tet, lf[2]);
+        if (!(condensed(c0) && condensed(c1) && condensed(c2))) continue;
+        const int reg = tet_region.size() ? tet_region[s.tet] : 0;
+        if (!quadratic) {
+            tris.push_back({c0, c1, c2});
+            tri_region.push_back(reg);
+            continue;
+        }
+        const int m01 = tets(s.tet, mid_slot(lf[0], lf[1])), m12 = tets(s.tet, mid_slot(lf[1], lf[2])),
+                  m20 = tets(s.tet, mid_slot(lf[2], lf[0]));
+        if (!(condensed(m01) && condensed(m12) && condensed(m20))) continue;
+        for (const auto& t : {std::array<int, 3>{c0, m01, m20}, std::array<int, 3>{m01, c1, m12},
+                              std::array<int, 3>{m20, m12, c2}, std::array<int, 3>{m01, m12, m20}}) {
+            tris.push_back(t);
+            tri_region.push_back(reg);
+        }
+    }
+    SimSurface s;
+    std::unordered_map<int, int> local;
+    std::vector<int> order;
+    for (const auto& t : tris)
+        for (int n : t)
+            if (local.emplace(n, -1).second) order.push_back(n);
+    std::sort(order.begin(), order.end());
+    for (size_t i = 0; i < order.size(); ++i) local[order[i]] = static_cast<int>(i);
+    const Eigen::Index S = static_cast<Eigen::Index>(order.size());
+    s.X.resize(S, 3);
+    s.node.resize(S);
+    s.row.resize(S, 3);
+    for (Eigen::Index i = 0; i < S; ++i) {
+        const int n = order[static_cast<size_t>(i)];
+        s.node[i] = n;
+        s.X.row(i) = nodes.row(n);
+        for (int a = 0; a < 3; ++a) s.row(i, a) = row_of_dof[static_cast<size_t>(3 * n + a)];
+    }
+    s.F.resize(static_cast<Eigen::Index>(tris.size()), 3);
+    s.face_region.resize(static_cast<Eigen::Index>(tris.size()));
+    for (size_t f = 0; f < tris.size(); ++f) {
+        for (int k = 0; k < 3; ++k) s.F(static_cast<Eigen::Index>(f), k) = local.at(tris[f][static_cast<size_t>(k)]);
+        s.face_region[static_cast<Eigen::Index>(f)] = tri_region[f];
+    }
+    s.region_names = region_names.empty() ? std::vector<std::string>{"wall"} : region_names;
+    // Normals (area weighted) and one-ring adjacency.
+    s.N.setZero(S, 3);
+    std::vector<std::vector<int>> nb(static_cast<size_t>(S));
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        const Eigen::Vector3d a = s.X.row(s.F(f, 0)), b = s.X.row(s.F(f, 1)), c = s.X.row(s.F(f, 2));
+        const Eigen::RowVector3d n = (b - a).cross(c - a).transpose();
+        for (int k = 0; k < 3; ++k) {
+            s.N.row(s.F(f, k)) += n;
+            nb[static_cast<size_t>(s.F(f, k))].push_back(s.F(f, (k + 1) % 3));
+            nb[static_cast<size_t>(s.F(f, k))].push_back(s.F(f, (k + 2) % 3));
+        }
+    }
+    s.adj_offsets.assign(static_cast<size_t>(S) + 1, 0);
+    for (Eigen::Index i = 0; i < S; ++i) {
+        const double len = s.N.row(i).norm();
+        if (len > 0) s.N.row(i) /= len;
+        auto& l = nb[static_cast<size_t>(i)];
+        std::sort(l.begin(), l.end());
+        l.erase(std::unique(l.begin(), l.end()), l.end());
+        s.adj_offsets[static_cast<size_t>(i) + 1] = s.adj_offsets[static_cast<size_t>(i)] + static_cast<int>(l.size());
+        s.adj.insert(s.adj.end(), l.begin(), l.end());
+    }
+    // Neck: edges between an aneurysm face and a face of another region.
+    const auto it = std::find(s.region_names.begin(), s.region_names.end(), "aneurysm");
+    if (it != s.region_names.end()) {
+        const int sac = static_cast<int>(it - s.region_names.begin());
+        std::map<std::pair<int, int>, std::array<int, 2>> edge_faces;  // (min,max) -> (#sac faces, #other faces)
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) {
+                auto& c = edge_faces[std::minmax(s.F(f, k), s.F(f, (k + 1) % 3))];
+                ++c[s.face_region[f] == sac ? 0 : 1];
+            }
+        std::vector<std::array<int, 2>> neck;
+        for (const auto& [e, c] : edge_faces)
+            if (c[0] == 1 && c[1] == 1) neck.push_back({e.first, e.second});
+        s.neck_loops = chain_loops(neck);
+    }
+    return s;
+}
+
+SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
     const auto t0 = std::chrono::steady_clock::now();
     BundleParts parts;
     parts.image = parts.surfaces = parts.fem = parts.condensed_W = false;
@@ -18,29 +188,76 @@ SimModel load_model(const std::string& bundle_path, const std::optional<RegionSp
     }
     if (!b.volume) throw InputError(bundle_path + ": no /volume group; a case bundle needs the mesh nodes");
     SimModel m;
+    m.case_id = b.meta.case_id;
     m.nodes = std::move(b.volume->nodes);
-    m.dof_node = std::move(b.condensed->dof_node);
-    m.dof_axis = std::move(b.condensed->dof_axis);
-    m.precision = b.condensed->precision;
-    for (Eigen::Index r = 0; r < m.dof_node.size(); ++r) {
-        const int node = m.dof_node[r];
-        if (node >= m.nodes.rows()) {
+    const CondensedData& c = *b.condensed;
+    const Eigen::Index M = c.dof_node.size();
+    std::vector<int> row_of_dof(static_cast<size_t>(3 * m.nodes.rows()), -1);
+    for (Eigen::Index r = 0; r < M; ++r) {
+        const int node = c.dof_node[r], axis = c.dof_axis[r];
+        if (node < 0 || node >= m.nodes.rows() || axis < 0 || axis > 2) {
             throw InputError(bundle_path + ": /condensed/dof_node[" + std::to_string(r) + "] = " + std::to_string(node) +
-                             " but /volume has " + std::to_string(m.nodes.rows()) + " nodes");
+                             ", axis " + std::to_string(axis) + ", but /volume has " + std::to_string(m.nodes.rows()) +
+                             " nodes (expected node < #nodes, axis 0..2)");
         }
-        if (!region || (m.nodes.row(node).transpose() - region->centre).norm() <= region->radius_mm) {
+        row_of_dof[static_cast<size_t>(3 * node + axis)] = static_cast<int>(r);
+    }
+    // Working region: file rows whose node is inside, sorted.
+    std::vector<char> in(static_cast<size_t>(M), 0);
+    for (Eigen::Index r = 0; r < M; ++r) {
+        const int node = c.dof_node[r];
+        if (!opt.region || (m.nodes.row(node).transpose() - opt.region->centre).norm() <= opt.region->radius_mm) {
+            in[static_cast<size_t>(r)] = 1;
             m.active.push_back(static_cast<int>(r));
         }
     }
     if (m.active.empty()) {
-        throw InputError(bundle_path + ": the working region (centre " + std::to_string(region->centre.x()) + "," +
-                         std::to_string(region->centre.y()) + "," + std::to_string(region->centre.z()) + ", radius " +
-                         std::to_string(region->radius_mm) + " mm) contains no simulated node");
+        throw InputError(bundle_path + ": the working region (centre " + fmt3(opt.region->centre) + ", radius " +
+                         std::to_string(opt.region->radius_mm) + " mm) contains no simulated node");
     }
-    if (m.precision == Precision::FLOAT32) {
-        m.Wf = read_condensed_columns_f(bundle_path, m.active);
+    // Permutation: active rows first (in file order), then the rest.
+    m.file_row.resize(M);
+    Eigen::Index k = 0;
+    for (int r : m.active) m.file_row[k++] = r;
+    for (Eigen::Index r = 0; r < M; ++r)
+        if (!in[static_cast<size_t>(r)]) m.file_row[k++] = static_cast<int>(r);
+    m.n_active = static_cast<Eigen::Index>(m.active.size());
+    std::vector<int> perm_of_file(static_cast<size_t>(M));
+    m.dof_node.resize(M);
+    m.dof_axis.resize(M);
+    for (Eigen::Index p = 0; p < M; ++p) {
+        perm_of_file[static_cast<size_t>(m.file_row[p])] = static_cast<int>(p);
+        m.dof_node[p] = c.dof_node[m.file_row[p]];
+        m.dof_axis[p] = c.dof_axis[m.file_row[p]];
+    }
+    for (int& r : row_of_dof)
+        if (r >= 0) r = perm_of_file[static_cast<size_t>(r)];
+
+    const bool want_float = opt.working_precision ? *opt.working_precision == Precision::FLOAT32
+                                                  : c.precision == Precision::FLOAT32;
+    m.precision = want_float ? Precision::FLOAT32 : Precision::FLOAT64;
+    auto permute_rows = [&](auto& W) {
+        using Mat = std::decay_t<decltype(W)>;
+        Mat P(W.rows(), W.cols());
+        for (Eigen::Index j = 0; j < W.cols(); ++j)
+            for (Eigen::Index p = 0; p < M; ++p) P(p, j) = W(m.file_row[p], j);
+        W.swap(P);
+    };
+    if (want_float) {
+        if (c.precision == Precision::FLOAT32) {
+            m.Wf = read_condensed_columns_f(bundle_path, m.active);
+        } else {
+            m.Wf = read_condensed_columns(bundle_path, m.active).cast<float>();
+        }
+        permute_rows(m.Wf);
     } else {
         m.Wd = read_condensed_columns(bundle_path, m.active);
+        permute_rows(m.Wd);
+    }
+    m.surface = extract_surface(m.nodes, b.volume->tets, b.volume->tet_region, b.volume->region_names, row_of_dof);
+    if (m.surface.size() == 0) {
+        throw InputError(bundle_path + ": no boundary face of /volume/tets has all its nodes in /condensed (expected the "
+                         "outer wall surface to be condensed)");
     }
     m.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return m;

@@ -5,28 +5,40 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/sim/model.hpp"
+#include "sim_fixtures.hpp"
 #include "test_bundles.hpp"
 
 using namespace aneu;
 
 TEST(SimModel, LoadsAllColumnsOrOnlyTheRegion) {
     test::TempDir d("sim");
-    Bundle b = test::full_bundle(Precision::FLOAT32, 150, 32);
+    const Bundle b = test::tube_case(Precision::FLOAT32, 16, 8).bundle;
     write_bundle(d.file("b.h5"), b);
     const Eigen::MatrixXf W = b.condensed->W32.to_dense();
+    const Eigen::Index M = W.rows();
     const sim::SimModel all = sim::load_model(d.file("b.h5"));
-    ASSERT_EQ(all.active.size(), 150u);
-    EXPECT_EQ(all.Wf, W);
+    ASSERT_EQ(static_cast<Eigen::Index>(all.active.size()), M);
+    ASSERT_EQ(all.n_active, M);
     EXPECT_EQ(all.nodes, b.volume->nodes);
+    for (Eigen::Index q = 0; q < M; ++q)
+        for (Eigen::Index p = 0; p < M; ++p) ASSERT_EQ(all.Wf(p, q), W(all.file_row[p], all.active[static_cast<size_t>(q)]));
 
-    const sim::RegionSphere region{b.volume->nodes.row(5).transpose(), 6.0};
+    const sim::RegionSphere region{Eigen::Vector3d(1.9, 0, 4), 2.0};
     const sim::SimModel part = sim::load_model(d.file("b.h5"), region);
     ASSERT_FALSE(part.active.empty());
-    ASSERT_LT(part.active.size(), 150u);
+    ASSERT_LT(static_cast<Eigen::Index>(part.active.size()), M);
     for (size_t q = 0; q < part.active.size(); ++q) {
         const int r = part.active[q];
-        EXPECT_LE((b.volume->nodes.row(b.condensed->dof_node[r]).transpose() - region.centre).norm(), 6.0);
-        EXPECT_EQ(part.Wf.col(static_cast<Eigen::Index>(q)), W.col(r));
+        EXPECT_LE((b.volume->nodes.row(b.condensed->dof_node[r]).transpose() - region.centre).norm(), 2.0);
+        // Rows permuted: the region's rows first, in file order, so the top block is W(active, active).
+        EXPECT_EQ(part.file_row[static_cast<Eigen::Index>(q)], r);
+        for (Eigen::Index p = 0; p < M; ++p)
+            ASSERT_EQ(part.Wf(p, static_cast<Eigen::Index>(q)), W(part.file_row[p], r));
+    }
+    // Surface vertices outside the region have rows past n_active.
+    for (Eigen::Index v = 0; v < part.surface.size(); ++v) {
+        const bool inside = (part.surface.X.row(v).transpose() - region.centre).norm() <= 2.0;
+        EXPECT_EQ(part.surface.row(v, 0) < part.n_active, inside);
     }
 }
 

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 /// @file
-/// The simulator's view of a case bundle: mesh nodes and the columns of W its working region needs.
+/// The simulator's view of a case bundle: the simulated surface (boundary faces of the tetrahedral mesh
+/// whose nodes all carry condensed DOFs) and the columns of W its working region needs.
 #include <optional>
 #include <string>
 #include <vector>
@@ -18,21 +19,65 @@ struct RegionSphere {
     double radius_mm = 0.0;
 };
 
-/// What the simulator keeps in memory from a bundle.
-struct SimModel {
-    Eigen::MatrixX3d nodes;        ///< #N×3 mesh nodes [mm]
-    Eigen::VectorXi dof_node;      ///< #M: node of each row of W (the bundle's full DOF map)
-    Eigen::VectorXi dof_axis;      ///< #M: axis of each row
-    std::vector<int> active;       ///< the loaded columns, as rows of the DOF map (sorted)
-    Precision precision = Precision::FLOAT32;  ///< of W in the file; Wf or Wd is filled accordingly
-    Eigen::MatrixXf Wf;            ///< #M×#active, W(:, active) when stored float32 [mm/N]
-    Eigen::MatrixXd Wd;            ///< #M×#active, W(:, active) when stored float64 [mm/N]
-    double load_seconds = 0.0;
+/// The simulated (outer) surface, indexed by its own vertices s = 0..#S-1.
+struct SimSurface {
+    Eigen::MatrixX3d X;                ///< #S×3 rest positions [mm]
+    Eigen::MatrixX3i F;                ///< #F×3 triangles (local vertex ids), counter-clockwise from outside
+    Eigen::MatrixX3d N;                ///< #S×3 unit outward vertex normals at rest (area-weighted)
+    Eigen::VectorXi node;              ///< #S: volume node of each vertex
+    Eigen::MatrixX3i row;              ///< #S×3: row of W (in SimModel's permuted order) of each DOF
+    Eigen::VectorXi face_region;       ///< #F: index into region_names
+    std::vector<std::string> region_names;
+    std::vector<int> adj_offsets;      ///< #S+1: neighbours of s are adj[adj_offsets[s] .. adj_offsets[s+1])
+    std::vector<int> adj;
+    std::vector<std::vector<int>> neck_loops;  ///< closed vertex loops between an "aneurysm" and another region
+    Eigen::Index size() const { return X.rows(); }
 };
 
-/// Loads a case bundle for simulation, reading only the columns of W whose node lies in `region`
-/// (all columns when no region is given) by HDF5 hyperslabs.
-/// @throws InputError the file is not a condensed case bundle, or the region holds no simulated node
-SimModel load_model(const std::string& bundle_path, const std::optional<RegionSphere>& region = std::nullopt);
+/// What the simulator keeps in memory from a bundle.
+///
+/// Rows of W are permuted so that the working region's rows come first: W's loaded columns are the
+/// region's DOFs, and column j of Wf/Wd holds W(:, j) in the permuted row order. The top #active×#active
+/// block is therefore the region's own (symmetric) block, contiguous in every column.
+struct SimModel {
+    Eigen::MatrixX3d nodes;        ///< #N×3 mesh nodes [mm]
+    Eigen::VectorXi dof_node;      ///< #M: node of each row of W, in the permuted order
+    Eigen::VectorXi dof_axis;      ///< #M: axis of each row
+    Eigen::VectorXi file_row;      ///< #M: row of the bundle's DOF map each permuted row came from
+    Eigen::Index n_active = 0;     ///< rows/columns 0..n_active-1 are the working region
+    std::vector<int> active;       ///< the loaded columns, as rows of the bundle's DOF map (sorted)
+    Precision precision = Precision::FLOAT32;  ///< of W in the file; Wf or Wd is filled accordingly
+    Eigen::MatrixXf Wf;            ///< #M×#active when stored float32 [mm/N]
+    Eigen::MatrixXd Wd;            ///< #M×#active when stored float64 [mm/N]
+    SimSurface surface;
+    std::string case_id;
+    double load_seconds = 0.0;
+    bool is_float() const { return precision == Precision::FLOAT32; }
+};
+
+/// Options of load_model.
+struct LoadOptions {
+    std::optional<RegionSphere> region;        ///< none: the whole simulated surface
+    std::optional<Precision> working_precision;  ///< convert W after reading (none: keep the file's)
+};
+
+/// Loads a case bundle for simulation, reading only the columns of W whose node lies in the region
+/// (all columns when none is given) by HDF5 hyperslabs, and extracts the simulated surface.
+/// @throws InputError the file is not a condensed case bundle of this schema, the DOF map does not fit the
+///         mesh, or the region holds no simulated node
+SimModel load_model(const std::string& bundle_path, const LoadOptions& opt = {});
+
+/// Overload kept for the command line: region only.
+inline SimModel load_model(const std::string& bundle_path, const std::optional<RegionSphere>& region) {
+    LoadOptions o;
+    o.region = region;
+    return load_model(bundle_path, o);
+}
+
+/// The simulated surface of a mesh: boundary faces (corner faces split in four for 10-node elements) whose
+/// nodes all have their three DOFs in `row_of_dof` (−1 = not condensed), oriented outward.
+/// @param[in] row_of_dof  3#N: row of each DOF (3·node + axis), −1 if absent
+SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
+                           const std::vector<std::string>& region_names, const std::vector<int>& row_of_dof);
 
 }  // namespace aneu::sim

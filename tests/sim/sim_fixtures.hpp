@@ -1,0 +1,61 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Small analytic case bundles for the simulator tests: a tube wall (radius 1.5–1.9 mm, 8 mm long, ends
+// fixed, outer surface condensed), with a patch of elements labelled "aneurysm" for the neck measures.
+#include <cmath>
+#include <string>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/fem/assembly.hpp"
+#include "aneu/fem/condense.hpp"
+#include "aneu/fem/structured_mesh.hpp"
+
+namespace aneu::test {
+
+struct TubeCase {
+    Bundle bundle;                                       // volume + fem + condensed
+    Eigen::SparseMatrix<double, Eigen::RowMajor> K;      // both triangles
+    fem::StructuredMesh mesh;
+};
+
+/// Tube r 1.5..1.9 mm, length 8 mm along z; elements whose centroid has z in [3,5] and angle within
+/// ±40° of +x are "aneurysm" (E_sac), the rest "artery" (E_art).
+inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, double E_art = 1.0, double E_sac = 1.0,
+                          double nu = 0.45) {
+    TubeCase c;
+    c.mesh = fem::tube_mesh(1.5, 1.9, 8.0, 2, n_theta, n_z);
+    const auto& m = c.mesh;
+    Eigen::VectorXi region(m.T.rows());
+    for (Eigen::Index e = 0; e < m.T.rows(); ++e) {
+        Eigen::RowVector3d g = Eigen::RowVector3d::Zero();
+        for (int k = 0; k < 4; ++k) g += m.V.row(m.T(e, k)) / 4.0;
+        const double ang = std::atan2(g.y(), g.x());
+        region[e] = (g.z() > 3.0 && g.z() < 5.0 && std::abs(ang) < 40.0 * M_PI / 180.0) ? 1 : 0;
+    }
+    std::vector<Material> mats{{"artery", E_art, nu}, {"aneurysm", E_sac, nu}};
+    c.K = fem::assemble_stiffness(m.V, m.T, region, mats);
+    const fem::WallDofSets sets = fem::wall_dof_sets(m);
+    fem::CondenseParams cp;
+    cp.precision = precision;
+    cp.tile_size = 64;
+    cp.residual_columns = 0;
+    Bundle& b = c.bundle;
+    b.meta.case_id = "tube-test";
+    VolumeData v;
+    v.nodes = m.V;
+    v.tets = m.T;
+    v.tet_region = region;
+    v.region_names = {"artery", "aneurysm"};
+    v.node_sets["outer"] = m.outer;
+    b.volume = v;
+    FemData f;
+    f.K = c.K;
+    f.K_upper_only = false;
+    f.materials = mats;
+    f.fixed_dofs = sets.fixed;
+    b.fem = f;
+    b.condensed = fem::condense(c.K, sets.fixed, sets.kept, cp);
+    return c;
+}
+
+}  // namespace aneu::test

@@ -1,0 +1,186 @@
+// SPDX-License-Identifier: MIT
+// The simulator's deformation for prescribed contact displacements equals a full sparse FEM solve with the
+// same Dirichlet conditions; deposited clips (groups) carry zero net force with the exact method.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "../fem/fem_test_util.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/sim/model.hpp"
+#include "aneu/sim/solver.hpp"
+#include "sim_fixtures.hpp"
+#include "test_bundles.hpp"
+
+using namespace aneu;
+
+namespace {
+
+// Prescribes displacements on `count` surface vertices (in the working region) around vertex `centre`.
+std::vector<sim::Prescribed> patch(const sim::SimModel& m, int count, unsigned seed, int group = -1) {
+    const auto& s = m.surface;
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> U(-0.2, 0.2);
+    std::vector<std::pair<double, int>> by_dist;
+    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
+    for (Eigen::Index v = 0; v < s.size(); ++v)
+        if (s.row(v, 0) < m.n_active && s.row(v, 1) < m.n_active && s.row(v, 2) < m.n_active)
+            by_dist.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
+    std::sort(by_dist.begin(), by_dist.end());
+    std::vector<sim::Prescribed> p;
+    for (int k = 0; k < count && k < static_cast<int>(by_dist.size()); ++k) {
+        const int v = by_dist[static_cast<size_t>(k)].second;
+        sim::Prescribed q;
+        q.cols = s.row.row(v).transpose();
+        q.u = Eigen::Vector3d(U(rng), U(rng), U(rng));
+        q.group = group;
+        p.push_back(q);
+    }
+    return p;
+}
+
+// Full FEM: K u = 0 with the fixed DOFs at 0 and the prescribed ones at their values; returns u on W's rows
+// (permuted order of the model).
+Eigen::VectorXd reference(const test::TubeCase& c, const sim::SimModel& m, const std::vector<sim::Prescribed>& p,
+                          const std::vector<Eigen::Vector3d>& shift = {}) {
+    const Eigen::Index n = c.K.rows();
+    std::vector<char> fixed(static_cast<size_t>(n), 0);
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(n);
+    for (Eigen::Index k = 0; k < c.bundle.fem->fixed_dofs.size(); ++k) fixed[static_cast<size_t>(c.bundle.fem->fixed_dofs[k])] = 1;
+    for (const auto& q : p)
+        for (int a = 0; a < 3; ++a) {
+            const int dof = 3 * m.dof_node[q.cols[a]] + m.dof_axis[q.cols[a]];
+            fixed[static_cast<size_t>(dof)] = 1;
+            g[dof] = q.u[a] + (q.group >= 0 ? shift[static_cast<size_t>(q.group)][a] : 0.0);
+        }
+    const Eigen::VectorXd u = test::solve_dirichlet(c.K, Eigen::VectorXd::Zero(n), fixed, g);
+    Eigen::VectorXd out(m.dof_node.size());
+    for (Eigen::Index r = 0; r < out.size(); ++r) out[r] = u[3 * m.dof_node[r] + m.dof_axis[r]];
+    return out;
+}
+
+double rel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).norm() / b.norm(); }
+
+}  // namespace
+
+class SolverVsFem : public ::testing::TestWithParam<Precision> {};
+
+TEST_P(SolverVsFem, DeformationEqualsFullSparseSolve) {
+    const Precision prec = GetParam();
+    test::TempDir d("solver");
+    const test::TubeCase c = test::tube_case(prec);
+    write_bundle(d.file("case.h5"), c.bundle);
+    const sim::SimModel m = sim::load_model(d.file("case.h5"));
+    ASSERT_EQ(m.n_active, m.dof_node.size());
+    EXPECT_GT(m.surface.F.rows(), 0);
+    sim::ContactSolver solver(m);
+    const double tol = prec == Precision::FLOAT64 ? 1e-8 : 1e-4;
+    for (int count : {1, 12, 60}) {
+        const auto p = patch(m, count, 3u + static_cast<unsigned>(count));
+        const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+        const Eigen::VectorXd ref = reference(c, m, p);
+        EXPECT_LT(rel(r.d, ref), tol) << count << " nodes";
+        // The prescribed DOFs themselves come back.
+        for (size_t k = 0; k < p.size(); ++k)
+            for (int a = 0; a < 3; ++a) EXPECT_NEAR(r.d[p[k].cols[a]], p[k].u[a], 50 * tol);
+    }
+}
+
+TEST_P(SolverVsFem, WorkingRegionAndReuse) {
+    const Precision prec = GetParam();
+    test::TempDir d("solver2");
+    const test::TubeCase c = test::tube_case(prec);
+    write_bundle(d.file("case.h5"), c.bundle);
+    sim::LoadOptions lo;
+    lo.region = sim::RegionSphere{Eigen::Vector3d(1.9, 0, 4), 2.5};
+    const sim::SimModel m = sim::load_model(d.file("case.h5"), lo);
+    ASSERT_LT(m.n_active, m.dof_node.size());
+    sim::ContactSolver solver(m);
+    auto p = patch(m, 20, 11);
+    const sim::SolveResult r1 = solver.solve(p, 0, sim::GroupMethod::EXACT, m.n_active);
+    EXPECT_TRUE(r1.refactored);
+    EXPECT_EQ(r1.d.size(), m.n_active);
+    for (auto& q : p) q.u *= -2.0;  // same node set: the factor is reused
+    const sim::SolveResult r2 = solver.solve(p, 0, sim::GroupMethod::EXACT, m.n_active);
+    EXPECT_FALSE(r2.refactored);
+    const Eigen::VectorXd ref = reference(c, m, p);
+    const double tol = prec == Precision::FLOAT64 ? 1e-8 : 1e-4;
+    EXPECT_LT(rel(r2.d, ref.head(m.n_active)), tol);
+    // The rest of the surface at output rate from the same forces.
+    const Eigen::VectorXd rest = solver.deformation(m.n_active, m.dof_node.size());
+    EXPECT_LT((rest - ref.tail(rest.size())).norm(), tol * ref.norm());
+}
+
+TEST_P(SolverVsFem, ExactGroupHasZeroNetForceAndMatchesFem) {
+    const Precision prec = GetParam();
+    test::TempDir d("solver3");
+    const test::TubeCase c = test::tube_case(prec);
+    write_bundle(d.file("case.h5"), c.bundle);
+    const sim::SimModel m = sim::load_model(d.file("case.h5"));
+    sim::ContactSolver solver(m);
+    auto held = patch(m, 16, 5, 0);  // a deposited clip's nodes, relative displacements
+    auto other = patch(m, 40, 9);
+    std::vector<sim::Prescribed> p;
+    std::vector<char> taken(static_cast<size_t>(m.dof_node.size()), 0);
+    for (const auto& q : held) {
+        p.push_back(q);
+        taken[static_cast<size_t>(q.cols[0])] = 1;
+    }
+    for (const auto& q : other)
+        if (!taken[static_cast<size_t>(q.cols[0])]) p.push_back(q);
+    const sim::SolveResult r = solver.solve(p, 1, sim::GroupMethod::EXACT, m.dof_node.size());
+    Eigen::Vector3d net = Eigen::Vector3d::Zero(), abs_sum = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < p.size(); ++k)
+        if (p[k].group == 0) {
+            net += r.f.segment<3>(3 * static_cast<Eigen::Index>(k));
+            abs_sum += r.f.segment<3>(3 * static_cast<Eigen::Index>(k)).cwiseAbs();
+        }
+    const double tol = prec == Precision::FLOAT64 ? 1e-8 : 1e-4;
+    EXPECT_LT(net.norm(), tol * abs_sum.norm()) << "net " << net.transpose();
+    // With the group's translation known, it is an ordinary Dirichlet problem.
+    EXPECT_LT(rel(r.d, reference(c, m, p, r.group_shift)), tol);
+
+    // The published two-solve method moves the clip by its nodes' mean displacement instead: a net force remains.
+    const sim::SolveResult t = solver.solve(p, 1, sim::GroupMethod::TWO_SOLVE, m.dof_node.size());
+    EXPECT_LT(rel(t.d, reference(c, m, p, t.group_shift)), tol);
+    Eigen::Vector3d net2 = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < p.size(); ++k)
+        if (p[k].group == 0) net2 += t.f.segment<3>(3 * static_cast<Eigen::Index>(k));
+    EXPECT_GT(net2.norm(), 10 * net.norm());
+}
+
+INSTANTIATE_TEST_SUITE_P(Precisions, SolverVsFem, ::testing::Values(Precision::FLOAT64, Precision::FLOAT32),
+                         [](const auto& i) { return std::string(i.param == Precision::FLOAT64 ? "double" : "float"); });
+
+TEST(SimSurface, TubeOuterSurfaceAndNeck) {
+    test::TempDir d("surf");
+    const test::TubeCase c = test::tube_case(Precision::FLOAT64, 24, 16);
+    write_bundle(d.file("case.h5"), c.bundle);
+    const sim::SimModel m = sim::load_model(d.file("case.h5"));
+    const auto& s = m.surface;
+    // Outer surface minus the end rings (fixed, not condensed): 24 × (16−1) vertices, 2·24·14 triangles.
+    EXPECT_EQ(s.size(), 24 * 15);
+    EXPECT_EQ(s.F.rows(), 2 * 24 * 14);
+    for (Eigen::Index v = 0; v < s.size(); ++v) {
+        const Eigen::Vector3d x = s.X.row(v), n = s.N.row(v);
+        EXPECT_NEAR(std::hypot(x.x(), x.y()), 1.9, 1e-9);
+        const Eigen::Vector3d radial = Eigen::Vector3d(x.x(), x.y(), 0).normalized();
+        EXPECT_GT(n.dot(radial), 0.95) << "normal not outward at vertex " << v;
+    }
+    // Neck: one closed loop around the aneurysm patch.
+    ASSERT_EQ(s.neck_loops.size(), 1u);
+    EXPECT_GE(s.neck_loops[0].size(), 8u);
+}
+
+TEST(SimModel, RejectsOtherSchemaAndBadDofMap) {
+    test::TempDir d("bad");
+    test::TubeCase c = test::tube_case(Precision::FLOAT32, 12, 6);
+    c.bundle.condensed->dof_node[0] = 100000;
+    write_bundle(d.file("bad.h5"), c.bundle);
+    try {
+        sim::load_model(d.file("bad.h5"));
+        FAIL() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("dof_node[0]"), std::string::npos) << e.what();
+    }
+}
