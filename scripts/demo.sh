@@ -33,5 +33,5 @@ echo "   picture of the wall, artery/aneurysm regions: $out/tube_wall_regions.pn
 echo "== inspect $out/tube_case.h5 (the case bundle)"
 "$prep" inspect "$out/tube_case.h5"
 echo "== aneusim loads the case bundle"
-build/tools/aneusim "$out/tube_case.h5"
+build/tools/aneusim load "$out/tube_case.h5"
 echo "== done: outputs under $out/"

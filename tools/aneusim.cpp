@@ -1,37 +1,96 @@
 // SPDX-License-Identifier: MIT
 // aneusim: the real-time clipping simulator. Links aneu_sim + aneu_core only (no offline stack).
+#include <fstream>
+#include <iostream>
+
 #include <CLI/CLI.hpp>
 
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/sim/model.hpp"
+#include "aneu/sim/simulator.hpp"
 #include "cli_common.hpp"
 
 int main(int argc, char** argv) {
     using namespace aneu::tools;
     CLI::App app{"aneuclip real-time clipping simulator", "aneusim"};
     app.set_version_flag("--version", std::string("aneusim ") + aneu::tool_version() + " (" + aneu::git_revision() + ")");
+    app.require_subcommand(1);
+    LoggingOptions log;
+    add_logging_options(app, log);
+
+    // aneusim load BUNDLE: load figures only.
+    auto* load = app.add_subcommand("load", "load a case bundle (only the working region's columns of W) and report");
     std::string bundle;
     std::vector<double> sphere;
-    LoggingOptions log;
-    app.add_option("bundle", bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
-    app.add_option("--region-sphere", sphere, "working region x,y,z,radius [mm]: load only W's columns there")
+    load->add_option("bundle", bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
+    load->add_option("--region-sphere", sphere, "working region x,y,z,radius [mm]: load only W's columns there")
         ->delimiter(',')
         ->expected(4);
-    add_logging_options(app, log);
+
+    // aneusim run SCENE: simulate.
+    auto* run = app.add_subcommand("run", "run a scene (configs/scenes/*.json): scripted keyframes or live poses on stdin");
+    std::string scene_path, bundle_override, log_out, report_out, series_out, haptic_out, method;
+    bool deterministic = false, live = false;
+    run->add_option("scene", scene_path, "scene file (JSON)")->required()->check(CLI::ExistingFile);
+    run->add_flag("--deterministic", deterministic,
+                  "single thread on a fixed timeline (tests, replays): the same scene gives the same log, bit for bit");
+    run->add_flag("--live", live, "read poses from standard input (`t name px py pz ax ay az ux uy uz opening button [action]`)");
+    run->add_option("--bundle", bundle_override, "case bundle instead of the scene's");
+    run->add_option("--log", log_out, "per-frame log (CSV) instead of the scene's");
+    run->add_option("--haptic-log", haptic_out, "haptic force at every haptic tick (CSV)");
+    run->add_option("--series", series_out, "deformed surface series (writes BASE.xdmf + BASE.h5)");
+    run->add_option("--report", report_out, "assessment report (JSON; a readable summary goes to REPORT.txt)");
+    run->add_option("--clip-method", method, "deposited clips: exact or two-solve (the published method)")
+        ->check(CLI::IsMember({"exact", "two-solve"}));
+
     CLI11_PARSE(app, argc, argv);
     apply_logging_options(log);
-    return run_guarded("aneusim", [&] {
-        std::optional<aneu::sim::RegionSphere> region;
-        if (!sphere.empty()) {
-            if (!(sphere[3] > 0)) throw aneu::InputError("--region-sphere: radius = " + std::to_string(sphere[3]) + ", must be > 0");
-            region = aneu::sim::RegionSphere{{sphere[0], sphere[1], sphere[2]}, sphere[3]};
-        }
-        const auto m = aneu::sim::load_model(bundle, region);
-        const bool f32 = m.precision == aneu::Precision::FLOAT32;
-        logger().info("loaded {}: {} nodes, W {} rows x {} of {} columns ({}) in {:.3f} s", bundle, m.nodes.rows(),
-                      m.dof_node.size(), m.active.size(), m.dof_node.size(), f32 ? "float32" : "float64", m.load_seconds);
-        fmt::print("bundle {}\nnodes {}\nW_rows {}\nW_columns_loaded {}\nprecision {}\nload_seconds {:.3f}\n", bundle,
-                   m.nodes.rows(), m.dof_node.size(), m.active.size(), f32 ? "float32" : "float64", m.load_seconds);
+    if (load->parsed()) {
+        return run_guarded("aneusim load", [&] {
+            std::optional<aneu::sim::RegionSphere> region;
+            if (!sphere.empty()) {
+                if (!(sphere[3] > 0)) throw aneu::InputError("--region-sphere: radius = " + std::to_string(sphere[3]) + ", must be > 0");
+                region = aneu::sim::RegionSphere{{sphere[0], sphere[1], sphere[2]}, sphere[3]};
+            }
+            const auto m = aneu::sim::load_model(bundle, region);
+            const bool f32 = m.is_float();
+            logger().info("loaded {}: {} nodes, W {} rows x {} of {} columns ({}) in {:.3f} s", bundle, m.nodes.rows(),
+                          m.dof_node.size(), m.active.size(), m.dof_node.size(), f32 ? "float32" : "float64", m.load_seconds);
+            fmt::print("bundle {}\nnodes {}\nsurface_vertices {}\nsurface_triangles {}\nneck_loops {}\nW_rows {}\n"
+                       "W_columns_loaded {}\nprecision {}\nload_seconds {:.3f}\n",
+                       bundle, m.nodes.rows(), m.surface.size(), m.surface.F.rows(), m.surface.neck_loops.size(),
+                       m.dof_node.size(), m.active.size(), f32 ? "float32" : "float64", m.load_seconds);
+        });
+    }
+    return run_guarded("aneusim run", [&] {
+        aneu::sim::Scene scene = aneu::sim::read_scene(scene_path);
+        if (!bundle_override.empty()) scene.bundle = bundle_override;
+        if (!log_out.empty()) scene.log = log_out;
+        if (!report_out.empty()) scene.report = report_out;
+        if (!series_out.empty()) scene.series = series_out;
+        if (!haptic_out.empty()) scene.haptic_log = haptic_out;
+        if (method == "exact") scene.clip_method = aneu::sim::GroupMethod::EXACT;
+        if (method == "two-solve") scene.clip_method = aneu::sim::GroupMethod::TWO_SOLVE;
+        if (live) scene.live_input = true;
+        aneu::sim::LoadOptions lo;
+        lo.region = scene.region;
+        lo.working_precision = scene.working_precision;
+        aneu::sim::SimModel model = aneu::sim::load_model(scene.bundle, lo);
+        logger().info("loaded {} in {:.3f} s: {} surface vertices, {} of {} columns of W ({})", scene.bundle,
+                      model.load_seconds, model.surface.size(), model.n_active, model.dof_node.size(),
+                      model.is_float() ? "float32" : "float64");
+        aneu::sim::Simulator sim(std::move(scene), std::move(model));
+        aneu::sim::RunOptions opt;
+        opt.deterministic = deterministic;
+        opt.live = &std::cin;
+        opt.on_message = [](const std::string& m) { logger().warn("{}", m); };
+        const aneu::sim::Assessment a = aneu::sim::run_scene(sim, opt);
+        fmt::print("time_s {:.3f}\nclips_used {}\nclips_deposited {}\nrepositionings {}\nforce_exceedances {}\n"
+                   "velocity_exceedances {}\npeak_force_n {:.4f}\npeak_vessel_force_n {:.4f}\nneck_closed_fraction {:.3f}\n"
+                   "skipped_inputs {}\nphysics_frames {}\nhaptic_ticks {}\n",
+                   a.total_time_s, a.clips_used, a.clips_deposited, a.repositionings, a.force_exceedances,
+                   a.velocity_exceedances, a.peak_force_n, a.peak_vessel_force_n, a.neck_closed_fraction, a.skipped_inputs,
+                   a.frames, a.haptic_ticks);
     });
 }

@@ -1,0 +1,127 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// A simulation scene (JSON file in configs/scenes/): the bundle, clip models, instruments with a scripted
+/// trajectory or live input, rigid obstacles, the working region, contact/haptic parameters, assessment
+/// thresholds and outputs. Format: docs/scene_format.md.
+#include <iosfwd>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "aneu/sim/model.hpp"
+#include "aneu/sim/shapes.hpp"
+#include "aneu/sim/solver.hpp"
+
+namespace aneu::sim {
+
+/// Instrument pose: position of the tip (suction) or clip hinge (applier), the instrument axis (towards
+/// the tips) and the opening direction (the plane the jaws open in is spanned by axis and up).
+struct Pose {
+    Eigen::Vector3d position = Eigen::Vector3d::Zero();
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+    Eigen::Vector3d up = Eigen::Vector3d::UnitX();
+};
+
+/// A clip model: two straight jaws (boxes) hinged at the clip's origin, or a jaw given as a triangle mesh
+/// (in the jaw frame: x along the jaw from the hinge, y across its width, z away from the other jaw).
+struct ClipModel {
+    std::string name;
+    double jaw_length_mm = 7.0;
+    double jaw_width_mm = 1.0;
+    double jaw_thickness_mm = 0.5;
+    double closed_gap_mm = 0.0;     ///< gap between the jaws' inner faces when closed
+    double max_opening_deg = 40.0;
+    std::string mesh_file;          ///< set: the jaw is this mesh instead of a box
+    std::optional<TriMesh> jaw_mesh;
+};
+
+/// One keyframe of a scripted instrument.
+struct Keyframe {
+    double t = 0.0;
+    Pose pose;
+    double opening_deg = 0.0;       ///< clip applier: jaw opening
+    bool button = false;            ///< suction: button held (the tube sticks to the surface)
+    std::string load;               ///< clip applier: take a new clip of this model at t
+    bool release = false;           ///< clip applier: deposit the held clip at t
+    bool grasp = false;             ///< clip applier: pick up the nearest deposited clip at t
+};
+
+struct InstrumentSpec {
+    enum class Kind { CLIP_APPLIER, SUCTION } kind = Kind::CLIP_APPLIER;
+    std::string name;
+    double radius_mm = 1.0;         ///< suction tube radius
+    double length_mm = 15.0;        ///< suction tube length modelled behind the tip
+    std::vector<Keyframe> keys;     ///< sorted by t (scripted mode)
+};
+
+struct ObstacleSpec {
+    std::string name;
+    std::string mesh_file;
+    TriMesh mesh;
+};
+
+/// Direction of the prescribed displacement of a node inside a clip jaw.
+enum class JawPush {
+    SHAPE,        ///< the shortest way out of the jaw (across it): a closing clip squeezes the vessel between its jaws
+    NODE_NORMAL,  ///< along the node's normal, as published (also what the suction tube always uses)
+};
+
+struct Scene {
+    std::string path;               ///< the scene file
+    std::string bundle;             ///< resolved against the scene file's directory
+    std::optional<RegionSphere> region;
+    std::optional<Precision> working_precision;
+    std::map<std::string, ClipModel> clip_models;
+    std::vector<InstrumentSpec> instruments;
+    std::vector<ObstacleSpec> obstacles;
+    // contact → displacement
+    double displacement_fraction = 0.5;   ///< prescribed displacement = this × penetration (published: about half)
+    double neighbour_weight = 0.5;        ///< one-ring neighbours get this × their contact neighbours' push (0: off)
+    double release_tolerance_mm = 0.02;   ///< a contact node stays held while within this gap of the shape
+    double relax_time_s = 0.05;           ///< released nodes relax to rest with this time constant
+    GroupMethod clip_method = GroupMethod::EXACT;
+    JawPush jaw_push = JawPush::SHAPE;
+    // haptics (contact-plane method)
+    double plane_stiffness_n_per_mm = 0.3;
+    double friction_n_s_per_mm = 0.002;
+    double obstacle_stiffness_n_per_mm = 1.0;
+    double friction_depth_mm = 0.05;      ///< friction fades in over this depth (continuity)
+    double approach_margin_mm = 0.5;      ///< a contact plane is set up when a part comes this close (≥ 2 edge lengths)
+    // rates [Hz]
+    double haptic_hz = 1000.0;
+    double physics_hz = 250.0;            ///< collision + solve
+    double log_hz = 250.0;
+    double series_hz = 25.0;
+    double duration_s = 0.0;              ///< scripted: 0 = until the last keyframe
+    bool live_input = false;              ///< poses from standard input instead of keyframes
+    // assessment
+    double force_threshold_n = 0.5;
+    double velocity_threshold_mm_s = 30.0;
+    double neck_tolerance_mm = 0.5;
+    // outputs ("" = not written); resolved against the scene file's directory unless absolute
+    std::string log, haptic_log, series, report;
+};
+
+/// Reads and checks a scene. Relative paths are taken from the scene file's directory.
+/// @throws InputError naming the file, the key and what was expected (unknown keys are errors too)
+Scene read_scene(const std::string& path);
+
+/// Pose, opening and button of a scripted instrument at time t: positions by a monotone cubic Hermite
+/// curve (velocity continuous, no overshoot past a keyframe), directions likewise then re-orthonormalised,
+/// opening linear.
+Keyframe sample(const InstrumentSpec& ins, double t);
+
+/// One line of the live pose stream: `t name px py pz ax ay az ux uy uz opening button`.
+struct LiveSample {
+    double t = 0.0;
+    std::string instrument;
+    Keyframe key;
+};
+/// Parses a live line; returns nullopt and sets `why` for garbage, NaN/inf, or a zero direction.
+std::optional<LiveSample> parse_live_line(const std::string& line, std::string& why);
+
+}  // namespace aneu::sim

@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// The clipping simulator: instrument and clip contacts → prescribed displacements → forces → deformation
+/// (ContactSolver), deposited clips, suction, contact-plane haptic force, and the assessment.
+#include <iosfwd>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "aneu/sim/model.hpp"
+#include "aneu/sim/scene.hpp"
+#include "aneu/sim/solver.hpp"
+
+namespace aneu::sim {
+
+/// A clip in the scene.
+struct Clip {
+    enum class State { HELD, DEPOSITED };
+    int id = 0;
+    std::string model;
+    State state = State::HELD;
+    int holder = -1;                ///< instrument holding it (HELD)
+    Pose pose;                      ///< hinge frame now (deposited: at release, moved by `shift`)
+    Pose release_pose;
+    double opening_deg = 0.0;
+    Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< translation since release (moves with the vessel)
+    Eigen::Vector3d net_force = Eigen::Vector3d::Zero();  ///< Σ contact forces on the vessel [N]
+    double grip_force_n = 0.0;      ///< ½ Σ |f_i| over its nodes [N]
+    int n_nodes = 0;
+};
+
+/// The two jaws of a clip model at a pose and opening, as shapes (index 0: +up side, 1: −up side).
+std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening_deg);
+
+/// Figures of one physics frame.
+struct FrameStats {
+    double t = 0.0;
+    int contact_nodes = 0;          ///< nodes penetrating an instrument or clip jaw
+    int prescribed_nodes = 0;       ///< all nodes with a prescribed displacement (contacts, neighbours, held, relaxing)
+    bool refactored = false;
+    double collision_s = 0.0, factor_s = 0.0, solve_s = 0.0, smvm_s = 0.0;
+};
+
+/// The assessment of a session.
+struct Assessment {
+    double total_time_s = 0.0;
+    int clips_used = 0;
+    int clips_deposited = 0;        ///< clips left on the vessel at the end
+    int repositionings = 0;         ///< deposited clips picked up again
+    int force_exceedances = 0;      ///< rising edges of |haptic force| above the threshold (any instrument)
+    int velocity_exceedances = 0;   ///< rising edges of instrument speed above the threshold while in contact
+    double peak_force_n = 0.0;      ///< largest haptic force
+    double peak_vessel_force_n = 0.0;  ///< largest ½ Σ|f| on the vessel over all frames
+    double neck_closed_fraction = 0.0;  ///< fraction of the neck line (by length) held closed between clip jaws
+    double neck_length_mm = 0.0;
+    int skipped_inputs = 0;         ///< live lines refused
+    long frames = 0, haptic_ticks = 0;
+};
+
+class Simulator {
+public:
+    Simulator(Scene scene, SimModel model);
+    ~Simulator();
+    Simulator(const Simulator&) = delete;
+    Simulator& operator=(const Simulator&) = delete;
+
+    const Scene& scene() const;
+    const SimModel& model() const;
+    int instrument_index(const std::string& name) const;  ///< −1 if unknown
+
+    /// Sets an instrument's pose/opening/button at time t and runs its actions (load/release/grasp).
+    /// Actions that cannot apply (release with no clip, grasp with no clip near) are logged and counted.
+    void set_input(int instrument, const Keyframe& k, double t);
+    /// Scripted inputs at time t: every instrument sampled, actions of keyframes in (t_prev, t] fired.
+    void apply_script(double t_prev, double t);
+
+    /// Collision detection, prescribed displacements, solve, contact areas (the physics rate).
+    /// With `mx`, the state is changed under that lock and the solve runs without it, so a haptic thread
+    /// that takes the same lock around set_input/haptic_step is never held up by a solve.
+    FrameStats physics_step(double t, std::mutex* mx = nullptr);
+    /// Haptic force on each instrument at time t by the contact-plane method (cheap; the haptic rate).
+    /// Also accumulates the force/velocity assessment.
+    const std::vector<Eigen::Vector3d>& haptic_step(double t);
+
+    /// Deformed positions of the simulated surface: region rows from the last physics step; the rest
+    /// computed now from the same forces, or (region_only) as last computed — the solver belongs to the
+    /// physics thread, so other threads ask for region_only.
+    Eigen::MatrixX3d deformed_surface(bool region_only = false);
+    const std::vector<Clip>& clips() const;
+    /// Final assessment (neck closure evaluated now).
+    Assessment assess();
+    std::vector<std::string> take_messages();  ///< warnings since the last call (skipped actions, ...)
+    void count_skipped_input();
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> m_impl;
+};
+
+/// Outputs of a run.
+struct RunOptions {
+    bool deterministic = true;      ///< single thread, fixed timeline; false: threads at wall-clock rates
+    std::istream* live = nullptr;   ///< pose stream (scene.live_input)
+    std::function<void(const std::string&)> on_message;  ///< warnings (skipped input, ignored actions)
+    std::function<void(const FrameStats&)> on_frame;     ///< after each physics frame
+};
+
+/// Runs a scene to its end and writes the outputs the scene asks for (log, haptic log, series, report).
+/// @return the assessment
+Assessment run_scene(Simulator& sim, const RunOptions& opt);
+
+/// Writes the assessment as JSON and a readable summary (report path; the summary goes to path + ".txt").
+void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
+                  const std::vector<FrameStats>& frames);
+
+}  // namespace aneu::sim

@@ -1,0 +1,504 @@
+// SPDX-License-Identifier: MIT
+// Running a scene: the deterministic single-thread timeline and the threaded real-time mode, and the
+// outputs (per-frame log, haptic log, XDMF + HDF5 surface series, assessment report).
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <unistd.h>
+
+#include <H5Cpp.h>
+#include <nlohmann/json.hpp>
+
+#include "aneu/core/error.hpp"
+#include "aneu/core/version.hpp"
+#include "aneu/sim/simulator.hpp"
+
+namespace aneu::sim {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string part_name(const std::string& final_path) { return final_path + ".part-" + std::to_string(::getpid()); }
+
+void commit(const std::string& tmp, const std::string& final_path) {
+    std::error_code ec;
+    fs::rename(tmp, final_path, ec);
+    if (ec) throw IoError(final_path + ": cannot rename the finished output into place: " + ec.message());
+}
+
+std::string g(double x) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.9g", x);
+    return b;
+}
+
+// A text output written under a temporary name and renamed when complete.
+class TextOut {
+public:
+    explicit TextOut(std::string path) : m_path(std::move(path)) {
+        if (m_path.empty()) return;
+        m_tmp = part_name(m_path);
+        m_out.open(m_tmp);
+        if (!m_out) throw IoError(m_path + ": cannot write (does the directory exist?)");
+    }
+    ~TextOut() {
+        if (!m_tmp.empty() && !m_done) {
+            m_out.close();
+            std::remove(m_tmp.c_str());
+        }
+    }
+    bool on() const { return !m_path.empty(); }
+    std::ofstream& out() { return m_out; }
+    void finish() {
+        if (!on()) return;
+        m_out.close();
+        if (!m_out) throw IoError(m_path + ": write failed");
+        commit(m_tmp, m_path);
+        m_done = true;
+    }
+
+private:
+    std::string m_path, m_tmp;
+    std::ofstream m_out;
+    bool m_done = false;
+};
+
+// Deformed surface (and clip jaws) over time: one HDF5 file with a dataset per step, and an XDMF file that
+// ParaView opens as a temporal collection.
+class Series {
+public:
+    Series(std::string base, const SimSurface& s) : m_base(std::move(base)), m_S(s.size()) {
+        if (m_base.empty()) return;
+        m_h5 = m_base + ".h5";
+        m_tmp = part_name(m_h5);
+        try {
+            m_file = H5::H5File(m_tmp, H5F_ACC_TRUNC);
+            std::vector<int> tri(static_cast<size_t>(3 * s.F.rows()));
+            for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+                for (int k = 0; k < 3; ++k) tri[static_cast<size_t>(3 * f + k)] = s.F(f, k);
+            write(m_file, "triangles", tri.data(), {static_cast<hsize_t>(s.F.rows()), 3}, H5::PredType::NATIVE_INT);
+            std::vector<int> reg(s.face_region.data(), s.face_region.data() + s.face_region.size());
+            write(m_file, "face_region", reg.data(), {reg.size()}, H5::PredType::NATIVE_INT);
+            m_file.createGroup("/steps");
+            m_F = s.F.rows();
+        } catch (const H5::Exception& e) {
+            throw IoError(m_h5 + ": cannot write the series: " + e.getDetailMsg());
+        }
+    }
+    ~Series() {
+        if (!m_tmp.empty() && !m_done) {
+            try {
+                m_file.close();
+            } catch (...) {
+            }
+            std::remove(m_tmp.c_str());
+        }
+    }
+    bool on() const { return !m_base.empty(); }
+    void add(double t, const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& rest, const std::vector<Shape>& jaws) {
+        const std::string name = "/steps/" + std::to_string(m_steps.size());
+        H5::Group grp = m_file.createGroup(name);
+        std::vector<float> pts(static_cast<size_t>(3 * m_S)), disp(static_cast<size_t>(3 * m_S));
+        for (Eigen::Index v = 0; v < m_S; ++v)
+            for (int k = 0; k < 3; ++k) {
+                pts[static_cast<size_t>(3 * v + k)] = static_cast<float>(x(v, k));
+                disp[static_cast<size_t>(3 * v + k)] = static_cast<float>(x(v, k) - rest(v, k));
+            }
+        write(grp, "points", pts.data(), {static_cast<hsize_t>(m_S), 3}, H5::PredType::NATIVE_FLOAT);
+        write(grp, "displacement", disp.data(), {static_cast<hsize_t>(m_S), 3}, H5::PredType::NATIVE_FLOAT);
+        std::vector<float> jp;
+        std::vector<int> hex;
+        for (const Shape& sh : jaws) {
+            if (sh.kind != Shape::Kind::BOX) continue;
+            static constexpr int sg[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                                             {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+            const int base = static_cast<int>(jp.size() / 3);
+            for (const auto& c : sg) {
+                Eigen::Vector3d p = sh.centre;
+                for (int k = 0; k < 3; ++k) p += c[k] * sh.half[k] * sh.axes.col(k);
+                for (int k = 0; k < 3; ++k) jp.push_back(static_cast<float>(p[k]));
+            }
+            for (int k = 0; k < 8; ++k) hex.push_back(base + k);
+        }
+        if (!hex.empty()) {
+            write(grp, "jaw_points", jp.data(), {jp.size() / 3, 3}, H5::PredType::NATIVE_FLOAT);
+            write(grp, "jaw_hexahedra", hex.data(), {hex.size() / 8, 8}, H5::PredType::NATIVE_INT);
+        }
+        m_steps.push_back({t, hex.size() / 8});
+    }
+    void finish() {
+        if (!on()) return;
+        m_file.close();
+        commit(m_tmp, m_h5);
+        m_done = true;
+        const std::string h5name = fs::path(m_h5).filename().string();
+        TextOut x(m_base + ".xdmf");
+        auto& o = x.out();
+        o << "<?xml version=\"1.0\" ?>\n<Xdmf Version=\"3.0\">\n <Domain>\n";
+        o << "  <Grid Name=\"vessel\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+        for (size_t k = 0; k < m_steps.size(); ++k) {
+            const std::string st = h5name + ":/steps/" + std::to_string(k);
+            o << "   <Grid Name=\"surface\" GridType=\"Uniform\">\n    <Time Value=\"" << g(m_steps[k].t) << "\"/>\n";
+            o << "    <Topology TopologyType=\"Triangle\" NumberOfElements=\"" << m_F << "\">\n     <DataItem Dimensions=\""
+              << m_F << " 3\" NumberType=\"Int\" Format=\"HDF\">" << h5name << ":/triangles</DataItem>\n    </Topology>\n";
+            o << "    <Geometry GeometryType=\"XYZ\">\n     <DataItem Dimensions=\"" << m_S
+              << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << st << "/points</DataItem>\n    </Geometry>\n";
+            o << "    <Attribute Name=\"displacement\" AttributeType=\"Vector\" Center=\"Node\">\n     <DataItem Dimensions=\""
+              << m_S << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << st << "/displacement</DataItem>\n    </Attribute>\n";
+            o << "    <Attribute Name=\"region\" AttributeType=\"Scalar\" Center=\"Cell\">\n     <DataItem Dimensions=\"" << m_F
+              << "\" NumberType=\"Int\" Format=\"HDF\">" << h5name << ":/face_region</DataItem>\n    </Attribute>\n   </Grid>\n";
+        }
+        o << "  </Grid>\n  <Grid Name=\"clip jaws\" GridType=\"Collection\" CollectionType=\"Temporal\">\n";
+        for (size_t k = 0; k < m_steps.size(); ++k) {
+            const size_t n = m_steps[k].jaws;
+            const std::string st = h5name + ":/steps/" + std::to_string(k);
+            o << "   <Grid Name=\"jaws\" GridType=\"Uniform\">\n    <Time Value=\"" << g(m_steps[k].t) << "\"/>\n";
+            if (n == 0) {
+                o << "    <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"0\"/>\n    <Geometry GeometryType=\"XYZ\">"
+                     "\n     <DataItem Dimensions=\"0 3\" Format=\"XML\"></DataItem>\n    </Geometry>\n";
+            } else {
+                o << "    <Topology TopologyType=\"Hexahedron\" NumberOfElements=\"" << n << "\">\n     <DataItem Dimensions=\""
+                  << n << " 8\" NumberType=\"Int\" Format=\"HDF\">" << st << "/jaw_hexahedra</DataItem>\n    </Topology>\n";
+                o << "    <Geometry GeometryType=\"XYZ\">\n     <DataItem Dimensions=\"" << 8 * n
+                  << " 3\" NumberType=\"Float\" Precision=\"4\" Format=\"HDF\">" << st << "/jaw_points</DataItem>\n    </Geometry>\n";
+            }
+            o << "   </Grid>\n";
+        }
+        o << "  </Grid>\n </Domain>\n</Xdmf>\n";
+        x.finish();
+    }
+
+private:
+    template <class Loc, class T>
+    static void write(Loc& loc, const std::string& name, const T* data, std::vector<hsize_t> dims, const H5::PredType& type) {
+        H5::DataSpace sp(static_cast<int>(dims.size()), dims.data());
+        H5::DataSet ds = loc.createDataSet(name, type, sp);
+        ds.write(data, type);
+    }
+    struct Step {
+        double t;
+        size_t jaws;
+    };
+    std::string m_base, m_h5, m_tmp;
+    Eigen::Index m_S = 0, m_F = 0;
+    H5::H5File m_file;
+    std::vector<Step> m_steps;
+    bool m_done = false;
+};
+
+std::vector<Shape> all_jaws(const Simulator& sim) {
+    std::vector<Shape> out;
+    for (const Clip& c : sim.clips()) {
+        if (c.model.empty()) continue;
+        const auto j = clip_jaws(sim.scene().clip_models.at(c.model), c.pose, c.opening_deg);
+        out.push_back(j[0]);
+        out.push_back(j[1]);
+    }
+    return out;
+}
+
+// Log lines; timings only outside deterministic mode (they differ from run to run).
+struct Logger {
+    TextOut out;
+    bool timings;
+    const Scene& scene;
+    Logger(const Scene& s, bool with_timings) : out(s.log), timings(with_timings), scene(s) {
+        if (!out.on()) return;
+        auto& o = out.out();
+        o << "t_s,contact_nodes,prescribed_nodes,refactored";
+        if (timings) o << ",collision_ms,factor_ms,solve_ms,smvm_ms";
+        for (const auto& ins : s.instruments) o << ",F_" << ins.name << "_x,F_" << ins.name << "_y,F_" << ins.name << "_z,F_" << ins.name << "_N";
+        o << ",clips\n";
+    }
+    void line(const FrameStats& fs, double t, const std::vector<Eigen::Vector3d>& F, const std::vector<Clip>& clips) {
+        if (!out.on()) return;
+        auto& o = out.out();
+        o << g(t) << ',' << fs.contact_nodes << ',' << fs.prescribed_nodes << ',' << (fs.refactored ? 1 : 0);
+        if (timings) o << ',' << g(1e3 * fs.collision_s) << ',' << g(1e3 * fs.factor_s) << ',' << g(1e3 * fs.solve_s) << ',' << g(1e3 * fs.smvm_s);
+        for (const auto& f : F) o << ',' << g(f.x()) << ',' << g(f.y()) << ',' << g(f.z()) << ',' << g(f.norm());
+        o << ',';
+        for (size_t k = 0; k < clips.size(); ++k) {
+            const Clip& c = clips[k];
+            if (c.model.empty()) continue;
+            o << (k ? " " : "") << "clip" << c.id << ':' << (c.state == Clip::State::HELD ? "held" : "deposited") << ':'
+              << g(c.net_force.norm()) << ':' << g(c.grip_force_n);
+        }
+        o << '\n';
+    }
+};
+
+struct HapticLog {
+    TextOut out;
+    explicit HapticLog(const Scene& s) : out(s.haptic_log) {
+        if (!out.on()) return;
+        out.out() << "t_s";
+        for (const auto& ins : s.instruments) out.out() << ",F_" << ins.name << "_x,F_" << ins.name << "_y,F_" << ins.name << "_z";
+        out.out() << '\n';
+    }
+    void line(double t, const std::vector<Eigen::Vector3d>& F) {
+        if (!out.on()) return;
+        out.out() << g(t);
+        for (const auto& f : F) out.out() << ',' << g(f.x()) << ',' << g(f.y()) << ',' << g(f.z());
+        out.out() << '\n';
+    }
+};
+
+int every(double hi, double lo) { return lo > 0 ? std::max(1, static_cast<int>(std::lround(hi / lo))) : 0; }
+
+}  // namespace
+
+Assessment run_scene(Simulator& sim, const RunOptions& opt) {
+    const Scene& sc = sim.scene();
+    auto message = [&](const std::string& m) {
+        if (opt.on_message) opt.on_message(m);
+    };
+    auto flush_messages = [&] {
+        for (const auto& m : sim.take_messages()) message(m);
+    };
+    Logger log(sc, !opt.deterministic);
+    HapticLog hlog(sc);
+    Series series(sc.series, sim.model().surface);
+    std::vector<FrameStats> frames;
+    const double H = sc.haptic_hz;
+    const int phys_every = every(H, sc.physics_hz), log_every = every(H, sc.log_hz), series_every = every(H, sc.series_hz);
+    FrameStats last;
+    std::vector<Eigen::Vector3d> F(sc.instruments.size(), Eigen::Vector3d::Zero());
+
+    if (opt.deterministic) {
+        long n = 0;
+        double t_prev = -1;
+        auto tick = [&](double t) {
+            if (n % phys_every == 0) {
+                last = sim.physics_step(t);
+                frames.push_back(last);
+                if (opt.on_frame) opt.on_frame(last);
+            }
+            F = sim.haptic_step(t);
+            hlog.line(t, F);
+            if (n % log_every == 0) log.line(last, t, F, sim.clips());
+            if (series.on() && series_every && n % series_every == 0) series.add(t, sim.deformed_surface(), sim.model().surface.X, all_jaws(sim));
+            flush_messages();
+            ++n;
+        };
+        if (!sc.live_input) {
+            const long ticks = static_cast<long>(std::floor(sc.duration_s * H + 1e-9));
+            for (long k = 0; k <= ticks; ++k) {
+                const double t = static_cast<double>(k) / H;
+                sim.apply_script(t_prev, t);
+                t_prev = t;
+                tick(t);
+            }
+        } else {
+            if (!opt.live) throw InputError(sc.path + ": live_input is set but no pose stream was given");
+            std::string line;
+            long lineno = 0;
+            double t_now = 0;
+            while (std::getline(*opt.live, line)) {
+                ++lineno;
+                if (line.empty() || line[0] == '#') continue;
+                std::string why;
+                const auto s = parse_live_line(line, why);
+                int idx = -1;
+                if (s) {
+                    idx = sim.instrument_index(s->instrument);
+                    if (idx < 0) why = "unknown instrument \"" + s->instrument + "\"";
+                    else if (s->t + 1e-12 < t_now) why = "time " + g(s->t) + " s goes back (now " + g(t_now) + " s)";
+                }
+                if (!s || !why.empty()) {
+                    sim.count_skipped_input();
+                    message("pose stream line " + std::to_string(lineno) + " skipped: " + why);
+                    continue;
+                }
+                // Advance the timeline to the sample's time, then apply it.
+                while (static_cast<double>(n) / H + 1e-12 < s->t) tick(static_cast<double>(n) / H);
+                t_now = s->t;
+                sim.set_input(idx, s->key, s->t);
+            }
+            tick(static_cast<double>(n) / H);
+        }
+    } else {
+        // Threads: haptic loop at its rate (input sampling + contact-plane force), physics (collision +
+        // solve) as often as it can up to its rate, output (log, series) at theirs. Shared state is
+        // exchanged under one mutex that the solve never holds.
+        std::mutex mx;
+        std::atomic<bool> running{true};
+        const auto start = std::chrono::steady_clock::now();
+        auto now = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
+        std::vector<std::pair<double, std::vector<Eigen::Vector3d>>> hbuf;
+        std::vector<FrameStats> fbuf;
+        std::mutex fmx;
+        std::thread physics([&] {
+            const double period = 1.0 / sc.physics_hz;
+            double next = 0;
+            while (running) {
+                const FrameStats fs = sim.physics_step(now(), &mx);
+                {
+                    std::lock_guard<std::mutex> lk(fmx);
+                    fbuf.push_back(fs);
+                }
+                next += period;
+                const double wait = next - now();
+                if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+                else next = now();
+            }
+        });
+        std::thread output([&] {
+            const double lp = 1.0 / sc.log_hz, sp = sc.series_hz > 0 ? 1.0 / sc.series_hz : 1e300;
+            double next_log = 0, next_series = 0;
+            while (running) {
+                const double t = now();
+                if (t >= next_log) {
+                    FrameStats fs;
+                    {
+                        std::lock_guard<std::mutex> lk(fmx);
+                        if (!fbuf.empty()) fs = fbuf.back();
+                    }
+                    std::vector<Eigen::Vector3d> f;
+                    std::vector<Clip> cl;
+                    {
+                        std::lock_guard<std::mutex> lk(mx);
+                        f = F;
+                        cl = sim.clips();
+                        for (const auto& m : sim.take_messages()) message(m);
+                    }
+                    log.line(fs, t, f, cl);
+                    next_log += lp;
+                }
+                if (series.on() && t >= next_series) {
+                    Eigen::MatrixX3d x;
+                    std::vector<Shape> jaws;
+                    {
+                        std::lock_guard<std::mutex> lk(mx);
+                        x = sim.deformed_surface(true);  // region rows: the solver belongs to the physics thread
+                        jaws = all_jaws(sim);
+                    }
+                    series.add(t, x, sim.model().surface.X, jaws);
+                    next_series += sp;
+                }
+                std::this_thread::sleep_for(std::chrono::microseconds(500));
+            }
+        });
+        // The haptic loop runs on this thread.
+        const double hp = 1.0 / H;
+        double t_prev = -1, next = 0;
+        std::istream* live = sc.live_input ? opt.live : nullptr;
+        while (true) {
+            const double t = now();
+            if (!sc.live_input && t > sc.duration_s) break;
+            {
+                std::lock_guard<std::mutex> lk(mx);
+                if (!sc.live_input) sim.apply_script(t_prev, t);
+                F = sim.haptic_step(t);
+            }
+            if (hlog.out.on()) hbuf.emplace_back(t, F);
+            t_prev = t;
+            if (live) {
+                // One line per tick at most (a pose device streams at the haptic rate).
+                std::string line;
+                if (!std::getline(*live, line)) break;
+                std::string why;
+                const auto s = parse_live_line(line, why);
+                const int idx = s ? sim.instrument_index(s->instrument) : -1;
+                std::lock_guard<std::mutex> lk(mx);
+                if (!s || idx < 0) {
+                    sim.count_skipped_input();
+                    message("pose stream line skipped: " + (s ? "unknown instrument \"" + s->instrument + "\"" : why));
+                } else {
+                    sim.set_input(idx, s->key, t);
+                }
+            }
+            next += hp;
+            const double wait = next - now();
+            if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
+        }
+        running = false;
+        physics.join();
+        output.join();
+        for (const auto& [t, f] : hbuf) hlog.line(t, f);
+        frames = fbuf;
+    }
+    flush_messages();
+    const Assessment a = sim.assess();
+    log.out.finish();
+    hlog.out.finish();
+    series.finish();
+    if (!sc.report.empty()) write_report(sc.report, sc, sim.model(), a, frames);
+    return a;
+}
+
+void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
+                  const std::vector<FrameStats>& frames) {
+    auto stats = [&](auto get) {
+        std::vector<double> v;
+        for (const auto& f : frames) v.push_back(get(f) * 1e3);
+        nlohmann::json j;
+        if (v.empty()) return j;
+        std::sort(v.begin(), v.end());
+        double sum = 0;
+        for (double x : v) sum += x;
+        j["mean_ms"] = sum / static_cast<double>(v.size());
+        j["p95_ms"] = v[std::min(v.size() - 1, static_cast<size_t>(0.95 * static_cast<double>(v.size())))];
+        j["max_ms"] = v.back();
+        return j;
+    };
+    long refactors = 0;
+    for (const auto& f : frames) refactors += f.refactored;
+    nlohmann::json j;
+    j["tool"] = std::string("aneusim ") + tool_version();
+    j["scene"] = scene.path;
+    j["bundle"] = scene.bundle;
+    j["case_id"] = model.case_id;
+    j["deposited_clip_method"] = scene.clip_method == GroupMethod::EXACT ? "exact" : "two-solve";
+    j["total_time_s"] = a.total_time_s;
+    j["clips_used"] = a.clips_used;
+    j["clips_deposited"] = a.clips_deposited;
+    j["repositionings"] = a.repositionings;
+    j["force_threshold_n"] = scene.force_threshold_n;
+    j["force_exceedances"] = a.force_exceedances;
+    j["velocity_threshold_mm_s"] = scene.velocity_threshold_mm_s;
+    j["velocity_exceedances"] = a.velocity_exceedances;
+    j["peak_force_n"] = a.peak_force_n;
+    j["peak_vessel_force_n"] = a.peak_vessel_force_n;
+    j["neck_length_mm"] = a.neck_length_mm;
+    j["neck_closed_fraction"] = a.neck_closed_fraction;
+    j["skipped_inputs"] = a.skipped_inputs;
+    j["physics_frames"] = a.frames;
+    j["haptic_ticks"] = a.haptic_ticks;
+    j["refactorisations"] = refactors;
+    j["load_s"] = model.load_seconds;
+    j["time_split"] = {{"collision", stats([](const FrameStats& f) { return f.collision_s; })},
+                       {"factorisation", stats([](const FrameStats& f) { return f.factor_s; })},
+                       {"solve", stats([](const FrameStats& f) { return f.solve_s; })},
+                       {"smvm", stats([](const FrameStats& f) { return f.smvm_s; })}};
+    TextOut js(path);
+    js.out() << j.dump(2) << '\n';
+    js.finish();
+    TextOut tx(path + ".txt");
+    auto& o = tx.out();
+    char buf[512];
+    std::snprintf(buf, sizeof buf,
+                  "Assessment of %s on %s\n"
+                  "  total time                 %.3f s\n"
+                  "  clips used                 %d (%d left on the vessel)\n"
+                  "  repositionings             %d\n"
+                  "  force above %.2f N         %d time(s), peak %.3f N\n"
+                  "  speed above %.1f mm/s      %d time(s) while touching\n"
+                  "  aneurysm neck closed       %.0f %% of %.1f mm\n",
+                  scene.path.c_str(), model.case_id.c_str(), a.total_time_s, a.clips_used, a.clips_deposited,
+                  a.repositionings, scene.force_threshold_n, a.force_exceedances, a.peak_force_n,
+                  scene.velocity_threshold_mm_s, a.velocity_exceedances, 100.0 * a.neck_closed_fraction, a.neck_length_mm);
+    o << buf;
+    if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
+    tx.finish();
+}
+
+}  // namespace aneu::sim

@@ -1,0 +1,392 @@
+// SPDX-License-Identifier: MIT
+// Scenes on the small tube case: clips placed, released, repositioned; deterministic replay; the
+// contact-plane haptic force over a slide on the curved wall; suction sticking and relaxing; obstacles;
+// bad scenes and pose streams.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include <H5Cpp.h>
+#include <nlohmann/json.hpp>
+
+#include "aneu/core/error.hpp"
+#include "aneu/sim/scene.hpp"
+#include "aneu/sim/simulator.hpp"
+#include "sim_fixtures.hpp"
+#include "test_bundles.hpp"
+
+using namespace aneu;
+using nlohmann::json;
+
+namespace {
+
+std::string slurp(const std::string& p) {
+    std::ifstream in(p, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+void put(const std::string& p, const std::string& s) { std::ofstream(p, std::ios::binary) << s; }
+
+// The bundle is shared by the tests (writing it is the slow part).
+const std::string& tube_bundle(Precision prec) {
+    static std::map<Precision, std::unique_ptr<test::TempDir>> dirs;
+    static std::map<Precision, std::string> files;
+    if (!files.count(prec)) {
+        dirs[prec] = std::make_unique<test::TempDir>(prec == Precision::FLOAT64 ? "simcase64" : "simcase32");
+        files[prec] = dirs[prec]->file("tube.h5");
+        write_bundle(files[prec], test::tube_case(prec, 32, 20, 1.0, 0.5).bundle);
+    }
+    return files[prec];
+}
+
+json key(double t, std::array<double, 3> pos, std::array<double, 3> axis, std::array<double, 3> up, double opening) {
+    return json{{"t", t}, {"position", pos}, {"axis", axis}, {"up", up}, {"opening_deg", opening}};
+}
+
+// Two clips across the sac side of the tube (jaws spread along z, closing on the wall at x ≈ 1.9), the
+// first released, the second placed lower, then the first picked up and moved 0.6 mm along z.
+json two_clip_scene(const std::string& bundle, const std::string& method) {
+    json keys = json::array();
+    const std::array<double, 3> ax{-1, 0, 0}, up{0, 0, 1};
+    auto k = [&](double t, double x, double z, double open) { return key(t, {x, 0, z}, ax, up, open); };
+    json k0 = k(0.00, 5.0, 4.0, 40);
+    k0["load"] = "straight";
+    keys.push_back(k0);
+    keys.push_back(k(0.05, 2.6, 4.0, 40));
+    keys.push_back(k(0.10, 2.6, 4.0, 0));
+    json r1 = k(0.14, 2.6, 4.0, 0);
+    r1["release"] = true;
+    keys.push_back(r1);
+    keys.push_back(k(0.18, 5.0, 4.0, 0));
+    json l2 = k(0.20, 5.0, 2.2, 40);
+    l2["load"] = "straight";
+    keys.push_back(l2);
+    keys.push_back(k(0.24, 2.6, 2.2, 40));
+    keys.push_back(k(0.28, 2.6, 2.2, 0));
+    json r2 = k(0.32, 2.6, 2.2, 0);
+    r2["release"] = true;
+    keys.push_back(r2);
+    keys.push_back(k(0.36, 5.0, 2.2, 0));
+    json g1 = k(0.40, 2.6 + 0.0, 4.0, 0);  // at the first clip's hinge (it moved little with the vessel)
+    keys.push_back(g1);
+    json g2 = k(0.41, 2.6, 4.0, 0);
+    g2["grasp"] = true;
+    keys.push_back(g2);
+    keys.push_back(k(0.44, 2.6, 4.0, 30));
+    keys.push_back(k(0.48, 2.6, 4.6, 30));
+    keys.push_back(k(0.52, 2.6, 4.6, 0));
+    json r3 = k(0.56, 2.6, 4.6, 0);
+    r3["release"] = true;
+    keys.push_back(r3);
+    keys.push_back(k(0.60, 5.0, 4.6, 0));
+    return json{{"bundle", bundle},
+                {"clip_models", {{"straight", {{"jaw_length_mm", 4.0}, {"jaw_width_mm", 1.2}, {"jaw_thickness_mm", 0.5},
+                                               {"closed_gap_mm", 0.0}, {"max_opening_deg", 45}}}}},
+                {"contact", {{"deposited_clips", method}}},
+                {"rates_hz", {{"haptic", 1000}, {"physics", 250}, {"log", 250}, {"series", 50}}},
+                {"assessment", {{"force_threshold_n", 0.05}, {"velocity_threshold_mm_s", 30}}},
+                {"instruments", json::array({{{"name", "applier"}, {"kind", "clip_applier"}, {"keyframes", keys}}})}};
+}
+
+sim::Simulator make(const json& j, const std::string& dir, const std::string& name = "scene.json") {
+    const std::string p = dir + "/" + name;
+    put(p, j.dump(2));
+    sim::Scene sc = sim::read_scene(p);
+    sim::LoadOptions lo;
+    lo.region = sc.region;
+    lo.working_precision = sc.working_precision;
+    sim::SimModel m = sim::load_model(sc.bundle, lo);
+    return sim::Simulator(std::move(sc), std::move(m));
+}
+
+}  // namespace
+
+TEST(Simulator, TwoClipsReleasedAndOneRepositioned) {
+    test::TempDir d("clips");
+    json j = two_clip_scene(tube_bundle(Precision::FLOAT64), "exact");
+    j["outputs"] = {{"log", "log.csv"}, {"report", "report.json"}, {"series", "series"}};
+    sim::Simulator sim = make(j, d.file(""));
+    std::vector<std::string> msgs;
+    double worst_ratio = 0;
+    int deposited_frames = 0;
+    sim::RunOptions opt;
+    opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
+    opt.on_frame = [&](const sim::FrameStats&) {
+        for (const sim::Clip& c : sim.clips())
+            if (c.state == sim::Clip::State::DEPOSITED && c.n_nodes > 0 && c.grip_force_n > 0) {
+                worst_ratio = std::max(worst_ratio, c.net_force.norm() / c.grip_force_n);
+                ++deposited_frames;
+            }
+    };
+    const sim::Assessment a = sim::run_scene(sim, opt);
+    for (const auto& m : msgs) ADD_FAILURE() << "unexpected message: " << m;
+    EXPECT_EQ(a.clips_used, 2);
+    EXPECT_EQ(a.repositionings, 1);
+    EXPECT_EQ(a.clips_deposited, 2);
+    EXPECT_GT(deposited_frames, 50);
+    // Exact method: a deposited clip is a free body, the vessel's forces on it sum to zero.
+    EXPECT_LT(worst_ratio, 1e-8);
+    EXPECT_GT(a.peak_vessel_force_n, 0.0);
+    EXPECT_GE(a.neck_closed_fraction, 0.0);
+    EXPECT_LE(a.neck_closed_fraction, 1.0);
+    // Outputs exist under their final names (and no temporary is left).
+    const json rep = json::parse(slurp(d.file("report.json")));
+    EXPECT_EQ(rep["clips_used"], 2);
+    EXPECT_EQ(rep["repositionings"], 1);
+    EXPECT_NE(slurp(d.file("report.json.txt")).find("repositionings             1"), std::string::npos);
+    EXPECT_NE(slurp(d.file("series.xdmf")).find("CollectionType=\"Temporal\""), std::string::npos);
+    EXPECT_GT(slurp(d.file("series.h5")).size(), 1000u);
+    const std::string log = slurp(d.file("log.csv"));
+    EXPECT_EQ(log.rfind("t_s,contact_nodes,prescribed_nodes,refactored,F_applier_x", 0), 0u);
+    EXPECT_NE(log.find("clip1:deposited"), std::string::npos);
+    for (const auto& e : std::filesystem::directory_iterator(d.file("")))
+        EXPECT_EQ(e.path().string().find(".part-"), std::string::npos) << e.path();
+
+    // The published two-solve method leaves a net force on the deposited clips.
+    json j2 = two_clip_scene(tube_bundle(Precision::FLOAT64), "two-solve");
+    sim::Simulator sim2 = make(j2, d.file(""), "two.json");
+    double ratio2 = 0;
+    opt.on_frame = [&](const sim::FrameStats&) {
+        for (const sim::Clip& c : sim2.clips())
+            if (c.state == sim::Clip::State::DEPOSITED && c.n_nodes > 0 && c.grip_force_n > 0)
+                ratio2 = std::max(ratio2, c.net_force.norm() / c.grip_force_n);
+    };
+    const sim::Assessment a2 = sim::run_scene(sim2, opt);
+    EXPECT_EQ(a2.clips_used, 2);
+    EXPECT_EQ(a2.repositionings, 1);
+    EXPECT_GT(ratio2, 1e-3);
+    std::printf("net/grip force on deposited clips: exact %.2e, two-solve %.2e\n", worst_ratio, ratio2);
+}
+
+TEST(Simulator, DeterministicModeGivesBitIdenticalLogs) {
+    test::TempDir d("det");
+    for (const char* run : {"a", "b"}) {
+        json j = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
+        j["outputs"] = {{"log", std::string("log_") + run + ".csv"}, {"haptic_log", std::string("hap_") + run + ".csv"}};
+        sim::Simulator sim = make(j, d.file(""), std::string("s_") + run + ".json");
+        sim::run_scene(sim, {});
+    }
+    const std::string a = slurp(d.file("log_a.csv")), b = slurp(d.file("log_b.csv"));
+    ASSERT_GT(a.size(), 1000u);
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(slurp(d.file("hap_a.csv")), slurp(d.file("hap_b.csv")));
+}
+
+TEST(Simulator, ContactPlaneForceIsContinuousAndFrictionOpposesMotion) {
+    // The suction tip, pointing at the axis, 0.15 mm inside the outer wall (r = 1.9), slides 120° around it.
+    test::TempDir d("slide");
+    json keys = json::array();
+    const double z = 4.0, r_in = 1.9 - 0.15;
+    auto at = [&](double t, double ang, double r) {
+        const double c = std::cos(ang), s = std::sin(ang);
+        return key(t, {r * c, r * s, z}, {-c, -s, 0}, {0, 0, 1}, 0);
+    };
+    keys.push_back(at(0.0, -M_PI / 3, 2.6));
+    keys.push_back(at(0.1, -M_PI / 3, r_in));
+    for (int k = 1; k <= 8; ++k) keys.push_back(at(0.1 + 0.1 * k, -M_PI / 3 + k * (2 * M_PI / 3) / 8, r_in));
+    keys.push_back(at(1.0, M_PI / 3, 2.6));
+    json j{{"bundle", tube_bundle(Precision::FLOAT64)},
+           {"haptic", {{"plane_stiffness_n_per_mm", 0.3}, {"friction_n_s_per_mm", 0.002}}},
+           {"rates_hz", {{"haptic", 1000}, {"physics", 250}}},
+           {"instruments", json::array({{{"name", "suction"}, {"kind", "suction"}, {"radius_mm", 0.5}, {"keyframes", keys}}})}};
+    sim::Simulator sim = make(j, d.file(""));
+    const int H = 1000, every = 4;
+    double peak = 0, jump = 0, fric_checked = 0, fric_bad = 0, step = 0;
+    Eigen::Vector3d prev = Eigen::Vector3d::Zero();
+    Eigen::Vector3d prev_pos = sim::sample(sim.scene().instruments[0], 0).pose.position;
+    for (int n = 0; n <= H * 1; ++n) {
+        const double t = static_cast<double>(n) / H;
+        sim.apply_script(n ? static_cast<double>(n - 1) / H : -1, t);
+        if (n % every == 0) sim.physics_step(t);
+        const Eigen::Vector3d F = sim.haptic_step(t)[0];
+        peak = std::max(peak, F.norm());
+        if (n) jump = std::max(jump, (F - prev).norm());
+        prev = F;
+        // While sliding (0.15 < t < 0.85) the force pushes outward and its tangential part opposes the motion.
+        const Eigen::Vector3d pos = sim::sample(sim.scene().instruments[0], t).pose.position;
+        if (t > 0.15 && t < 0.85 && F.norm() > 0) {
+            const Eigen::Vector3d radial = Eigen::Vector3d(pos.x(), pos.y(), 0).normalized();
+            EXPECT_GT(F.dot(radial), 0) << "t=" << t;
+            Eigen::Vector3d v = (pos - prev_pos) * H;
+            v -= v.dot(radial) * radial;
+            const Eigen::Vector3d Ft = F - F.dot(radial) * radial;
+            if (v.norm() > 1.0) {
+                ++fric_checked;
+                if (Ft.dot(v) >= 0) ++fric_bad;
+            }
+        }
+        step = std::max(step, (pos - prev_pos).norm());
+        prev_pos = pos;
+    }
+    // Continuous: no step larger than what a spring of the plane's stiffness gives at the tool's largest
+    // speed over one haptic tick (a force that switched on at first node contact would step by k × depth).
+    const double k = 0.3, bound = 1.5 * k * step;
+    std::printf("slide: peak %.4f N, largest step between haptic ticks %.5f N (%.2f %% of peak), k·v·dt %.5f N\n", peak,
+                jump, 100 * jump / peak, k * step);
+    EXPECT_GT(peak, 0.02);
+    EXPECT_LT(jump, bound);
+    EXPECT_GT(fric_checked, 400);
+    EXPECT_LT(fric_bad, 0.02 * fric_checked);
+}
+
+TEST(Simulator, SuctionSticksPullsAndReleasedAreaRelaxes) {
+    test::TempDir d("suction");
+    json keys = json::array();
+    auto at = [&](double t, double x, bool button) {
+        json k = key(t, {x, 0, 4.0}, {-1, 0, 0}, {0, 0, 1}, 0);
+        k["button"] = button;
+        return k;
+    };
+    keys.push_back(at(0.0, 2.5, false));
+    keys.push_back(at(0.1, 1.8, false));
+    keys.push_back(at(0.15, 1.8, true));
+    keys.push_back(at(0.3, 2.6, true));   // pulls the wall out by ~0.8 mm
+    keys.push_back(at(0.35, 2.6, false));  // released
+    keys.push_back(at(0.8, 2.6, false));
+    json j{{"bundle", tube_bundle(Precision::FLOAT64)},
+           {"contact", {{"relax_time_s", 0.05}}},
+           {"rates_hz", {{"haptic", 1000}, {"physics", 250}}},
+           {"instruments", json::array({{{"name", "suction"}, {"kind", "suction"}, {"radius_mm", 0.6}, {"keyframes", keys}}})}};
+    sim::Simulator sim = make(j, d.file(""));
+    const auto& X = sim.model().surface.X;
+    auto outward = [&] {
+        const Eigen::MatrixX3d x = sim.deformed_surface();
+        double best = -1e9;
+        for (Eigen::Index v = 0; v < X.rows(); ++v) best = std::max(best, x(v, 0) - X(v, 0));
+        return best;
+    };
+    double pulled = 0, after = 1e9, prev_after = 1e9;
+    bool monotone = true;
+    for (int n = 0; n <= 800; ++n) {
+        const double t = n / 1000.0;
+        sim.apply_script(n ? (n - 1) / 1000.0 : -1, t);
+        if (n % 4 == 0) {
+            sim.physics_step(t);
+            if (std::abs(t - 0.30) < 1e-9) pulled = outward();
+            if (t > 0.36) {
+                after = outward();
+                if (after > prev_after + 1e-9) monotone = false;
+                prev_after = after;
+            }
+        }
+        sim.haptic_step(t);
+    }
+    EXPECT_GT(pulled, 0.5) << "the stuck wall follows the tube out";
+    EXPECT_TRUE(monotone) << "released area relaxes back monotonically";
+    EXPECT_LT(after, 0.01) << "and reaches rest after many time constants";
+}
+
+TEST(Simulator, RigidObstaclePushesTheInstrumentOut) {
+    test::TempDir d("obst");
+    // A cube obstacle x ∈ [4,6], y,z ∈ [-1,1] (+4 in z), as ASCII STL, outward triangles.
+    const double c[8][3] = {{4, -1, 3}, {6, -1, 3}, {6, 1, 3}, {4, 1, 3}, {4, -1, 5}, {6, -1, 5}, {6, 1, 5}, {4, 1, 5}};
+    const int f[12][3] = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                          {1, 2, 6}, {1, 6, 5}, {2, 3, 7}, {2, 7, 6}, {3, 0, 4}, {3, 4, 7}};
+    std::ostringstream stl;
+    stl << "solid box\n";
+    for (const auto& t : f) {
+        stl << " facet normal 0 0 0\n  outer loop\n";
+        for (int k : t) stl << "   vertex " << c[k][0] << ' ' << c[k][1] << ' ' << c[k][2] << '\n';
+        stl << "  endloop\n endfacet\n";
+    }
+    stl << "endsolid box\n";
+    put(d.file("box.stl"), stl.str());
+    json keys = json::array({key(0.0, {7.0, 0, 4}, {-1, 0, 0}, {0, 0, 1}, 0), key(0.2, {5.8, 0, 4}, {-1, 0, 0}, {0, 0, 1}, 0)});
+    json j{{"bundle", tube_bundle(Precision::FLOAT64)},
+           {"obstacles", json::array({{{"name", "bone"}, {"mesh", "box.stl"}}})},
+           {"haptic", {{"obstacle_stiffness_n_per_mm", 2.0}}},
+           {"instruments", json::array({{{"name", "suction"}, {"kind", "suction"}, {"keyframes", keys}}})}};
+    sim::Simulator sim = make(j, d.file(""));
+    sim.apply_script(-1, 0.2);
+    sim.physics_step(0.2);
+    const Eigen::Vector3d F = sim.haptic_step(0.2)[0];
+    // Tip 0.2 mm inside the face x = 6: pushed back along +x with 2 N/mm · 0.2 mm.
+    EXPECT_NEAR(F.x(), 0.4, 1e-6);
+    EXPECT_NEAR(F.y(), 0.0, 1e-9);
+    EXPECT_NEAR(F.z(), 0.0, 1e-9);
+}
+
+TEST(SimulatorInput, BadScenesAreClearErrors) {
+    test::TempDir d("badscene");
+    auto expect_error = [&](const json& j, const std::string& needle) {
+        put(d.file("s.json"), j.dump());
+        try {
+            sim::read_scene(d.file("s.json"));
+            ADD_FAILURE() << "expected InputError containing " << needle;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+        }
+    };
+    json good = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
+    json j = good;
+    j["instruments"][0]["keyframes"][0]["load"] = "fenestrated";
+    expect_error(j, "names clip model \"fenestrated\", which clip_models does not define");
+    j = good;
+    j["contact"]["deposited_clips"] = "magic";
+    expect_error(j, "expected exact or two-solve");
+    j = good;
+    j["haptc"] = json::object();
+    expect_error(j, "unknown key \"haptc\"");
+    j = good;
+    j["instruments"][0]["keyframes"][1]["t"] = 0.0;
+    expect_error(j, "must be after the previous keyframe");
+    j = good;
+    j["clip_models"]["straight"]["jaw_mesh"] = "missing_jaw.stl";
+    expect_error(j, "missing_jaw.stl: cannot open");
+    put(d.file("broken.json"), "{ \"bundle\": ");
+    EXPECT_THROW(sim::read_scene(d.file("broken.json")), InputError);
+
+    // A bundle of another schema version.
+    const std::string other = d.file("other.h5");
+    std::filesystem::copy_file(tube_bundle(Precision::FLOAT32), other);
+    {
+        H5::H5File f(other, H5F_ACC_RDWR);
+        H5::Group meta = f.openGroup("/meta");
+        meta.removeAttr("schema_version");
+        const int v = 99;
+        meta.createAttribute("schema_version", H5::PredType::NATIVE_INT, H5::DataSpace()).write(H5::PredType::NATIVE_INT, &v);
+    }
+    try {
+        sim::load_model(other);
+        ADD_FAILURE() << "expected InputError";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("schema"), std::string::npos) << e.what();
+    }
+}
+
+TEST(SimulatorInput, PoseStreamSkipsGarbageAndNaN) {
+    test::TempDir d("live");
+    json j{{"bundle", tube_bundle(Precision::FLOAT64)},
+           {"live_input", true},
+           {"clip_models", {{"straight", json::object()}}},
+           {"rates_hz", {{"haptic", 1000}, {"physics", 250}}},
+           {"instruments", json::array({{{"name", "applier"}, {"kind", "clip_applier"}}})}};
+    sim::Simulator sim = make(j, d.file(""));
+    std::istringstream in(
+        "0.000 applier 5 0 4 -1 0 0 0 0 1 40 0 load:straight\n"
+        "0.010 applier 4.5 0 4 -1 0 0 0 0 1 40 0\n"
+        "hello world\n"
+        "0.020 applier nan 0 4 -1 0 0 0 0 1 40 0\n"
+        "0.030 applier 4 0 4 -1 0 0 -1 0 0 40 0\n"   // up parallel to axis
+        "0.040 scalpel 4 0 4 -1 0 0 0 0 1 40 0\n"
+        "0.005 applier 4 0 4 -1 0 0 0 0 1 40 0\n"    // time goes back
+        "0.050 applier 4 0 4 -1 0 0 0 0 1 40 0 explode\n"
+        "0.060 applier 4 0 4 -1 0 0 0 0 1 40 0\n");
+    std::vector<std::string> msgs;
+    sim::RunOptions opt;
+    opt.live = &in;
+    opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
+    const sim::Assessment a = sim::run_scene(sim, opt);
+    EXPECT_EQ(a.skipped_inputs, 6);
+    ASSERT_EQ(msgs.size(), 6u);
+    EXPECT_NE(msgs[0].find("line 3 skipped"), std::string::npos) << msgs[0];
+    EXPECT_NE(msgs[1].find("not finite"), std::string::npos) << msgs[1];
+    EXPECT_NE(msgs[2].find("parallel"), std::string::npos) << msgs[2];
+    EXPECT_NE(msgs[3].find("unknown instrument \"scalpel\""), std::string::npos) << msgs[3];
+    EXPECT_NE(msgs[4].find("goes back"), std::string::npos) << msgs[4];
+    EXPECT_NE(msgs[5].find("unknown action"), std::string::npos) << msgs[5];
+    EXPECT_EQ(a.clips_used, 1);
+    EXPECT_NEAR(a.total_time_s, 0.06, 1e-9);
+}
