@@ -34,4 +34,8 @@ echo "== inspect $out/tube_case.h5 (the case bundle)"
 "$prep" inspect "$out/tube_case.h5"
 echo "== aneusim loads the case bundle"
 build/tools/aneusim load "$out/tube_case.h5"
+echo "== aneusim runs the clipping scene configs/scenes/tube_clip.json (threads, real time): log, series, report"
+build/tools/aneusim run configs/scenes/tube_clip.json
+echo "   assessment: $out/sim_report.json.txt; deformed surface for ParaView: $out/sim_series.xdmf"
+cat "$out/sim_report.json.txt"
 echo "== done: outputs under $out/"

@@ -516,6 +516,7 @@ struct Simulator::Impl {
         std::vector<char> matched(areas.size(), 0);
         for (auto& [part, nodes] : by_part) {
             std::set<int> todo(nodes.begin(), nodes.end());
+            std::vector<std::vector<int>> comps;
             while (!todo.empty()) {
                 std::vector<int> comp{*todo.begin()};
                 todo.erase(todo.begin());
@@ -530,6 +531,25 @@ struct Simulator::Impl {
                     }
                 }
                 std::sort(comp.begin(), comp.end());
+                comps.push_back(std::move(comp));
+            }
+            // Patches of one part closer than 1.5 mm are one contact area (node sets fragment under a jaw).
+            std::vector<std::vector<int>> merged;
+            std::vector<Eigen::Vector3d> centres;
+            for (auto& cp : comps) {
+                const Eigen::Vector3d cc = centroid(cp);
+                size_t q = 0;
+                while (q < merged.size() && (centres[q] - cc).norm() >= 1.5) ++q;
+                if (q == merged.size()) {
+                    merged.push_back(cp);
+                    centres.push_back(cc);
+                } else {
+                    merged[q].insert(merged[q].end(), cp.begin(), cp.end());
+                    std::sort(merged[q].begin(), merged[q].end());
+                    centres[q] = centroid(merged[q]);
+                }
+            }
+            for (auto& comp : merged) {
                 Eigen::Vector3d n = Eigen::Vector3d::Zero();
                 for (int v : comp) n += sf.N.row(v).transpose();
                 n.normalize();
@@ -573,7 +593,9 @@ struct Simulator::Impl {
             if (matched[q] || areas[q].r0 <= 0) continue;
             Area ar = areas[q];
             const auto it = shapes.find(ar.part);
-            const bool below = ar.alive && it != shapes.end() && ar.o1 - ar.n1.dot(it->second.support(ar.n1)) > 0;
+            // Lives on only while its part touches nothing else (the flicker of a sliding tool), never piles up.
+            const bool below = ar.alive && it != shapes.end() && !by_part.count(ar.part) &&
+                               ar.o1 - ar.n1.dot(it->second.support(ar.n1)) > 0;
             if (!below) {
                 ar.r1 = 0;
                 ar.alive = false;

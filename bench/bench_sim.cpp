@@ -1,0 +1,105 @@
+// SPDX-License-Identifier: MIT
+// Simulator speed on a case bundle: load time, and per contact-set size the time split of one deformation
+// update (W_CC gather + Cholesky, triangular solves, SMVM over the working region's rows and over all rows),
+// with the factor reused (contact set unchanged) and recomputed (set changed); the haptic step; the collision
+// step of a closing clip. One JSON object per line on stdout.
+// Usage: aneu_bench_sim BUNDLE [--region x,y,z,r] [--reps N]
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "aneu/sim/model.hpp"
+#include "aneu/sim/solver.hpp"
+
+using namespace aneu;
+using clk = std::chrono::steady_clock;
+
+static double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
+
+int main(int argc, char** argv) {
+    if (argc < 2) {
+        std::fprintf(stderr, "usage: %s BUNDLE [--region x,y,z,r] [--reps N]\n", argv[0]);
+        return 2;
+    }
+    sim::LoadOptions lo;
+    int reps = 200;
+    for (int a = 2; a + 1 < argc; a += 2) {
+        if (!std::strcmp(argv[a], "--region")) {
+            double x, y, z, r;
+            if (std::sscanf(argv[a + 1], "%lf,%lf,%lf,%lf", &x, &y, &z, &r) != 4) return 2;
+            lo.region = sim::RegionSphere{{x, y, z}, r};
+        } else if (!std::strcmp(argv[a], "--reps")) {
+            reps = std::atoi(argv[a + 1]);
+        }
+    }
+    const sim::SimModel m = sim::load_model(argv[1], lo);
+    const auto& s = m.surface;
+    nlohmann::json head{{"bundle", argv[1]},
+                        {"precision", m.is_float() ? "float32" : "float64"},
+                        {"W_rows", m.dof_node.size()},
+                        {"W_columns_loaded", m.n_active},
+                        {"surface_vertices", s.size()},
+                        {"load_s", m.load_seconds}};
+    std::cout << head.dump() << std::endl;
+    sim::ContactSolver solver(m);
+    // Contact patches: the n region vertices nearest a vertex near the region's centre.
+    Eigen::Vector3d c = lo.region ? lo.region->centre : Eigen::Vector3d(s.X.colwise().mean().transpose());
+    Eigen::Index v0 = 0;
+    (s.X.rowwise() - c.transpose()).rowwise().squaredNorm().minCoeff(&v0);
+    std::vector<std::pair<double, int>> order;
+    for (Eigen::Index v = 0; v < s.size(); ++v)
+        if (s.row.row(v).maxCoeff() < m.n_active) order.emplace_back((s.X.row(v) - s.X.row(v0)).norm(), static_cast<int>(v));
+    std::sort(order.begin(), order.end());
+    for (int n : {10, 50, 100, 200, 300, 500}) {
+        if (n > static_cast<int>(order.size())) break;
+        std::vector<sim::Prescribed> p;
+        for (int k = 0; k < n; ++k) {
+            sim::Prescribed q;
+            q.cols = s.row.row(order[static_cast<size_t>(k)].second).transpose();
+            q.u = -0.05 * s.N.row(order[static_cast<size_t>(k)].second).transpose();
+            p.push_back(q);
+        }
+        double f_ref = 0, s_ref = 0, mv_ref = 0, mv_all = 0, t_re = 0, f_new = 0;
+        const int r_new = std::max(5, reps / 20);
+        // Set changed every frame: factor each time (alternate two sets that differ in one node).
+        std::vector<sim::Prescribed> p2 = p;
+        p2.back().cols = s.row.row(order[static_cast<size_t>(n)].second).transpose();
+        for (int r = 0; r < r_new; ++r) {
+            const auto t0 = clk::now();
+            const auto res = solver.solve(r % 2 ? p2 : p, 0, sim::GroupMethod::EXACT, m.n_active);
+            t_re += secs(t0);
+            f_new += res.factor_s;
+        }
+        // Set unchanged: the factor is reused, only the right-hand side changes.
+        solver.solve(p, 0, sim::GroupMethod::EXACT, m.n_active);
+        for (int r = 0; r < reps; ++r) {
+            for (auto& q : p) q.u *= -1.0;
+            const auto res = solver.solve(p, 0, sim::GroupMethod::EXACT, m.n_active);
+            f_ref += res.factor_s;
+            s_ref += res.solve_s;
+            mv_ref += res.smvm_s;
+        }
+        for (int r = 0; r < std::max(5, reps / 20); ++r) {
+            const auto t0 = clk::now();
+            solver.deformation(m.n_active, m.dof_node.size());
+            mv_all += secs(t0);
+        }
+        const double upd_reuse = (f_ref + s_ref + mv_ref) / reps;
+        nlohmann::json j{{"contact_nodes", n},
+                         {"reuse_update_ms", 1e3 * upd_reuse},
+                         {"reuse_update_hz", 1.0 / upd_reuse},
+                         {"reuse_solve_ms", 1e3 * s_ref / reps},
+                         {"reuse_smvm_region_ms", 1e3 * mv_ref / reps},
+                         {"refactor_update_ms", 1e3 * t_re / r_new},
+                         {"refactor_update_hz", r_new / t_re},
+                         {"refactor_factor_ms", 1e3 * f_new / r_new},
+                         {"smvm_rest_of_surface_ms", 1e3 * mv_all / std::max(5, reps / 20)}};
+        std::cout << j.dump() << std::endl;
+    }
+    return 0;
+}
