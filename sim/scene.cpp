@@ -82,6 +82,15 @@ public:
         }
         return x;
     }
+    /// A string key that must be one of `names`; returns its index (the default's when absent).
+    size_t choice(const std::string& k, const std::vector<std::string>& names, size_t def = 0) {
+        const std::string v = str(k, names[def]);
+        const auto it = std::find(names.begin(), names.end(), v);
+        if (it != names.end()) return static_cast<size_t>(it - names.begin());
+        std::string list;
+        for (size_t i = 0; i < names.size(); ++i) list += (i ? (i + 1 == names.size() ? " or " : ", ") : "") + names[i];
+        fail("\"" + k + "\" = \"" + v + "\", expected " + list);
+    }
     const std::string& where() const { return m_where; }
 
 private:
@@ -132,13 +141,10 @@ Scene read_scene(const std::string& path) {
         s.region = rs;
         r.done();
     }
-    const std::string prec = top.str("precision", "bundle");
-    if (prec == "float32") {
-        s.working_precision = Precision::FLOAT32;
-    } else if (prec == "float64") {
-        s.working_precision = Precision::FLOAT64;
-    } else if (prec != "bundle") {
-        top.fail("\"precision\" = \"" + prec + "\", expected float32, float64 or bundle");
+    switch (top.choice("precision", {"bundle", "float32", "float64"})) {
+        case 1: s.working_precision = Precision::FLOAT32; break;
+        case 2: s.working_precision = Precision::FLOAT64; break;
+        default: break;
     }
     if (top.has("clip_models")) {
         const json& cm = top.at("clip_models");
@@ -164,22 +170,8 @@ Scene read_scene(const std::string& path) {
         s.neighbour_weight = o.num("neighbour_weight", s.neighbour_weight, 0, 1);
         s.release_tolerance_mm = o.num("release_tolerance_mm", s.release_tolerance_mm, 0, 10);
         s.relax_time_s = o.num("relax_time_s", s.relax_time_s, 1e-4, 100);
-        const std::string jp = o.str("jaw_push", "shape");
-        if (jp == "shape") {
-            s.jaw_push = JawPush::SHAPE;
-        } else if (jp == "node_normal") {
-            s.jaw_push = JawPush::NODE_NORMAL;
-        } else {
-            o.fail("\"jaw_push\" = \"" + jp + "\", expected shape or node_normal");
-        }
-        const std::string m = o.str("deposited_clips", "exact");
-        if (m == "exact") {
-            s.clip_method = GroupMethod::EXACT;
-        } else if (m == "two-solve") {
-            s.clip_method = GroupMethod::TWO_SOLVE;
-        } else {
-            o.fail("\"deposited_clips\" = \"" + m + "\", expected exact or two-solve");
-        }
+        s.jaw_push = o.choice("jaw_push", {"shape", "node_normal"}) == 0 ? JawPush::SHAPE : JawPush::NODE_NORMAL;
+        s.clip_method = o.choice("deposited_clips", {"exact", "two-solve"}) == 0 ? GroupMethod::EXACT : GroupMethod::TWO_SOLVE;
         o.done();
     }
     if (top.has("haptic")) {
@@ -237,14 +229,9 @@ Scene read_scene(const std::string& path) {
         InstrumentSpec ins;
         ins.name = o.str("name", "", true);
         if (!names.insert(ins.name).second) o.fail("instrument name \"" + ins.name + "\" used twice");
-        const std::string kind = o.str("kind", "", true);
-        if (kind == "clip_applier") {
-            ins.kind = InstrumentSpec::Kind::CLIP_APPLIER;
-        } else if (kind == "suction") {
-            ins.kind = InstrumentSpec::Kind::SUCTION;
-        } else {
-            o.fail("\"kind\" = \"" + kind + "\", expected clip_applier or suction");
-        }
+        if (!o.has("kind")) o.fail("missing key \"kind\"");
+        ins.kind = o.choice("kind", {"clip_applier", "suction"}) == 0 ? InstrumentSpec::Kind::CLIP_APPLIER
+                                                                       : InstrumentSpec::Kind::SUCTION;
         ins.radius_mm = o.num("radius_mm", ins.radius_mm, 0.05, 20);
         ins.length_mm = o.num("length_mm", ins.length_mm, 0.1, 500);
         if (o.has("keyframes")) {

@@ -91,6 +91,7 @@ struct Simulator::Impl {
     double cell = 0.5;
     double t_phys = 0, dt_phys = 0;
     std::vector<Area> areas;
+    std::vector<Shape> obstacles;                   // the scene's obstacles as shapes, built once
     std::vector<Eigen::Vector3d> forces;
     Assessment a;
     std::vector<std::string> messages;
@@ -112,6 +113,12 @@ struct Simulator::Impl {
         for (Eigen::Index f = 0; f < model.surface.F.rows(); ++f)
             sum += (model.surface.X.row(model.surface.F(f, 0)) - model.surface.X.row(model.surface.F(f, 1))).norm();
         if (model.surface.F.rows()) cell = std::max(0.05, sum / static_cast<double>(model.surface.F.rows()));
+        for (const ObstacleSpec& ob : scene.obstacles) {
+            Shape os;
+            os.kind = Shape::Kind::MESH;
+            os.mesh = ob.mesh;
+            obstacles.push_back(std::move(os));
+        }
         ins.resize(scene.instruments.size());
         forces.assign(ins.size(), Eigen::Vector3d::Zero());
         dt_phys = 1.0 / scene.physics_hz;
@@ -629,7 +636,7 @@ struct Simulator::Impl {
             forces[i] += ramp * (scene.plane_stiffness_n_per_mm * depth * n - fade * scene.friction_n_s_per_mm * vt);
         }
         // Rigid obstacles push the instruments' tips and jaw corners out (exact distance: continuous).
-        if (!scene.obstacles.empty()) {
+        if (!obstacles.empty()) {
             for (size_t i = 0; i < ins.size(); ++i) {
                 std::vector<Eigen::Vector3d> probes{ins[i].in.pose.position};
                 for (const auto& [part, sh] : shapes)
@@ -639,10 +646,7 @@ struct Simulator::Impl {
                             for (int k = 0; k < 3; ++k) q += ((s >> k) & 1 ? 1.0 : -1.0) * sh.half[k] * sh.axes.col(k);
                             probes.push_back(q);
                         }
-                for (const ObstacleSpec& ob : scene.obstacles) {
-                    Shape os;
-                    os.kind = Shape::Kind::MESH;
-                    os.mesh = ob.mesh;  // (copy-free would be better; obstacles are small)
+                for (const Shape& os : obstacles) {
                     double worst = 0;
                     Eigen::Vector3d where = Eigen::Vector3d::Zero();
                     for (const auto& q : probes) {

@@ -61,6 +61,18 @@ Eigen::VectorXd reference(const test::TubeCase& c, const sim::SimModel& m, const
 
 double rel(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).norm() / b.norm(); }
 
+// The tube case written to a bundle and loaded back for simulation (what every solver test starts from).
+struct Loaded {
+    test::TubeCase c;
+    sim::SimModel m;
+};
+Loaded load_tube(Precision prec, const test::TempDir& d, const sim::LoadOptions& lo = {}) {
+    Loaded l{test::tube_case(prec), {}};
+    write_bundle(d.file("case.h5"), l.c.bundle);
+    l.m = sim::load_model(d.file("case.h5"), lo);
+    return l;
+}
+
 }  // namespace
 
 class SolverVsFem : public ::testing::TestWithParam<Precision> {};
@@ -68,9 +80,9 @@ class SolverVsFem : public ::testing::TestWithParam<Precision> {};
 TEST_P(SolverVsFem, DeformationEqualsFullSparseSolve) {
     const Precision prec = GetParam();
     test::TempDir d("solver");
-    const test::TubeCase c = test::tube_case(prec);
-    write_bundle(d.file("case.h5"), c.bundle);
-    const sim::SimModel m = sim::load_model(d.file("case.h5"));
+    const Loaded l = load_tube(prec, d);
+    const test::TubeCase& c = l.c;
+    const sim::SimModel& m = l.m;
     ASSERT_EQ(m.n_active, m.dof_node.size());
     EXPECT_GT(m.surface.F.rows(), 0);
     sim::ContactSolver solver(m);
@@ -89,11 +101,11 @@ TEST_P(SolverVsFem, DeformationEqualsFullSparseSolve) {
 TEST_P(SolverVsFem, WorkingRegionAndReuse) {
     const Precision prec = GetParam();
     test::TempDir d("solver2");
-    const test::TubeCase c = test::tube_case(prec);
-    write_bundle(d.file("case.h5"), c.bundle);
     sim::LoadOptions lo;
     lo.region = sim::RegionSphere{Eigen::Vector3d(1.9, 0, 4), 2.5};
-    const sim::SimModel m = sim::load_model(d.file("case.h5"), lo);
+    const Loaded l = load_tube(prec, d, lo);
+    const test::TubeCase& c = l.c;
+    const sim::SimModel& m = l.m;
     ASSERT_LT(m.n_active, m.dof_node.size());
     sim::ContactSolver solver(m);
     auto p = patch(m, 20, 11);
@@ -114,9 +126,9 @@ TEST_P(SolverVsFem, WorkingRegionAndReuse) {
 TEST_P(SolverVsFem, ExactGroupHasZeroNetForceAndMatchesFem) {
     const Precision prec = GetParam();
     test::TempDir d("solver3");
-    const test::TubeCase c = test::tube_case(prec);
-    write_bundle(d.file("case.h5"), c.bundle);
-    const sim::SimModel m = sim::load_model(d.file("case.h5"));
+    const Loaded l = load_tube(prec, d);
+    const test::TubeCase& c = l.c;
+    const sim::SimModel& m = l.m;
     sim::ContactSolver solver(m);
     auto held = patch(m, 16, 5, 0);  // a deposited clip's nodes, relative displacements
     auto other = patch(m, 40, 9);
