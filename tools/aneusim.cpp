@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
     CLI::App app{"aneuclip real-time clipping simulator", "aneusim"};
     app.set_version_flag("--version", std::string("aneusim ") + aneu::tool_version() + " (" + aneu::git_revision() + ")");
     app.require_subcommand(1);
+    app.fallthrough();  // logging options after the subcommand too (`aneusim run SCENE -q`)
     LoggingOptions log;
     add_logging_options(app, log);
 
