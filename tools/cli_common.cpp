@@ -79,6 +79,16 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
     }
 }
 
+namespace {
+std::function<void(const StagePlan&)>& sink_storage() {
+    static std::function<void(const StagePlan&)> sink;
+    return sink;
+}
+}  // namespace
+
+void set_plan_sink(std::function<void(const StagePlan&)> sink) { sink_storage() = std::move(sink); }
+const std::function<void(const StagePlan&)>& plan_sink() { return sink_storage(); }
+
 std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
 
 CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action,
@@ -94,6 +104,10 @@ CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std
             return run_guarded("aneuprep " + name, [&] {
                 std::vector<std::string> inputs;
                 if (has_input) inputs.push_back(io->input);
+                if (plan_sink()) {
+                    plan_sink()(StagePlan{name, params(), inputs, io->output});
+                    return;
+                }
                 run(*io, make_stage_record(name, shell_join(args), params(), inputs));
             });
         };

@@ -44,6 +44,20 @@ struct StageIo {
     std::string input, output;
 };
 
+/// What a stage subcommand would do: its validated parameters (as stored in its provenance), inputs and output.
+struct StagePlan {
+    std::string stage;
+    std::vector<std::pair<std::string, std::string>> parameters;
+    std::vector<std::string> inputs;
+    std::string output;
+};
+/// While a sink is set, stage subcommands do not run: their action validates the options and hands the plan
+/// to the sink (`aneuprep run` uses it to compare a stage's parameters with its output's provenance).
+/// An empty function clears it.
+void set_plan_sink(std::function<void(const StagePlan&)> sink);
+/// The sink set by set_plan_sink (empty when stages run).
+const std::function<void(const StagePlan&)>& plan_sink();
+
 /// Registers a stage subcommand with an optional positional input and a required -o output. `run`
 /// receives the files and the provenance record; `params` validates the options and lists them.
 CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action,

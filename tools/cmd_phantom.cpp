@@ -80,6 +80,10 @@ void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, st
                 std::string fl;
                 for (const auto& f : cli->formats) fl += (fl.empty() ? "" : ",") + f;
                 params.emplace_back("formats", fl);
+                if (plan_sink()) {
+                    plan_sink()(StagePlan{"phantom", params, {}, cli->out});
+                    return;
+                }
                 auto rec = make_stage_record("phantom", shell_join(args), params, {});
                 Reporter rep = make_log_reporter();
                 pipeline::write_phantom(p, o, cli->out, rec, rep);

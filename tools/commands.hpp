@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli_common.hpp"
+
 namespace aneu::tools {
 
 void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
@@ -15,5 +17,12 @@ void add_inspect_command(CLI::App& app, std::function<int()>& action);
 void add_snapshot_command(CLI::App& app, std::function<int()>& action);
 void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
+void add_run_command(CLI::App& app, std::function<int()>& action);
+
+/// Registers every aneuprep subcommand and option on `app` (main, and `run` for each stage it plans or runs).
+void build_aneuprep(CLI::App& app, LoggingOptions& log, const std::vector<std::string>& args,
+                    std::function<int()>& action);
+/// Parses argv into `app`: -1 when parsing succeeded, else the exit code (after printing the error).
+int parse_aneuprep(CLI::App& app, int argc, const char* const* argv);
 
 }  // namespace aneu::tools
