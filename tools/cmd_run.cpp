@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 // `aneuprep run CASE`: every stage of a case whose inputs or parameters changed since its output was made
 // (the output's /meta provenance tells), one line per stage; and the make rules of Makefile.cases.
+#include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -182,6 +184,28 @@ void write_make_rules(const RunOptions& o, const CaseChain& chain, const std::ve
     write_if_changed(o.make_rules, r);
 }
 
+/// Removes "<output>.part-<pid>" leftovers of writers that no longer run (a killed batch): every stage writes
+/// there and renames, so these are never results, only litter. Returns how many were removed.
+int remove_stale_parts(const std::string& output) {
+    const fs::path out(output);
+    const fs::path dir = out.parent_path().empty() ? fs::path(".") : out.parent_path();
+    const std::string prefix = out.filename().string() + ".part-";
+    int removed = 0;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.rfind(prefix, 0) != 0) continue;
+        const std::string pid_text = name.substr(prefix.size());
+        if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos) continue;
+        const long pid = std::stol(pid_text);
+        if (pid > 0 && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH) {
+            fs::remove_all(e.path(), ec);
+            if (!ec) ++removed;
+        }
+    }
+    return removed;
+}
+
 void touch(const std::string& path) { fs::last_write_time(path, fs::file_time_type::clock::now()); }
 
 std::string human_size(std::uintmax_t b) {
@@ -240,6 +264,9 @@ int run_case(const RunOptions& o) {
         if (!single) {  // one line per stage: the outcome is appended when it ends
             fmt::print("  {:<9} {} ({}) ...", step.stage, "running", why);
             std::fflush(stdout);
+        }
+        if (const int n = remove_stale_parts(step.output); n > 0) {
+            log.info("{}: removed {} unfinished output(s) of an interrupted run", step.stage, n);
         }
         if (!o.verbose) log.set_level(spdlog::level::warn);
         const auto ts = std::chrono::steady_clock::now();
