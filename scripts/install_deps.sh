@@ -18,6 +18,8 @@ PACKAGES=(
   libnglib-dev netgen libtet1.5-dev
   # off-screen rendering for snapshots (Debian's VTK renders through X11 only)
   xvfb xauth
+  # workflow checks: CalculiX (the exported .inp is run in ccx) and headless Chromium (the QA report)
+  calculix-ccx chromium
 )
 
 if [ "$(id -u)" -eq 0 ]; then

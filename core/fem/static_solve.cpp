@@ -1,0 +1,118 @@
+// SPDX-License-Identifier: MIT
+#include "aneu/fem/static_solve.hpp"
+
+#include <algorithm>
+#include <array>
+#include <map>
+
+#include <Eigen/CholmodSupport>
+#include <Eigen/Geometry>
+#include <Eigen/SparseCore>
+
+#include "aneu/core/error.hpp"
+#include "aneu/fem/element.hpp"
+#include "aneu/fem/loads.hpp"
+
+namespace aneu::fem {
+
+namespace {
+
+/// Local index (4..9) of the mid-edge node between corners a and b of a 10-node tetrahedron.
+int mid_of(int a, int b) {
+    for (int k = 0; k < 6; ++k) {
+        const int p = QUADRATIC_TET_EDGES[k][0], q = QUADRATIC_TET_EDGES[k][1];
+        if ((p == a && q == b) || (p == b && q == a)) return 4 + k;
+    }
+    return -1;
+}
+
+}  // namespace
+
+Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& node_set) {
+    if (T.cols() != 4 && T.cols() != 10) throw InputError("tetrahedra must have 4 or 10 nodes, not " + std::to_string(T.cols()));
+    static constexpr int FACES[4][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+    std::vector<char> in(static_cast<size_t>(V.rows()), 0);
+    for (Eigen::Index k = 0; k < node_set.size(); ++k) in.at(static_cast<size_t>(node_set[k])) = 1;
+    // A face on the boundary belongs to one tetrahedron only.
+    std::map<std::array<int, 3>, std::pair<int, int>> seen;  // sorted corners -> (tet, local face), or tet -1
+    for (Eigen::Index t = 0; t < T.rows(); ++t) {
+        for (int f = 0; f < 4; ++f) {
+            std::array<int, 3> key{T(t, FACES[f][0]), T(t, FACES[f][1]), T(t, FACES[f][2])};
+            if (!in[static_cast<size_t>(key[0])] || !in[static_cast<size_t>(key[1])] || !in[static_cast<size_t>(key[2])]) continue;
+            std::sort(key.begin(), key.end());
+            auto [it, fresh] = seen.emplace(key, std::make_pair(static_cast<int>(t), f));
+            if (!fresh) it->second.first = -1;
+        }
+    }
+    std::vector<std::pair<int, int>> faces;
+    for (const auto& [key, tf] : seen) {
+        if (tf.first >= 0) faces.push_back(tf);
+    }
+    const bool quadratic = T.cols() == 10;
+    Eigen::MatrixXi F(static_cast<Eigen::Index>(faces.size()), quadratic ? 6 : 3);
+    for (size_t i = 0; i < faces.size(); ++i) {
+        const auto [t, f] = faces[i];
+        std::array<int, 3> l{FACES[f][0], FACES[f][1], FACES[f][2]};
+        // Outward: the face normal points away from the tetrahedron's fourth corner.
+        const int opposite = 6 - l[0] - l[1] - l[2];
+        const Eigen::Vector3d a = V.row(T(t, l[0])), b = V.row(T(t, l[1])), c = V.row(T(t, l[2]));
+        const Eigen::Vector3d d = V.row(T(t, opposite));
+        if ((b - a).cross(c - a).dot(d - a) > 0) std::swap(l[1], l[2]);
+        const auto r = static_cast<Eigen::Index>(i);
+        for (int k = 0; k < 3; ++k) F(r, k) = T(t, l[k]);
+        if (quadratic) {
+            F(r, 3) = T(t, mid_of(l[0], l[1]));
+            F(r, 4) = T(t, mid_of(l[1], l[2]));
+            F(r, 5) = T(t, mid_of(l[2], l[0]));
+        }
+    }
+    return F;
+}
+
+Eigen::VectorXd set_pressure_loads(const VolumeData& vol, const std::string& set, double p_mpa) {
+    auto it = vol.node_sets.find(set);
+    if (it == vol.node_sets.end()) throw InputError("node set '" + set + "': not in /volume/node_sets");
+    const Eigen::MatrixXi F = boundary_faces_in_set(vol.nodes, vol.tets, it->second);
+    if (F.rows() == 0) throw InputError("node set '" + set + "': no boundary face has all its corners in it");
+    return pressure_loads(vol.nodes, F, p_mpa);
+}
+
+Eigen::VectorXd solve_static(const FemData& fem, const Eigen::VectorXd& f) {
+    const Eigen::Index n = fem.K.rows();
+    if (f.size() != n) throw InputError("load vector has " + std::to_string(f.size()) + " entries, K " + std::to_string(n) + " rows");
+    std::vector<char> fixed(static_cast<size_t>(n), 0);
+    for (Eigen::Index k = 0; k < fem.fixed_dofs.size(); ++k) fixed.at(static_cast<size_t>(fem.fixed_dofs[k])) = 1;
+    std::vector<int> free_of(static_cast<size_t>(n), -1);
+    std::vector<int> dofs;
+    for (Eigen::Index i = 0; i < n; ++i) {
+        if (!fixed[static_cast<size_t>(i)]) {
+            free_of[static_cast<size_t>(i)] = static_cast<int>(dofs.size());
+            dofs.push_back(static_cast<int>(i));
+        }
+    }
+    // K_ff, upper triangle (K may be stored whole or upper only).
+    std::vector<Eigen::Triplet<double>> trip;
+    trip.reserve(static_cast<size_t>(fem.K.nonZeros()));
+    for (Eigen::Index r = 0; r < n; ++r) {
+        const int fr = free_of[static_cast<size_t>(r)];
+        if (fr < 0) continue;
+        for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(fem.K, r); it; ++it) {
+            const int fc = free_of[static_cast<size_t>(it.col())];
+            if (fc >= fr) trip.emplace_back(fr, fc, it.value());
+        }
+    }
+    const auto m = static_cast<Eigen::Index>(dofs.size());
+    Eigen::SparseMatrix<double> Kff(m, m);
+    Kff.setFromTriplets(trip.begin(), trip.end());
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt(Kff);
+    if (llt.info() != Eigen::Success) throw NumericalError("K_ff is not positive definite (CHOLMOD factorisation failed)");
+    Eigen::VectorXd ff(m);
+    for (Eigen::Index i = 0; i < m; ++i) ff[i] = f[dofs[static_cast<size_t>(i)]];
+    const Eigen::VectorXd uf = llt.solve(ff);
+    if (llt.info() != Eigen::Success) throw NumericalError("CHOLMOD solve failed");
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(n);
+    for (Eigen::Index i = 0; i < m; ++i) u[dofs[static_cast<size_t>(i)]] = uf[i];
+    return u;
+}
+
+}  // namespace aneu::fem
