@@ -26,6 +26,7 @@ void build_aneuprep(CLI::App& app, LoggingOptions& log, const std::vector<std::s
     add_snapshot_command(app, action);
     add_run_command(app, action);
     add_export_commands(app, action);
+    add_report_command(app, action);
 
     auto* ver = app.add_subcommand("version", "print versions of aneuclip and of every library it uses");
     ver->callback([&action] {

@@ -14,6 +14,7 @@
 #include "aneu/core/error.hpp"
 #include "aneu/core/provenance.hpp"
 #include "aneu/core/version.hpp"
+#include "aneu/pipeline/report.hpp"
 #include "case_chain.hpp"
 #include "cli_common.hpp"
 #include "commands.hpp"
@@ -325,6 +326,34 @@ void add_run_command(CLI::App& app, std::function<int()>& action) {
                 }
             });
             return g != 0 ? g : rc;
+        };
+    });
+}
+
+void add_report_command(CLI::App& app, std::function<int()>& action) {
+    struct Opts {
+        std::string config, out_dir, source, html;
+    };
+    auto o = std::make_shared<Opts>();
+    auto* c = app.add_subcommand("report", "QA report of a case: one self-contained HTML page (needs X: xvfb-run -a)");
+    c->add_option("case", o->config, "case config, configs/cases/<id>.toml")->required();
+    c->add_option("--out-dir", o->out_dir, "the case's output folder [default: as aneuprep run]");
+    c->add_option("--source", o->source, "as aneuprep run --source");
+    c->add_option("-o,--output", o->html, "HTML file [default: <out-dir>/report.html]");
+    c->callback([o, &action] {
+        action = [o] {
+            return run_guarded("aneuprep report", [&] {
+                const CaseChain chain = make_case_chain(o->config, o->out_dir, o->source, {});
+                pipeline::ReportInput in;
+                in.case_id = chain.id;
+                in.config_path = chain.config;
+                in.config_text = read_text(chain.config);
+                for (const auto& s : chain.steps) in.stages.push_back({s.stage, s.output, s.provenance_file});
+                const std::string html = o->html.empty() ? (fs::path(chain.out_dir) / "report.html").string() : o->html;
+                Reporter rep = make_log_reporter();
+                pipeline::write_case_report(in, html, rep);
+                fmt::print("{}\n", html);
+            });
         };
     });
 }

@@ -18,6 +18,7 @@ void add_snapshot_command(CLI::App& app, std::function<int()>& action);
 void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_run_command(CLI::App& app, std::function<int()>& action);
+void add_report_command(CLI::App& app, std::function<int()>& action);
 void add_export_commands(CLI::App& app, std::function<int()>& action);
 
 /// Registers every aneuprep subcommand and option on `app` (main, and `run` for each stage it plans or runs).

@@ -4,7 +4,8 @@
 # Makefile.cases on the shipped case configs (copied, so edits stay here): builds both from scratch, a second
 # call runs nothing, a changed sac thickness reruns exactly wall, tetmesh, assemble and condense of that case,
 # a batch killed in the middle of a stage resumes to valid bundles with nothing half-written under a final
-# name, and with -k a failing case does not stop the others and is listed at the end.
+# name, with -k a failing case does not stop the others and is listed at the end, and the sample's QA report
+# renders in headless Chromium with all its pictures.
 set -u
 root=$1 prep=$2 w=$3
 fail() { echo "FAIL: $*"; exit 1; }
@@ -72,5 +73,22 @@ for s in surface wall tetmesh assemble condense; do  # the stages of the failed 
   [ -e "$w/out/zz_bad/$s.h5" ] && fail "zz_bad/$s.h5 exists after its segment stage failed"
 done
 valid_bundles
+
+echo "== 6. the QA report of the sample case renders in headless Chromium with every picture"
+report() { xvfb-run -a "$prep" report "$w/cases/sample.toml" --out-dir "$w/out/sample" -q; }
+report >"$w/log7" 2>&1 || report >"$w/log7" 2>&1 || { cat "$w/log7"; fail "aneuprep report failed"; }
+html="$w/out/sample/report.html"
+grep -q 'Dice of the lumen against the phantom' "$html" || fail "report: no Dice figure"
+grep -q 'thickness_aneurysm_median_mm' "$html" || fail "report: no thickness per region"
+grep -q '<svg' "$html" || fail "report: no quality histograms"
+grep -q 'kept DOFs' "$html" || fail "report: no condensation diagnostics"
+grep -q 'http://\|https://\|src="/\|src="file' <(grep -o 'src="[^"]\{0,12\}' "$html") && fail "report: refers to an outside resource"
+command -v chromium >/dev/null || fail "chromium not found (scripts/install_deps.sh installs it)"
+dom=$(chromium --headless --no-sandbox --disable-gpu --dump-dom "file://$html" 2>/dev/null)
+check=$(echo "$dom" | grep -o 'id="picture-check" data-ok="[a-z]*">[^<]*')
+echo "   chromium: $check"
+echo "$check" | grep -q 'data-ok="yes">5 of 5 pictures shown' || fail "chromium: not every picture shown ($check)"
+chromium --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1200,2400 --screenshot="$w/report.png" "file://$html" >/dev/null 2>&1
+[ -s "$w/report.png" ] || fail "chromium made no screenshot"
 echo "OK"
 rm -rf "$w"
