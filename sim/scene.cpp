@@ -121,7 +121,7 @@ Pose orthonormal(Pose p) {
 
 Scene read_scene(const std::string& path) {
     std::ifstream in(path);
-    if (!in) throw InputError(path + ": cannot open the scene file");
+    if (!in) throw InputError(path + (std::filesystem::exists(path) ? ": cannot open the scene file" : ": no such scene file"));
     json j;
     try {
         j = json::parse(in, nullptr, true, /*ignore_comments=*/true);

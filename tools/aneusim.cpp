@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
     auto* run = app.add_subcommand("run", "run a scene (configs/scenes/*.json): scripted keyframes or live poses on stdin");
     std::string scene_path, bundle_override, log_out, report_out, series_out, haptic_out, method;
     bool deterministic = false, live = false;
-    run->add_option("scene", scene_path, "scene file (JSON)")->required()->check(CLI::ExistingFile);
+    run->add_option("scene", scene_path, "scene file (JSON)")->required();  // a missing file is bad input (exit 2), said by read_scene
     run->add_flag("--deterministic", deterministic,
                   "single thread on a fixed timeline (tests, replays): the same scene gives the same log, bit for bit");
     run->add_flag("--live", live, "read poses from standard input (`t name px py pz ax ay az ux uy uz opening button [action]`)");
