@@ -36,6 +36,35 @@ bool has_ext(const std::string& path, const std::string& ext) {
 
 }  // namespace
 
+SnapshotScene segment_scene(const ImageData& im, const std::string& title) {
+    Volume<float> m{im.grid, std::vector<float>(im.mask.begin(), im.mask.end())};
+    SnapshotScene sc;
+    SnapshotLayer layer{isosurface(m, 0.5, true, false), ColorBy::LABEL, 0.45, false};
+    layer.surface.label_names = {"lumen mask"};
+    sc.layers.push_back(std::move(layer));
+    sc.centerline = im.centerline;
+    sc.planes = im.planes;
+    sc.title = title;
+    return sc;
+}
+
+SnapshotScene surface_scene(const SurfaceData& lumen, const std::vector<EndPlane>& planes, const std::string& title) {
+    SnapshotScene sc;
+    sc.layers.push_back({lumen, ColorBy::LABEL, 1.0, true});
+    sc.planes = planes;
+    sc.title = title;
+    return sc;
+}
+
+SnapshotScene wall_thickness_scene(const SurfaceData& w, const std::string& title) {
+    std::vector<char> outer(static_cast<size_t>(w.F.rows()));
+    for (Eigen::Index f = 0; f < w.F.rows(); ++f) outer[static_cast<size_t>(f)] = w.face_label[f] != 0;  // outer and caps
+    SnapshotScene sc;
+    sc.layers.push_back({sub_surface(w, outer), ColorBy::THICKNESS, 1.0, true});
+    sc.title = title;
+    return sc;
+}
+
 void segment_file(const std::string& image_path, const std::string& out, const SegmentParams& p, StageRecord stage,
                   const std::string& snapshot_png, Reporter& rep) {
     validate(p);
@@ -50,15 +79,8 @@ void segment_file(const std::string& image_path, const std::string& out, const S
     finish(b, stage, t0, out, rep);
     if (!snapshot_png.empty()) {
         const ImageData& im = *b.image;
-        Volume<float> m{im.grid, std::vector<float>(im.mask.begin(), im.mask.end())};
-        SnapshotScene sc;
-        SnapshotLayer layer{isosurface(m, 0.5, true, false), ColorBy::LABEL, 0.45, false};
-        layer.surface.label_names = {"lumen mask"};
-        sc.layers.push_back(std::move(layer));
-        sc.centerline = im.centerline;
-        sc.planes = im.planes;
-        sc.title = "segment " + b.meta.case_id + ": threshold " + figure(seg.qa, "threshold_hu") + " HU, " + figure(seg.qa, "lumen_volume_mm3") +
-                   " mm3, " + std::to_string(im.planes.size()) + " ends";
+        const SnapshotScene sc = segment_scene(im, "segment " + b.meta.case_id + ": threshold " + figure(seg.qa, "threshold_hu") + " HU, " +
+                                                       figure(seg.qa, "lumen_volume_mm3") + " mm3, " + std::to_string(im.planes.size()) + " ends");
         snapshot_scene(sc, snapshot_png);
         rep.info("segment: snapshot " + snapshot_png);
     }
@@ -85,11 +107,9 @@ void surface_file(const std::string& in, const std::string& out, const SurfacePa
     stage.qa = r.qa;
     finish(b, stage, t0, out, rep);
     if (!snapshot_png.empty()) {
-        SnapshotScene sc;
-        sc.layers.push_back({b.surfaces["lumen"], ColorBy::LABEL, 1.0, true});
-        sc.planes = b.image->planes;
-        sc.title = "surface " + b.meta.case_id + ": " + figure(r.qa, "triangles") + " triangles, edge " + figure(r.qa, "edge_mean_mm") +
-                   " mm, min angle " + figure(r.qa, "min_angle_deg") + " deg";
+        const SnapshotScene sc = surface_scene(b.surfaces["lumen"], b.image->planes,
+                                               "surface " + b.meta.case_id + ": " + figure(r.qa, "triangles") + " triangles, edge " +
+                                                   figure(r.qa, "edge_mean_mm") + " mm, min angle " + figure(r.qa, "min_angle_deg") + " deg");
         snapshot_scene(sc, snapshot_png);
         rep.info("surface: snapshot " + snapshot_png);
     }
@@ -110,13 +130,9 @@ void wall_file(const std::string& in, const std::string& out, const WallParams& 
     stage.qa = r.qa;
     finish(b, stage, t0, out, rep);
     if (!snapshot_png.empty()) {
-        SnapshotScene sc;
-        const SurfaceData& w = b.surfaces["wall"];
-        std::vector<char> outer(static_cast<size_t>(w.F.rows()));
-        for (Eigen::Index f = 0; f < w.F.rows(); ++f) outer[static_cast<size_t>(f)] = w.face_label[f] != 0;  // outer and caps
-        sc.layers.push_back({sub_surface(w, outer), ColorBy::THICKNESS, 1.0, true});
-        sc.title = "wall " + b.meta.case_id + ": thickness median artery " + figure(r.qa, "thickness_artery_median_mm") + " mm, aneurysm " +
-                   figure(r.qa, "thickness_aneurysm_median_mm") + " mm";
+        const SnapshotScene sc = wall_thickness_scene(b.surfaces["wall"], "wall " + b.meta.case_id + ": thickness median artery " +
+                                                                          figure(r.qa, "thickness_artery_median_mm") + " mm, aneurysm " +
+                                                                          figure(r.qa, "thickness_aneurysm_median_mm") + " mm");
         snapshot_scene(sc, snapshot_png);
         rep.info("wall: snapshot " + snapshot_png);
     }

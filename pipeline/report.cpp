@@ -317,31 +317,18 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
     pg.h2("Pictures", "pictures");
     if (files.count("segment") && files["segment"].image) {
         const ImageData& im = *files["segment"].image;
-        Volume<float> m{im.grid, std::vector<float>(im.mask.begin(), im.mask.end())};
-        SnapshotScene sc;
-        SnapshotLayer layer{isosurface(m, 0.5, true, false), ColorBy::LABEL, 0.45, false};
-        layer.surface.label_names = {"lumen mask"};
-        sc.layers.push_back(std::move(layer));
-        sc.centerline = im.centerline;
-        sc.planes = im.planes;
-        sc.title = "segment";
+        const SnapshotScene sc = segment_scene(im, "segment");
         pg.picture({"segment", fmt::format("lumen mask (voxel surface), centerline with radius, {} end planes with their outward normals; threshold {} HU.",
                                            im.planes.size(), num(im.threshold_hu)), render(sc)});
     }
     if (files.count("surface") && files["surface"].surfaces.count("lumen")) {
-        SnapshotScene sc;
-        sc.layers.push_back({files["surface"].surfaces["lumen"], ColorBy::LABEL, 1.0, true});
-        if (files["surface"].image) sc.planes = files["surface"].image->planes;
-        sc.title = "surface";
+        const SnapshotScene sc = surface_scene(files["surface"].surfaces["lumen"],
+                                               files["surface"].image ? files["surface"].image->planes : std::vector<EndPlane>{}, "surface");
         pg.picture({"surface", "lumen surface after cutting, smoothing and remeshing, faces labelled artery/aneurysm.", render(sc)});
     }
     if (files.count("wall") && files["wall"].surfaces.count("wall")) {
         const SurfaceData& w = files["wall"].surfaces["wall"];
-        std::vector<char> outer(static_cast<size_t>(w.F.rows()));
-        for (Eigen::Index f = 0; f < w.F.rows(); ++f) outer[static_cast<size_t>(f)] = w.face_label[f] != 0;
-        SnapshotScene sc;
-        sc.layers.push_back({sub_surface(w, outer), ColorBy::THICKNESS, 1.0, true});
-        sc.title = "wall thickness";
+        const SnapshotScene sc = wall_thickness_scene(w, "wall thickness");
         pg.picture({"wall", "outer wall surface and end caps coloured by the measured thickness [mm].", render(sc)});
         SnapshotScene sl;
         sl.layers.push_back({w, ColorBy::LABEL, 1.0, true});

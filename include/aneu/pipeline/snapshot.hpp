@@ -31,6 +31,14 @@ struct SnapshotScene {
 /// @throws InputError no X display (DISPLAY unset; run under `xvfb-run -a`); IoError the PNG cannot be written
 void snapshot_scene(const SnapshotScene& scene, const std::string& png, int width = 1200, int height = 900);
 
+/// The pictures of the geometry stages, as `--snapshot` renders them and the case report shows them:
+/// the lumen mask (voxel surface, translucent) with the centerline and end planes;
+SnapshotScene segment_scene(const ImageData& image, const std::string& title);
+/// the lumen surface by label (artery/aneurysm) with the end planes;
+SnapshotScene surface_scene(const SurfaceData& lumen, const std::vector<EndPlane>& planes, const std::string& title);
+/// the outer wall and caps (every face not labelled inner) coloured by thickness.
+SnapshotScene wall_thickness_scene(const SurfaceData& wall, const std::string& title);
+
 /// @throws InputError when no X display is available for rendering (DISPLAY unset), with the remedy.
 void require_snapshot_display();
 
