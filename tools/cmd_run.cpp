@@ -249,8 +249,8 @@ int run_case(const RunOptions& o) {
                                               : why_stale(plans[i], step);
         if (why.empty()) {
             ++current;
-            if (single) touch(step.provenance_file);  // make asked: the output is current, say so by its time
             if (single) {
+                touch(step.provenance_file);  // make asked: the output is current, say so by its time
                 fmt::print("{} {}: up to date -> {}\n", chain.id, step.stage, step.output);
             } else {
                 fmt::print("  {:<9} {:<38} {}\n", step.stage, "up to date", step.output);
