@@ -214,7 +214,7 @@ struct Logger {
     Logger(const Scene& s, bool with_timings) : out(s.log), timings(with_timings), scene(s) {
         if (!out.on()) return;
         auto& o = out.out();
-        o << "t_s,contact_nodes,prescribed_nodes,refactored";
+        o << "t_s,contact_nodes,prescribed_nodes,updated_rows,refactored";
         if (timings) o << ",collision_ms,factor_ms,solve_ms,smvm_ms";
         for (const auto& ins : s.instruments) o << ",F_" << ins.name << "_x,F_" << ins.name << "_y,F_" << ins.name << "_z,F_" << ins.name << "_N";
         o << ",clips\n";
@@ -222,7 +222,7 @@ struct Logger {
     void line(const FrameStats& fs, double t, const std::vector<Eigen::Vector3d>& F, const std::vector<Clip>& clips) {
         if (!out.on()) return;
         auto& o = out.out();
-        o << g(t) << ',' << fs.contact_nodes << ',' << fs.prescribed_nodes << ',' << (fs.refactored ? 1 : 0);
+        o << g(t) << ',' << fs.contact_nodes << ',' << fs.prescribed_nodes << ',' << fs.updated_rows << ',' << (fs.refactored ? 1 : 0);
         if (timings) o << ',' << g(1e3 * fs.collision_s) << ',' << g(1e3 * fs.factor_s) << ',' << g(1e3 * fs.solve_s) << ',' << g(1e3 * fs.smvm_s);
         for (const auto& f : F) o << ',' << g(f.x()) << ',' << g(f.y()) << ',' << g(f.z()) << ',' << g(f.norm());
         o << ',';

@@ -170,6 +170,7 @@ Scene read_scene(const std::string& path) {
         s.neighbour_weight = o.num("neighbour_weight", s.neighbour_weight, 0, 1);
         s.release_tolerance_mm = o.num("release_tolerance_mm", s.release_tolerance_mm, 0, 10);
         s.relax_time_s = o.num("relax_time_s", s.relax_time_s, 1e-4, 100);
+        s.update_margin_mm = o.num("update_margin_mm", s.update_margin_mm, 0, 1e3);
         s.jaw_push = o.choice("jaw_push", {"shape", "node_normal"}) == 0 ? JawPush::SHAPE : JawPush::NODE_NORMAL;
         s.clip_method = o.choice("deposited_clips", {"exact", "two-solve"}) == 0 ? GroupMethod::EXACT : GroupMethod::TWO_SOLVE;
         o.done();
@@ -189,6 +190,7 @@ Scene read_scene(const std::string& path) {
         s.physics_hz = o.num("physics", s.physics_hz, 1, s.haptic_hz);
         s.log_hz = o.num("log", s.log_hz, 0.01, s.haptic_hz);
         s.series_hz = o.num("series", s.series_hz, 0, s.haptic_hz);
+        s.region_hz = o.num("region", s.region_hz, 0.01, s.haptic_hz);
         o.done();
     }
     if (top.has("assessment")) {

@@ -88,8 +88,11 @@ struct Simulator::Impl {
     Eigen::MatrixX3d d;                             // current displacement of every surface vertex
     std::vector<char> in_region;
     PointGrid grid;
+    Eigen::MatrixX3d x_grid;  ///< the positions the grid holds (it keeps a pointer to them between frames)
     double cell = 0.5;
     double t_phys = 0, dt_phys = 0;
+    double t_region = -1;  ///< when the whole working region's deformation was last computed (-1: never)
+    std::vector<char> fresh;  ///< vertex's d is that of the last solve (updated by it); others lag, up to 1/region_hz
     std::vector<Area> areas;
     std::vector<Shape> obstacles;                   // the scene's obstacles as shapes, built once
     std::vector<Eigen::Vector3d> forces;
@@ -278,7 +281,32 @@ struct Simulator::Impl {
         const double dt = t_phys > 0 || t > 0 ? std::max(t - t_phys, 0.0) : dt_phys;
         const double alpha = scene.displacement_fraction;
         const SimSurface& sf = model.surface;
-        const Eigen::MatrixX3d x = sf.X + d;
+        // Vertices coming within the update margin of an instrument whose d lags (not updated by the last solve)
+        // get it now from the last solve's forces (a few rows of the SMVM): collisions and prescribed values then
+        // see exactly the deformation a whole-region update would have given them.
+        std::vector<int> cand;
+        if (scene.update_margin_mm > 0 && !fresh.empty()) {
+            std::vector<char> want(static_cast<size_t>(S), 0);
+            for (size_t i = 0; i < ins.size(); ++i) {
+                for (const auto& [part, shape] : parts_of(i)) {
+                    grid.query(shape.bounds().grown(scene.update_margin_mm), cand);  // last frame's grid
+                    for (int v : cand) want[static_cast<size_t>(v)] = !fresh[static_cast<size_t>(v)];
+                }
+            }
+            std::vector<int> lagging;
+            for (Eigen::Index v = 0; v < S; ++v)
+                if (want[static_cast<size_t>(v)]) lagging.push_back(static_cast<int>(v));
+            if (!lagging.empty()) {
+                const RowRanges r = rows_of_vertices(model, lagging);
+                const Eigen::VectorXd dr = solver.deformation(r);
+                for (int v : lagging) {
+                    for (int ax = 0; ax < 3; ++ax) d(v, ax) = dr[sf.row(v, ax)];
+                    fresh[static_cast<size_t>(v)] = 1;
+                }
+            }
+        }
+        x_grid = sf.X + d;
+        const Eigen::MatrixX3d& x = x_grid;
         std::vector<char> candidate(static_cast<size_t>(S), 0);
         for (Eigen::Index v = 0; v < S; ++v)
             candidate[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)] && st[static_cast<size_t>(v)] != NodeState::HELD;
@@ -288,7 +316,6 @@ struct Simulator::Impl {
         std::vector<Eigen::Vector3d> push_dir(static_cast<size_t>(S), Eigen::Vector3d::Zero());
         std::vector<int> hit(static_cast<size_t>(S), -1);
         std::vector<char> kept(static_cast<size_t>(S), 0);
-        std::vector<int> cand;
         std::vector<Eigen::Vector3d> tips(ins.size());
         for (size_t i = 0; i < ins.size(); ++i) {
             tips[i] = ins[i].in.pose.position;
@@ -420,8 +447,31 @@ struct Simulator::Impl {
         fs.prescribed_nodes = static_cast<int>(p.size());
         const std::vector<int> vertices = last_vertices;
         const GroupMethod method = scene.clip_method;
+        // Rows to update: the whole region at region_hz, else the nodes near an instrument and the prescribed ones.
+        std::vector<char> update(static_cast<size_t>(S), 0);
+        RowRanges rows;
+        const bool whole = scene.update_margin_mm <= 0 || t_region < 0 || t - t_region >= 1.0 / scene.region_hz - 1e-9;
+        if (whole) {
+            t_region = t;
+            rows.emplace_back(0, model.n_active);
+            for (Eigen::Index v = 0; v < S; ++v) update[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)];
+        } else {
+            for (size_t i = 0; i < ins.size(); ++i) {
+                for (const auto& [part, shape] : parts_of(i)) {
+                    grid.query(shape.bounds().grown(scene.update_margin_mm), cand);
+                    for (int v : cand) update[static_cast<size_t>(v)] = 1;
+                }
+            }
+            for (int v : vertices) update[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)];
+            std::vector<int> uv;
+            for (Eigen::Index v = 0; v < S; ++v)
+                if (update[static_cast<size_t>(v)]) uv.push_back(static_cast<int>(v));
+            rows = rows_of_vertices(model, uv);
+        }
+        fs.updated_rows = 0;
+        for (const auto& [a0, b0] : rows) fs.updated_rows += static_cast<int>(b0 - a0);
         if (mx) lock.unlock();  // the solve runs while the haptic loop goes on
-        SolveResult res = solver.solve(p, static_cast<int>(group_of_clip.size()), method, model.n_active);
+        SolveResult res = solver.solve(p, static_cast<int>(group_of_clip.size()), method, rows);
         if (mx) lock.lock();
         last = std::move(res);
         last_vertices = vertices;
@@ -429,9 +479,10 @@ struct Simulator::Impl {
         fs.factor_s = last.factor_s;
         fs.solve_s = last.solve_s;
         fs.smvm_s = last.smvm_s;
-        // Deformation of the region's vertices.
+        // Deformation of the vertices updated this frame; the others now lag.
+        fresh = update;
         for (Eigen::Index v = 0; v < S; ++v) {
-            if (!in_region[static_cast<size_t>(v)]) continue;
+            if (!update[static_cast<size_t>(v)]) continue;
             for (int ax = 0; ax < 3; ++ax) d(v, ax) = last.d[sf.row(v, ax)];
         }
         // Clips: shift of deposited ones, forces of all.

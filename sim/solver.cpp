@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "aneu/sim/solver.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 
@@ -121,22 +122,24 @@ struct ContactSolver::Impl {
         return f;
     }
 
-    // d(rows) = Σ_j W(:, col_j) f_j over the first `rows` rows.
+    // d = Σ_j W(:, col_j) f_j on the rows of `ranges` (sorted, disjoint [first, last) pairs); the vector runs
+    // from row 0 to the last range's end, zero outside the ranges.
     template <class T>
-    Eigen::VectorXd smvm(const std::vector<int>& cols, const Eigen::Matrix<T, Eigen::Dynamic, 1>& f, Eigen::Index first,
-                         Eigen::Index last) const {
+    Eigen::VectorXd smvm(const std::vector<int>& cols, const Eigen::Matrix<T, Eigen::Dynamic, 1>& f, const RowRanges& ranges) const {
         const auto& Wm = W<T>();
-        Eigen::Matrix<T, Eigen::Dynamic, 1> d = Eigen::Matrix<T, Eigen::Dynamic, 1>::Zero(last - first);
+        const Eigen::Index n = ranges.empty() ? 0 : ranges.back().second;
+        Eigen::Matrix<T, Eigen::Dynamic, 1> d = Eigen::Matrix<T, Eigen::Dynamic, 1>::Zero(n);
         for (size_t j = 0; j < cols.size(); ++j) {
             const T fj = f[static_cast<Eigen::Index>(j)];
             if (fj == T(0)) continue;
-            d.noalias() += fj * Wm.col(cols[j]).segment(first, last - first);
+            const auto col = Wm.col(cols[j]);
+            for (const auto& [a, b] : ranges) d.segment(a, b - a).noalias() += fj * col.segment(a, b - a);
         }
         return d.template cast<double>();
     }
 
     template <class T>
-    SolveResult run(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, Eigen::Index rows) {
+    SolveResult run(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows) {
         using Vec = Eigen::Matrix<T, Eigen::Dynamic, 1>;
         SolveResult res;
         Factor<T>* facs = nullptr;
@@ -210,11 +213,29 @@ struct ContactSolver::Impl {
         last_cols = fac.cols;
         last_f = f.template cast<double>();
         res.f = last_f;
-        res.d = smvm<T>(fac.cols, f, 0, rows);
+        res.d = smvm<T>(fac.cols, f, rows);
         res.smvm_s = since(t0);
         return res;
     }
 };
+
+RowRanges rows_of_vertices(const SimModel& model, const std::vector<int>& vertices) {
+    std::vector<Eigen::Index> r;
+    r.reserve(3 * vertices.size());
+    for (int v : vertices)
+        for (int ax = 0; ax < 3; ++ax) r.push_back(model.surface.row(v, ax));
+    std::sort(r.begin(), r.end());
+    RowRanges rows;
+    for (Eigen::Index q : r) {
+        const Eigen::Index a = q / 16 * 16, b = std::min<Eigen::Index>(a + 16, model.n_active);
+        if (!rows.empty() && a <= rows.back().second) {
+            rows.back().second = std::max(rows.back().second, b);
+        } else {
+            rows.emplace_back(a, b);
+        }
+    }
+    return rows;
+}
 
 ContactSolver::ContactSolver(const SimModel& model) : m_impl(std::make_unique<Impl>(model)) {}
 ContactSolver::~ContactSolver() = default;
@@ -222,9 +243,21 @@ ContactSolver::~ContactSolver() = default;
 SolveResult ContactSolver::solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, Eigen::Index rows) {
     const Eigen::Index M = m_impl->model.dof_node.size();
     if (rows < 0 || rows > M) rows = M;
+    return solve(p, n_groups, method, RowRanges{{0, rows}});
+}
+
+SolveResult ContactSolver::solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows) {
+    const Eigen::Index M = m_impl->model.dof_node.size();
+    Eigen::Index end = 0;
+    for (const auto& [a, b] : rows) {
+        if (a < end || b < a || b > M) {
+            throw InputError("contact solve: row ranges must be sorted, disjoint and within 0.." + std::to_string(M));
+        }
+        end = b;
+    }
     if (p.empty()) {
         SolveResult r;
-        r.d = Eigen::VectorXd::Zero(rows);
+        r.d = Eigen::VectorXd::Zero(end);
         r.group_shift.assign(static_cast<size_t>(n_groups), Eigen::Vector3d::Zero());
         m_impl->last_cols.clear();
         m_impl->last_f.resize(0);
@@ -234,11 +267,17 @@ SolveResult ContactSolver::solve(const std::vector<Prescribed>& p, int n_groups,
     return m_impl->run<double>(p, n_groups, method, rows);
 }
 
+Eigen::VectorXd ContactSolver::deformation(const RowRanges& rows) const {
+    if (m_impl->last_cols.empty()) return Eigen::VectorXd::Zero(rows.empty() ? 0 : rows.back().second);
+    if (m_impl->model.is_float()) return m_impl->smvm<float>(m_impl->last_cols, m_impl->last_f.cast<float>(), rows);
+    return m_impl->smvm<double>(m_impl->last_cols, m_impl->last_f, rows);
+}
+
 Eigen::VectorXd ContactSolver::deformation(Eigen::Index first, Eigen::Index last) const {
     if (m_impl->model.is_float()) {
-        return m_impl->smvm<float>(m_impl->last_cols, m_impl->last_f.cast<float>(), first, last);
+        return m_impl->smvm<float>(m_impl->last_cols, m_impl->last_f.cast<float>(), {{first, last}}).tail(last - first);
     }
-    return m_impl->smvm<double>(m_impl->last_cols, m_impl->last_f, first, last);
+    return m_impl->smvm<double>(m_impl->last_cols, m_impl->last_f, {{first, last}}).tail(last - first);
 }
 
 }  // namespace aneu::sim

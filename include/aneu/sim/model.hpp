@@ -45,7 +45,7 @@ struct SimModel {
     Eigen::VectorXi dof_axis;      ///< #M: axis of each row
     Eigen::VectorXi file_row;      ///< #M: row of the bundle's DOF map each permuted row came from
     Eigen::Index n_active = 0;     ///< rows/columns 0..n_active-1 are the working region
-    std::vector<int> active;       ///< the loaded columns, as rows of the bundle's DOF map (sorted)
+    std::vector<int> active;       ///< the loaded columns, as rows of the bundle's DOF map, in spatial (Morton) order
     Precision precision = Precision::FLOAT32;  ///< of W in the file; Wf or Wd is filled accordingly
     Eigen::MatrixXf Wf;            ///< #M×#active when stored float32 [mm/N]
     Eigen::MatrixXd Wd;            ///< #M×#active when stored float64 [mm/N]

@@ -83,6 +83,10 @@ struct Scene {
     double neighbour_weight = 0.5;        ///< one-ring neighbours get this × their contact neighbours' push (0: off)
     double release_tolerance_mm = 0.02;   ///< a contact node stays held while within this gap of the shape
     double relax_time_s = 0.05;           ///< released nodes relax to rest with this time constant
+    /// Each physics frame updates the deformation of the region's nodes within this distance of an instrument
+    /// part (and of every prescribed node); the whole region is updated at region_hz. 0: the whole region every
+    /// frame. It must exceed the distance a tool moves in 1/region_hz (30 mm/s at 50 Hz: 0.6 mm).
+    double update_margin_mm = 3.0;
     GroupMethod clip_method = GroupMethod::EXACT;
     JawPush jaw_push = JawPush::SHAPE;
     // haptics (contact-plane method)
@@ -96,6 +100,7 @@ struct Scene {
     double physics_hz = 250.0;            ///< collision + solve
     double log_hz = 250.0;
     double series_hz = 25.0;
+    double region_hz = 50.0;              ///< the whole working region's deformation (see update_margin_mm)
     double duration_s = 0.0;              ///< scripted: 0 = until the last keyframe
     bool live_input = false;              ///< poses from standard input instead of keyframes
     // assessment

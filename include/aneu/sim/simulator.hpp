@@ -42,6 +42,7 @@ struct FrameStats {
     double t = 0.0;
     int contact_nodes = 0;          ///< nodes penetrating an instrument or clip jaw
     int prescribed_nodes = 0;       ///< all nodes with a prescribed displacement (contacts, neighbours, held, relaxing)
+    int updated_rows = 0;           ///< rows of the deformation computed this frame (near the instruments, or the region)
     bool refactored = false;
     double collision_s = 0.0, factor_s = 0.0, solve_s = 0.0, smvm_s = 0.0;
 };

@@ -4,6 +4,7 @@
 /// Prescribed surface displacements → contact forces → deformation, through the condensed compliance W.
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -11,6 +12,14 @@
 #include "aneu/sim/model.hpp"
 
 namespace aneu::sim {
+
+/// Sorted, disjoint [first, last) ranges of permuted rows.
+using RowRanges = std::vector<std::pair<Eigen::Index, Eigen::Index>>;
+
+/// The rows of surface vertices (all in the working region) as runs of whole 16-row blocks (a 64-byte line of
+/// floats): memory is read by lines anyway, and each row then goes through the same (vectorised or not)
+/// arithmetic as in a whole-region update, so rows computed this way are bit-identical to it.
+RowRanges rows_of_vertices(const SimModel& model, const std::vector<int>& vertices);
 
 /// One node with a prescribed displacement.
 struct Prescribed {
@@ -28,7 +37,7 @@ enum class GroupMethod {
 /// Result of one solve.
 struct SolveResult {
     Eigen::VectorXd f;                    ///< 3n contact forces on the vessel [N], in the order of the prescribed list
-    Eigen::VectorXd d;                    ///< displacement of the model's first `rows` rows [mm] (permuted order)
+    Eigen::VectorXd d;                    ///< displacement [mm] of the rows asked for (permuted order; zero between ranges)
     std::vector<Eigen::Vector3d> group_shift;  ///< translation of each group [mm]
     bool refactored = false;              ///< the Cholesky factor was recomputed (the node set changed)
     double factor_s = 0.0, solve_s = 0.0, smvm_s = 0.0;  ///< time split [s]
@@ -49,9 +58,13 @@ public:
     /// @param[in] rows     how many permuted rows of d to compute (n_active: the working region; #M: all)
     /// @throws NumericalError W_CC is not positive definite (duplicate or degenerate columns)
     SolveResult solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, Eigen::Index rows);
+    /// Same, computing d only on `rows` (e.g. the nodes near the instruments; the SMVM is the cost of a frame).
+    SolveResult solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows);
 
     /// d on rows [first, last) for the forces of the last solve (e.g. the rest of the surface at output rate).
     Eigen::VectorXd deformation(Eigen::Index first, Eigen::Index last) const;
+    /// d on `rows` for the forces of the last solve (vector up to the last range's end, zero between ranges).
+    Eigen::VectorXd deformation(const RowRanges& rows) const;
 
 private:
     struct Impl;
