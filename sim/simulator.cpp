@@ -90,6 +90,7 @@ struct Simulator::Impl {
     PointGrid grid;
     Eigen::MatrixX3d x_grid;  ///< the positions the grid holds (it keeps a pointer to them between frames)
     double cell = 0.5;
+    double update_margin = 0;  ///< effective update margin [mm] (see Scene::update_margin_mm); 0 = whole region
     double t_phys = 0, dt_phys = 0;
     double t_region = -1;  ///< when the whole working region's deformation was last computed (-1: never)
     std::vector<char> fresh;  ///< vertex's d is that of the last solve (updated by it); others lag, up to 1/region_hz
@@ -116,6 +117,9 @@ struct Simulator::Impl {
         for (Eigen::Index f = 0; f < model.surface.F.rows(); ++f)
             sum += (model.surface.X.row(model.surface.F(f, 0)) - model.surface.X.row(model.surface.F(f, 1))).norm();
         if (model.surface.F.rows()) cell = std::max(0.05, sum / static_cast<double>(model.surface.F.rows()));
+        // Everything a frame reads of d must be current: nodes inside the parts (collision), their one-ring
+        // (neighbour push) and the nodes within the approach margin (contact planes).
+        if (scene.update_margin_mm > 0) update_margin = std::max(scene.update_margin_mm, std::max(2.0 * cell, scene.approach_margin_mm) + cell);
         for (const ObstacleSpec& ob : scene.obstacles) {
             Shape os;
             os.kind = Shape::Kind::MESH;
@@ -285,11 +289,11 @@ struct Simulator::Impl {
         // get it now from the last solve's forces (a few rows of the SMVM): collisions and prescribed values then
         // see exactly the deformation a whole-region update would have given them.
         std::vector<int> cand;
-        if (scene.update_margin_mm > 0 && !fresh.empty()) {
+        if (update_margin > 0 && !fresh.empty()) {
             std::vector<char> want(static_cast<size_t>(S), 0);
             for (size_t i = 0; i < ins.size(); ++i) {
                 for (const auto& [part, shape] : parts_of(i)) {
-                    grid.query(shape.bounds().grown(scene.update_margin_mm), cand);  // last frame's grid
+                    grid.query(shape.bounds().grown(update_margin), cand);  // last frame's grid
                     for (int v : cand) want[static_cast<size_t>(v)] = !fresh[static_cast<size_t>(v)];
                 }
             }
@@ -450,7 +454,7 @@ struct Simulator::Impl {
         // Rows to update: the whole region at region_hz, else the nodes near an instrument and the prescribed ones.
         std::vector<char> update(static_cast<size_t>(S), 0);
         RowRanges rows;
-        const bool whole = scene.update_margin_mm <= 0 || t_region < 0 || t - t_region >= 1.0 / scene.region_hz - 1e-9;
+        const bool whole = update_margin <= 0 || t_region < 0 || t - t_region >= 1.0 / scene.region_hz - 1e-9;
         if (whole) {
             t_region = t;
             rows.emplace_back(0, model.n_active);
@@ -458,7 +462,7 @@ struct Simulator::Impl {
         } else {
             for (size_t i = 0; i < ins.size(); ++i) {
                 for (const auto& [part, shape] : parts_of(i)) {
-                    grid.query(shape.bounds().grown(scene.update_margin_mm), cand);
+                    grid.query(shape.bounds().grown(update_margin), cand);
                     for (int v : cand) update[static_cast<size_t>(v)] = 1;
                 }
             }

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <map>
 #include <string>
 
 #include <Eigen/Cholesky>
@@ -16,22 +18,61 @@ double since(std::chrono::steady_clock::time_point t0) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// A factored W_CC for one node set (plus, for groups, the Schur complement S = Bᵀ W⁻¹ B and W⁻¹ B).
+// A factored W_CC for one node set (plus, for groups, the Schur complement S = Bᵀ W⁻¹ B and W⁻¹ B). The factor
+// keeps its own node order: when the set changes by a few nodes it is updated instead of recomputed (a removed
+// node: rank-3 update of the trailing block; added nodes: appended block), O(n²) instead of O(n³).
 template <class T>
 struct Factor {
     using Mat = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
-    std::vector<std::int64_t> key;  // column, group per node
-    std::vector<int> cols;          // 3n columns
-    Eigen::LLT<Mat> llt;
-    Mat WinvB;                      // 3n × 3G
+    using Vec = Eigen::Matrix<T, Eigen::Dynamic, 1>;
+    std::vector<std::int64_t> key;  // n_groups, then column and group per node, in the order of the list
+    std::vector<int> cols;          // 3n columns in the order of the list
+    std::vector<int> node_col;      // per factor position: the node's first column
+    std::vector<int> order;         // per factor position: the node's index in the list
+    Mat L;                          // lower Cholesky factor of W_CC in factor order
+    int updates = 0;                // nodes added or removed since the last full factorisation
+    Mat WinvB;                      // 3n × 3G, factor order
     Eigen::LLT<Mat> schur;          // 3G × 3G
     bool valid = false;
+
+    Vec solve(const Vec& b) const {
+        Vec x = L.template triangularView<Eigen::Lower>().solve(b);
+        L.template triangularView<Eigen::Lower>().transpose().solveInPlace(x);
+        return x;
+    }
+    Mat solve(const Mat& b) const {
+        Mat x = L.template triangularView<Eigen::Lower>().solve(b);
+        L.template triangularView<Eigen::Lower>().transpose().solveInPlace(x);
+        return x;
+    }
 };
+
+// L L^T + w w^T on a lower factor, in place (Givens-like sweep; stable: it only adds).
+template <class Mat, class Vec>
+void rank1_update(Eigen::Block<Mat> L, Vec w) {
+    using T = typename Mat::Scalar;
+    const Eigen::Index m = L.rows();
+    for (Eigen::Index k = 0; k < m; ++k) {
+        const T lkk = L(k, k), wk = w[k];
+        const T r = std::sqrt(lkk * lkk + wk * wk);
+        const T c = r / lkk, sn = wk / lkk;
+        L(k, k) = r;
+        if (k + 1 < m) {
+            auto lk = L.col(k).tail(m - k - 1);
+            auto wt = w.tail(m - k - 1);
+            lk = (lk + sn * wt) / c;
+            wt = c * wt - sn * lk;
+        }
+    }
+}
 
 }  // namespace
 
 struct ContactSolver::Impl {
+    /// Nodes added or removed by updates before the factor is recomputed from scratch (bounds round-off drift).
+    static constexpr int MAX_UPDATES = 256;
     const SimModel& model;
+    int threads = 2;  // of the SMVM
     Factor<float> ff[2];
     Factor<double> fd[2];
     // Last forces, for deformation(): columns and values.
@@ -49,9 +90,81 @@ struct ContactSolver::Impl {
         }
     }
 
-    // Makes `fac` the factor of the listed nodes (restricted by `take`), refactoring when the key changed.
     template <class T>
-    bool prepare(Factor<T>& fac, const std::vector<Prescribed>& p, const std::vector<int>& take, int n_groups) {
+    T w_at(int i, int j) const {
+        const auto& Wm = W<T>();
+        return Wm.data()[static_cast<Eigen::Index>(j) * Wm.rows() + i];
+    }
+
+    template <class T>
+    [[noreturn]] void not_positive_definite(Eigen::Index n3) const {
+        throw NumericalError("contact solve: W_CC (" + std::to_string(n3) + " DOFs) is not positive definite in " +
+                             (std::is_same_v<T, float> ? std::string("float32") : std::string("float64")) +
+                             " (a node prescribed twice, or a fixed node?)");
+    }
+
+    // L of W_CC for fac.node_col, from scratch.
+    template <class T>
+    void full_factor(Factor<T>& fac) const {
+        const Eigen::Index n3 = 3 * static_cast<Eigen::Index>(fac.node_col.size());
+        typename Factor<T>::Mat Wcc(n3, n3);
+        for (Eigen::Index j = 0; j < n3; ++j)
+            for (Eigen::Index i = 0; i < n3; ++i)
+                Wcc(i, j) = w_at<T>(fac.node_col[static_cast<size_t>(i / 3)] + static_cast<int>(i % 3),
+                                    fac.node_col[static_cast<size_t>(j / 3)] + static_cast<int>(j % 3));
+        Eigen::LLT<typename Factor<T>::Mat> llt(Wcc);
+        if (llt.info() != Eigen::Success) not_positive_definite<T>(n3);
+        fac.L = llt.matrixL();
+        fac.updates = 0;
+    }
+
+    // Removes the node at factor position k: L33' L33'ᵀ = L33 L33ᵀ + L32 L32ᵀ, then rows and columns 3k..3k+2 go.
+    template <class T>
+    void remove_node(Factor<T>& fac, Eigen::Index k) const {
+        using Mat = typename Factor<T>::Mat;
+        Mat& L = fac.L;
+        const Eigen::Index n3 = L.rows(), a = 3 * k, m = n3 - a - 3;
+        if (m > 0) {
+            for (int c = 0; c < 3; ++c) {
+                typename Factor<T>::Vec w = L.col(a + c).tail(m);
+                rank1_update<Mat>(L.block(a + 3, a + 3, m, m), w);
+            }
+            L.block(a, 0, m, a) = L.block(a + 3, 0, m, a).eval();     // rows below move up
+            L.block(a, a, m, m) = L.block(a + 3, a + 3, m, m).eval();  // trailing block moves up-left
+        }
+        L.conservativeResize(n3 - 3, n3 - 3);
+        fac.node_col.erase(fac.node_col.begin() + k);
+    }
+
+    // Appends nodes (first columns `add`): L21 = (L11⁻¹ W_12)ᵀ, L22 = chol(W_22 − L21 L21ᵀ).
+    template <class T>
+    bool append_nodes(Factor<T>& fac, const std::vector<int>& add) const {
+        using Mat = typename Factor<T>::Mat;
+        const Eigen::Index n3 = fac.L.rows(), k3 = 3 * static_cast<Eigen::Index>(add.size());
+        auto col_of = [&](Eigen::Index i) {
+            return i < n3 ? fac.node_col[static_cast<size_t>(i / 3)] + static_cast<int>(i % 3)
+                          : add[static_cast<size_t>((i - n3) / 3)] + static_cast<int>((i - n3) % 3);
+        };
+        Mat B(n3, k3), D(k3, k3);
+        for (Eigen::Index j = 0; j < k3; ++j) {
+            for (Eigen::Index i = 0; i < n3; ++i) B(i, j) = w_at<T>(col_of(i), col_of(n3 + j));
+            for (Eigen::Index i = 0; i < k3; ++i) D(i, j) = w_at<T>(col_of(n3 + i), col_of(n3 + j));
+        }
+        if (n3 > 0) fac.L.template triangularView<Eigen::Lower>().solveInPlace(B);  // B = L11⁻¹ W_12
+        Eigen::LLT<Mat> llt(D - B.transpose() * B);
+        if (llt.info() != Eigen::Success) return false;
+        fac.L.conservativeResize(n3 + k3, n3 + k3);
+        fac.L.topRightCorner(n3, k3).setZero();
+        fac.L.bottomLeftCorner(k3, n3) = B.transpose();
+        fac.L.bottomRightCorner(k3, k3) = llt.matrixL();
+        fac.node_col.insert(fac.node_col.end(), add.begin(), add.end());
+        return true;
+    }
+
+    // Makes `fac` the factor of the listed nodes (restricted by `take`). Returns whether the factor changed;
+    // *updated says it was updated rather than recomputed.
+    template <class T>
+    bool prepare(bool* updated, Factor<T>& fac, const std::vector<Prescribed>& p, const std::vector<int>& take, int n_groups) {
         std::vector<std::int64_t> key;
         key.reserve(take.size() * 2 + 1);
         key.push_back(n_groups);
@@ -60,10 +173,8 @@ struct ContactSolver::Impl {
             key.push_back(p[static_cast<size_t>(i)].group);
         }
         if (fac.valid && key == fac.key) return false;
-        fac.valid = false;
-        fac.key = std::move(key);
         const Eigen::Index n3 = 3 * static_cast<Eigen::Index>(take.size());
-        fac.cols.resize(static_cast<size_t>(n3));
+        std::vector<int> cols(static_cast<size_t>(n3));
         for (size_t k = 0; k < take.size(); ++k)
             for (int a = 0; a < 3; ++a) {
                 const int c = p[static_cast<size_t>(take[k])].cols[a];
@@ -71,28 +182,52 @@ struct ContactSolver::Impl {
                     throw InputError("contact solve: column " + std::to_string(c) + " outside the loaded working region (" +
                                      std::to_string(model.n_active) + " columns)");
                 }
-                fac.cols[3 * k + static_cast<size_t>(a)] = c;
+                if (a > 0 && c != cols[3 * k] + a) {
+                    throw InputError("contact solve: a node's columns must be consecutive (x, y, z), got " +
+                                     std::to_string(cols[3 * k]) + ", " + std::to_string(c));
+                }
+                cols[3 * k + static_cast<size_t>(a)] = c;
             }
-        const auto& Wm = W<T>();
-        typename Factor<T>::Mat Wcc(n3, n3);
-        for (Eigen::Index j = 0; j < n3; ++j) {
-            const T* col = Wm.data() + static_cast<Eigen::Index>(fac.cols[static_cast<size_t>(j)]) * Wm.rows();
-            for (Eigen::Index i = 0; i < n3; ++i) Wcc(i, j) = col[fac.cols[static_cast<size_t>(i)]];
+        // Update or recompute the factor: update when a few nodes came or went since a full factorisation.
+        std::map<int, int> wanted;  // first column -> index in take
+        for (size_t k = 0; k < take.size(); ++k) wanted[cols[3 * k]] = static_cast<int>(k);
+        bool done = false;
+        if (fac.valid) {
+            std::vector<Eigen::Index> gone;
+            std::map<int, int> have;
+            for (size_t k = 0; k < fac.node_col.size(); ++k) {
+                have[fac.node_col[k]] = static_cast<int>(k);
+                if (!wanted.count(fac.node_col[k])) gone.push_back(static_cast<Eigen::Index>(k));
+            }
+            std::vector<int> add;
+            for (const auto& [c, k] : wanted)
+                if (!have.count(c)) add.push_back(c);
+            const size_t changes = gone.size() + add.size();
+            if (changes <= std::max<size_t>(4, take.size() / 4) && fac.updates + static_cast<int>(changes) <= MAX_UPDATES) {
+                for (auto it = gone.rbegin(); it != gone.rend(); ++it) remove_node(fac, *it);
+                done = add.empty() || append_nodes(fac, add);
+                if (done) fac.updates += static_cast<int>(changes);
+            }
         }
-        fac.llt.compute(Wcc);
-        if (fac.llt.info() != Eigen::Success) {
-            throw NumericalError("contact solve: W_CC (" + std::to_string(n3) + " DOFs) is not positive definite in " +
-                                 (std::is_same_v<T, float> ? std::string("float32") : std::string("float64")) +
-                                 " (a node prescribed twice, or a fixed node?)");
+        fac.valid = false;
+        if (updated) *updated = done;
+        if (!done) {
+            fac.node_col.clear();
+            for (size_t k = 0; k < take.size(); ++k) fac.node_col.push_back(cols[3 * k]);
+            full_factor(fac);
         }
+        fac.key = std::move(key);
+        fac.cols = std::move(cols);
+        fac.order.resize(fac.node_col.size());
+        for (size_t k = 0; k < fac.node_col.size(); ++k) fac.order[k] = wanted.at(fac.node_col[k]);
         if (n_groups > 0) {
             typename Factor<T>::Mat B = Factor<T>::Mat::Zero(n3, 3 * n_groups);
-            for (size_t k = 0; k < take.size(); ++k) {
-                const int g = p[static_cast<size_t>(take[k])].group;
+            for (size_t k = 0; k < fac.order.size(); ++k) {
+                const int g = p[static_cast<size_t>(take[static_cast<size_t>(fac.order[k])])].group;
                 if (g >= 0)
                     for (int a = 0; a < 3; ++a) B(3 * static_cast<Eigen::Index>(k) + a, 3 * g + a) = T(1);
             }
-            fac.WinvB = fac.llt.solve(B);
+            fac.WinvB = fac.solve(B);
             typename Factor<T>::Mat S = B.transpose() * fac.WinvB;
             fac.schur.compute(S);
             if (fac.schur.info() != Eigen::Success) {
@@ -103,12 +238,16 @@ struct ContactSolver::Impl {
         return true;
     }
 
-    // f for the nodes `take` with right-hand side u (relative to groups), groups free (exact) or absent.
+    // f for the nodes `take` with right-hand side u (relative to groups), groups free (exact) or absent. u and f
+    // are in the order of the list; the factor works in its own order.
     template <class T>
-    Eigen::Matrix<T, Eigen::Dynamic, 1> forces(const Factor<T>& fac, const Eigen::Matrix<T, Eigen::Dynamic, 1>& u,
+    Eigen::Matrix<T, Eigen::Dynamic, 1> forces(const Factor<T>& fac, const Eigen::Matrix<T, Eigen::Dynamic, 1>& u_list,
                                                 int n_groups, std::vector<Eigen::Vector3d>* shift) const {
         using Vec = Eigen::Matrix<T, Eigen::Dynamic, 1>;
-        Vec f = fac.llt.solve(u);
+        Vec u(u_list.size());
+        for (size_t k = 0; k < fac.order.size(); ++k)
+            u.template segment<3>(3 * static_cast<Eigen::Index>(k)) = u_list.template segment<3>(3 * static_cast<Eigen::Index>(fac.order[k]));
+        Vec f = fac.solve(u);
         if (n_groups > 0) {
             // W f = u + B r, Bᵀ f = 0  →  r = −S⁻¹ Bᵀ W⁻¹ u, f = W⁻¹ u + W⁻¹ B r.
             const Vec r = -fac.schur.solve(fac.WinvB.transpose() * u);
@@ -119,21 +258,52 @@ struct ContactSolver::Impl {
                     (*shift)[static_cast<size_t>(g)] = r.template segment<3>(3 * g).template cast<double>();
             }
         }
-        return f;
+        Vec f_list(f.size());
+        for (size_t k = 0; k < fac.order.size(); ++k)
+            f_list.template segment<3>(3 * static_cast<Eigen::Index>(fac.order[k])) = f.template segment<3>(3 * static_cast<Eigen::Index>(k));
+        return f_list;
     }
 
     // d = Σ_j W(:, col_j) f_j on the rows of `ranges` (sorted, disjoint [first, last) pairs); the vector runs
-    // from row 0 to the last range's end, zero outside the ranges.
+    // from row 0 to the last range's end, zero outside the ranges. Memory-bound: with `threads` > 1 and enough
+    // work the rows are split between threads at 16-row boundaries (each row's sum is the same either way).
     template <class T>
     Eigen::VectorXd smvm(const std::vector<int>& cols, const Eigen::Matrix<T, Eigen::Dynamic, 1>& f, const RowRanges& ranges) const {
         const auto& Wm = W<T>();
         const Eigen::Index n = ranges.empty() ? 0 : ranges.back().second;
         Eigen::Matrix<T, Eigen::Dynamic, 1> d = Eigen::Matrix<T, Eigen::Dynamic, 1>::Zero(n);
-        for (size_t j = 0; j < cols.size(); ++j) {
-            const T fj = f[static_cast<Eigen::Index>(j)];
-            if (fj == T(0)) continue;
-            const auto col = Wm.col(cols[j]);
-            for (const auto& [a, b] : ranges) d.segment(a, b - a).noalias() += fj * col.segment(a, b - a);
+        Eigen::Index total = 0;
+        for (const auto& [a, b] : ranges) total += b - a;
+        std::vector<RowRanges> parts(1, ranges);
+        const int nt = total * static_cast<Eigen::Index>(cols.size()) >= 200000 ? std::max(1, threads) : 1;
+        if (nt > 1) {  // split the rows into nt parts of about equal size
+            parts.assign(static_cast<size_t>(nt), {});
+            const Eigen::Index share = (total + nt - 1) / nt;
+            Eigen::Index filled = 0;
+            size_t t = 0;
+            for (auto [a, b] : ranges) {
+                while (a < b) {
+                    Eigen::Index take = std::min(b - a, share - filled);
+                    if (a + take < b && t + 1 < parts.size()) take = std::max<Eigen::Index>(16, (a + take) / 16 * 16 - a);
+                    take = std::min(take, b - a);
+                    parts[t].emplace_back(a, a + take);
+                    filled += take;
+                    a += take;
+                    if (filled >= share && t + 1 < parts.size()) {
+                        ++t;
+                        filled = 0;
+                    }
+                }
+            }
+        }
+#pragma omp parallel for num_threads(nt) schedule(static, 1) if (nt > 1)
+        for (int t = 0; t < static_cast<int>(parts.size()); ++t) {
+            for (size_t j = 0; j < cols.size(); ++j) {
+                const T fj = f[static_cast<Eigen::Index>(j)];
+                if (fj == T(0)) continue;
+                const auto col = Wm.col(cols[j]);
+                for (const auto& [a, b] : parts[static_cast<size_t>(t)]) d.segment(a, b - a).noalias() += fj * col.segment(a, b - a);
+            }
         }
         return d.template cast<double>();
     }
@@ -173,7 +343,7 @@ struct ContactSolver::Impl {
         Vec f;
         auto t0 = std::chrono::steady_clock::now();
         if (!two) {
-            res.refactored = prepare(fac, p, all, n_groups);
+            res.refactored = prepare(&res.factor_updated, fac, p, all, n_groups);
             res.factor_s = since(t0);
             t0 = std::chrono::steady_clock::now();
             f = forces(fac, rhs(all, nullptr), n_groups, &res.group_shift);
@@ -183,7 +353,7 @@ struct ContactSolver::Impl {
             bool r1 = false;
             Vec f1;
             if (!free_only.empty()) {
-                r1 = prepare(fac1, p, free_only, 0);
+                r1 = prepare(nullptr, fac1, p, free_only, 0);
                 f1 = forces(fac1, rhs(free_only, nullptr), 0, nullptr);
             }
             std::vector<int> count(static_cast<size_t>(n_groups), 0);
@@ -202,7 +372,7 @@ struct ContactSolver::Impl {
             }
             for (int g = 0; g < n_groups; ++g)
                 if (count[static_cast<size_t>(g)]) res.group_shift[static_cast<size_t>(g)] /= count[static_cast<size_t>(g)];
-            const bool r2 = prepare(fac, p, all, 0);
+            const bool r2 = prepare(&res.factor_updated, fac, p, all, 0);
             res.refactored = r1 || r2;
             res.factor_s = since(t0);
             t0 = std::chrono::steady_clock::now();
@@ -239,6 +409,8 @@ RowRanges rows_of_vertices(const SimModel& model, const std::vector<int>& vertic
 
 ContactSolver::ContactSolver(const SimModel& model) : m_impl(std::make_unique<Impl>(model)) {}
 ContactSolver::~ContactSolver() = default;
+
+void ContactSolver::set_threads(int n) { m_impl->threads = std::max(1, n); }
 
 SolveResult ContactSolver::solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, Eigen::Index rows) {
     const Eigen::Index M = m_impl->model.dof_node.size();

@@ -161,6 +161,65 @@ TEST_P(SolverVsFem, ExactGroupHasZeroNetForceAndMatchesFem) {
     EXPECT_GT(net2.norm(), 10 * net.norm());
 }
 
+TEST_P(SolverVsFem, FactorUpdatedForAChangingContactSetStaysExact) {
+    // A contact set that changes by a few nodes each frame (some removed from the middle of the factor, some
+    // added) with a deposited clip's group: the factor is updated, not recomputed, and every frame's forces
+    // and deformation equal a from-scratch solve; past MAX_UPDATES changes it is recomputed, and the last
+    // frame still matches the full FEM solve.
+    const Precision prec = GetParam();
+    test::TempDir d("solver4");
+    const Loaded l = load_tube(prec, d);
+    const sim::SimModel& m = l.m;
+    const auto& s = m.surface;
+    std::vector<std::pair<double, int>> by_dist;
+    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
+    for (Eigen::Index v = 0; v < s.size(); ++v) by_dist.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
+    std::sort(by_dist.begin(), by_dist.end());
+    ASSERT_GT(by_dist.size(), 200u);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> U(-0.1, 0.1);
+    auto node = [&](int v, int group) {
+        sim::Prescribed q;
+        q.cols = s.row.row(v).transpose();
+        q.u = Eigen::Vector3d(U(rng), U(rng), U(rng));
+        q.group = group;
+        return q;
+    };
+    std::vector<int> held, free_nodes;  // held: a clip's 6 nodes (group 0); free: 60 contacts, sliding outward
+    for (int k = 0; k < 6; ++k) held.push_back(by_dist[static_cast<size_t>(k)].second);
+    for (int k = 6; k < 66; ++k) free_nodes.push_back(by_dist[static_cast<size_t>(k)].second);
+    size_t next = 66;
+    sim::ContactSolver solver(m);
+    int updated = 0, recomputed = 0;
+    const double tol = prec == Precision::FLOAT64 ? 1e-9 : 2e-4;
+    double worst = 0;
+    std::vector<sim::Prescribed> p;
+    sim::SolveResult r;
+    for (int frame = 0; frame < 90; ++frame) {
+        if (frame > 0) {  // two nodes leave (from anywhere in the list), two new ones come
+            for (int k = 0; k < 2; ++k) free_nodes.erase(free_nodes.begin() + static_cast<long>(rng() % free_nodes.size()));
+            for (int k = 0; k < 2; ++k) free_nodes.push_back(by_dist[next++].second);
+        }
+        std::vector<int> verts = held;
+        verts.insert(verts.end(), free_nodes.begin(), free_nodes.end());
+        std::sort(verts.begin(), verts.end());  // the simulator lists nodes by vertex
+        p.clear();
+        for (int v : verts) p.push_back(node(v, std::find(held.begin(), held.end(), v) != held.end() ? 0 : -1));
+        r = solver.solve(p, 1, sim::GroupMethod::EXACT, m.dof_node.size());
+        updated += r.factor_updated;
+        recomputed += r.refactored && !r.factor_updated;
+        sim::ContactSolver fresh(m);
+        const sim::SolveResult ref = fresh.solve(p, 1, sim::GroupMethod::EXACT, m.dof_node.size());
+        worst = std::max(worst, (r.f - ref.f).norm() / ref.f.norm());
+        ASSERT_LT((r.f - ref.f).norm(), tol * ref.f.norm()) << "frame " << frame;
+        ASSERT_LT(rel(r.d, ref.d), tol) << "frame " << frame;
+    }
+    EXPECT_GT(updated, 80);     // 4 changes per frame: updated, and recomputed after 256 changes
+    EXPECT_GE(recomputed, 2);   // the first frame, and once the update budget is spent
+    EXPECT_LT(rel(r.d, reference(l.c, m, p, r.group_shift)), prec == Precision::FLOAT64 ? 1e-8 : 1e-4);
+    RecordProperty("worst_relative_force_difference", std::to_string(worst));
+}
+
 INSTANTIATE_TEST_SUITE_P(Precisions, SolverVsFem, ::testing::Values(Precision::FLOAT64, Precision::FLOAT32),
                          [](const auto& i) { return std::string(i.param == Precision::FLOAT64 ? "double" : "float"); });
 

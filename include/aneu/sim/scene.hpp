@@ -83,10 +83,11 @@ struct Scene {
     double neighbour_weight = 0.5;        ///< one-ring neighbours get this × their contact neighbours' push (0: off)
     double release_tolerance_mm = 0.02;   ///< a contact node stays held while within this gap of the shape
     double relax_time_s = 0.05;           ///< released nodes relax to rest with this time constant
-    /// Each physics frame updates the deformation of the region's nodes within this distance of an instrument
-    /// part (and of every prescribed node); the whole region is updated at region_hz. 0: the whole region every
-    /// frame. It must exceed the distance a tool moves in 1/region_hz (30 mm/s at 50 Hz: 0.6 mm).
-    double update_margin_mm = 3.0;
+    /// Each physics frame computes the deformation of the region's nodes within this distance of an instrument
+    /// part and of every prescribed node; the whole region at region_hz (for display and far nodes). Nodes
+    /// that lag and come within it are first brought up to date from the last forces, so what a frame reads is
+    /// exact. At least max(2 edges, approach_margin_mm) + 1 edge is used. 0: the whole region every frame.
+    double update_margin_mm = 1.0;
     GroupMethod clip_method = GroupMethod::EXACT;
     JawPush jaw_push = JawPush::SHAPE;
     // haptics (contact-plane method)

@@ -39,7 +39,8 @@ struct SolveResult {
     Eigen::VectorXd f;                    ///< 3n contact forces on the vessel [N], in the order of the prescribed list
     Eigen::VectorXd d;                    ///< displacement [mm] of the rows asked for (permuted order; zero between ranges)
     std::vector<Eigen::Vector3d> group_shift;  ///< translation of each group [mm]
-    bool refactored = false;              ///< the Cholesky factor was recomputed (the node set changed)
+    bool refactored = false;              ///< the Cholesky factor changed (the node set changed)
+    bool factor_updated = false;          ///< it was updated for the nodes that came and went, not recomputed
     double factor_s = 0.0, solve_s = 0.0, smvm_s = 0.0;  ///< time split [s]
 };
 
@@ -61,6 +62,8 @@ public:
     /// Same, computing d only on `rows` (e.g. the nodes near the instruments; the SMVM is the cost of a frame).
     SolveResult solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows);
 
+    /// Threads of the SMVM [2]: it is bound by memory bandwidth, which one core does not saturate here.
+    void set_threads(int n);
     /// d on rows [first, last) for the forces of the last solve (e.g. the rest of the surface at output rate).
     Eigen::VectorXd deformation(Eigen::Index first, Eigen::Index last) const;
     /// d on `rows` for the forces of the last solve (vector up to the last range's end, zero between ranges).
