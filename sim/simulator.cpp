@@ -288,11 +288,13 @@ struct Simulator::Impl {
         // Vertices coming within the update margin of an instrument whose d lags (not updated by the last solve)
         // get it now from the last solve's forces (a few rows of the SMVM): collisions and prescribed values then
         // see exactly the deformation a whole-region update would have given them.
+        std::vector<std::vector<std::pair<int, Shape>>> parts(ins.size());  // this frame's instrument parts
+        for (size_t i = 0; i < ins.size(); ++i) parts[i] = parts_of(i);
         std::vector<int> cand;
         if (update_margin > 0 && !fresh.empty()) {
             std::vector<char> want(static_cast<size_t>(S), 0);
             for (size_t i = 0; i < ins.size(); ++i) {
-                for (const auto& [part, shape] : parts_of(i)) {
+                for (const auto& [part, shape] : parts[i]) {
                     grid.query(shape.bounds().grown(update_margin), cand);  // last frame's grid
                     for (int v : cand) want[static_cast<size_t>(v)] = !fresh[static_cast<size_t>(v)];
                 }
@@ -323,7 +325,7 @@ struct Simulator::Impl {
         std::vector<Eigen::Vector3d> tips(ins.size());
         for (size_t i = 0; i < ins.size(); ++i) {
             tips[i] = ins[i].in.pose.position;
-            for (const auto& [part, shape] : parts_of(i)) {
+            for (const auto& [part, shape] : parts[i]) {
                 grid.query(shape.bounds().grown(scene.release_tolerance_mm), cand);
                 for (int v : cand) {
                     const size_t s = static_cast<size_t>(v);
@@ -461,7 +463,7 @@ struct Simulator::Impl {
             for (Eigen::Index v = 0; v < S; ++v) update[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)];
         } else {
             for (size_t i = 0; i < ins.size(); ++i) {
-                for (const auto& [part, shape] : parts_of(i)) {
+                for (const auto& [part, shape] : parts[i]) {
                     grid.query(shape.bounds().grown(update_margin), cand);
                     for (int v : cand) update[static_cast<size_t>(v)] = 1;
                 }

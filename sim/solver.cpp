@@ -69,8 +69,9 @@ void rank1_update(Eigen::Block<Mat> L, Vec w) {
 }  // namespace
 
 struct ContactSolver::Impl {
-    /// Nodes added or removed by updates before the factor is recomputed from scratch (bounds round-off drift).
-    static constexpr int MAX_UPDATES = 256;
+    /// Nodes added or removed by updates before the factor is recomputed from scratch anyway (a backstop: the
+    /// residual check of every solve recomputes it when it drifts).
+    static constexpr int MAX_UPDATES = 4096;
     const SimModel& model;
     int threads = 2;  // of the SMVM
     Factor<float> ff[2];
@@ -118,22 +119,36 @@ struct ContactSolver::Impl {
         fac.updates = 0;
     }
 
-    // Removes the node at factor position k: L33' L33'ᵀ = L33 L33ᵀ + L32 L32ᵀ, then rows and columns 3k..3k+2 go.
+    // Removes the nodes at factor positions `gone` (ascending): for each, L33' L33'ᵀ = L33 L33ᵀ + L32 L32ᵀ on the
+    // block after it (in place, later removed nodes included), then one compaction drops their rows and columns.
     template <class T>
-    void remove_node(Factor<T>& fac, Eigen::Index k) const {
+    void remove_nodes(Factor<T>& fac, const std::vector<Eigen::Index>& gone) const {
         using Mat = typename Factor<T>::Mat;
+        if (gone.empty()) return;
         Mat& L = fac.L;
-        const Eigen::Index n3 = L.rows(), a = 3 * k, m = n3 - a - 3;
-        if (m > 0) {
-            for (int c = 0; c < 3; ++c) {
+        const Eigen::Index n3 = L.rows();
+        for (Eigen::Index k : gone) {
+            const Eigen::Index a = 3 * k, m = n3 - a - 3;
+            for (int c = 0; c < 3 && m > 0; ++c) {
                 typename Factor<T>::Vec w = L.col(a + c).tail(m);
                 rank1_update<Mat>(L.block(a + 3, a + 3, m, m), w);
             }
-            L.block(a, 0, m, a) = L.block(a + 3, 0, m, a).eval();     // rows below move up
-            L.block(a, a, m, m) = L.block(a + 3, a + 3, m, m).eval();  // trailing block moves up-left
         }
-        L.conservativeResize(n3 - 3, n3 - 3);
-        fac.node_col.erase(fac.node_col.begin() + k);
+        std::vector<char> dead(fac.node_col.size(), 0);
+        for (Eigen::Index k : gone) dead[static_cast<size_t>(k)] = 1;
+        std::vector<Eigen::Index> keep;
+        std::vector<int> cols;
+        for (size_t k = 0; k < dead.size(); ++k) {
+            if (dead[k]) continue;
+            for (int c = 0; c < 3; ++c) keep.push_back(3 * static_cast<Eigen::Index>(k) + c);
+            cols.push_back(fac.node_col[k]);
+        }
+        const auto m = static_cast<Eigen::Index>(keep.size());
+        Mat Lk = Mat::Zero(m, m);
+        for (Eigen::Index j = 0; j < m; ++j)
+            for (Eigen::Index i = j; i < m; ++i) Lk(i, j) = L(keep[static_cast<size_t>(i)], keep[static_cast<size_t>(j)]);
+        L.swap(Lk);
+        fac.node_col = std::move(cols);
     }
 
     // Appends nodes (first columns `add`): L21 = (L11⁻¹ W_12)ᵀ, L22 = chol(W_22 − L21 L21ᵀ).
@@ -203,8 +218,18 @@ struct ContactSolver::Impl {
             for (const auto& [c, k] : wanted)
                 if (!have.count(c)) add.push_back(c);
             const size_t changes = gone.size() + add.size();
-            if (changes <= std::max<size_t>(4, take.size() / 4) && fac.updates + static_cast<int>(changes) <= MAX_UPDATES) {
-                for (auto it = gone.rbegin(); it != gone.rend(); ++it) remove_node(fac, *it);
+            // Time estimates: from scratch, gather and (3n)³/3 flops at level-3 speed; update: three rank-1
+            // updates of the trailing block per removed node (level-2 speed), the appended block, one compaction.
+            const double n_new = 3.0 * static_cast<double>(take.size()), kept = n_new - 3.0 * static_cast<double>(add.size());
+            const double k3 = 3.0 * static_cast<double>(add.size());
+            double update_flops = 4.0 * (kept * kept * k3 + k3 * k3 * kept + k3 * k3 * k3 / 3.0) + 2.0 * kept * kept;
+            for (Eigen::Index g : gone) {
+                const double m = 3.0 * static_cast<double>(fac.node_col.size() - static_cast<size_t>(g) - 1);
+                update_flops += 4.0 * 4.5 * m * m;  // level 2: about 4 times slower per flop
+            }
+            if (update_flops <= n_new * n_new * n_new / 3.0 + 4.0 * n_new * n_new &&
+                fac.updates + static_cast<int>(changes) <= MAX_UPDATES) {
+                remove_nodes(fac, gone);
                 done = add.empty() || append_nodes(fac, add);
                 if (done) fac.updates += static_cast<int>(changes);
             }
@@ -309,7 +334,7 @@ struct ContactSolver::Impl {
     }
 
     template <class T>
-    SolveResult run(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows) {
+    SolveResult run(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows, bool retried = false) {
         using Vec = Eigen::Matrix<T, Eigen::Dynamic, 1>;
         SolveResult res;
         Factor<T>* facs = nullptr;
@@ -385,6 +410,35 @@ struct ContactSolver::Impl {
         res.f = last_f;
         res.d = smvm<T>(fac.cols, f, rows);
         res.smvm_s = since(t0);
+        // The prescribed rows of d must reproduce u (W_CC f = u): a free residual check when they were computed.
+        // An updated factor that drifted past the tolerance is recomputed and the frame solved again.
+        double r_max = 0, u_max = 0;
+        bool all_in = true;
+        for (size_t i = 0; i < p.size() && all_in; ++i) {
+            const Prescribed& q = p[i];
+            Eigen::Vector3d u = q.u;
+            if (q.group >= 0) u += res.group_shift[static_cast<size_t>(q.group)];
+            for (int a = 0; a < 3; ++a) {
+                const Eigen::Index row = q.cols[a];
+                const auto it = std::upper_bound(rows.begin(), rows.end(), row, [](Eigen::Index v, const auto& r) { return v < r.second; });
+                if (it == rows.end() || row < it->first) {
+                    all_in = false;
+                    break;
+                }
+                r_max = std::max(r_max, std::abs(res.d[row] - u[a]));
+                u_max = std::max(u_max, std::abs(u[a]));
+            }
+        }
+        res.residual = all_in && u_max > 0 ? r_max / u_max : -1.0;
+        const double tol = std::is_same_v<T, float> ? 1e-3 : 1e-9;
+        if (res.residual > tol && !retried && fac.updates > 0) {
+            fac.valid = false;  // recompute from scratch, then this frame again
+            if (method == GroupMethod::TWO_SOLVE) facs[1].valid = false;
+            SolveResult again = run<T>(p, n_groups, method, rows, true);
+            again.factor_s += res.factor_s + res.solve_s + res.smvm_s;
+            again.recomputed_for_residual = true;
+            return again;
+        }
         return res;
     }
 };

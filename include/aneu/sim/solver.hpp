@@ -41,6 +41,9 @@ struct SolveResult {
     std::vector<Eigen::Vector3d> group_shift;  ///< translation of each group [mm]
     bool refactored = false;              ///< the Cholesky factor changed (the node set changed)
     bool factor_updated = false;          ///< it was updated for the nodes that came and went, not recomputed
+    /// max |d − u| / max |u| over the prescribed rows (W_CC f = u), when d covers them; −1 otherwise
+    double residual = -1.0;
+    bool recomputed_for_residual = false; ///< an updated factor had drifted: recomputed and solved again
     double factor_s = 0.0, solve_s = 0.0, smvm_s = 0.0;  ///< time split [s]
 };
 
