@@ -289,7 +289,17 @@ struct Simulator::Impl {
         // get it now from the last solve's forces (a few rows of the SMVM): collisions and prescribed values then
         // see exactly the deformation a whole-region update would have given them.
         std::vector<std::vector<std::pair<int, Shape>>> parts(ins.size());  // this frame's instrument parts
-        for (size_t i = 0; i < ins.size(); ++i) parts[i] = parts_of(i);
+        std::vector<Eigen::Vector3d> tips(ins.size());
+        for (size_t i = 0; i < ins.size(); ++i) {
+            parts[i] = parts_of(i);
+            tips[i] = ins[i].in.pose.position;
+        }
+        // Collision detection runs on copies of what the haptic thread may change (node states through clip and
+        // suction actions), without the lock: the haptic loop is not kept waiting for it. d, the grid and the
+        // solver belong to this thread (d is written under the lock, for the output thread).
+        const std::vector<NodeState> st_seen = st;
+        const std::vector<int> owner_seen = owner;
+        if (mx) lock.unlock();
         std::vector<int> cand;
         if (update_margin > 0 && !fresh.empty()) {
             std::vector<char> want(static_cast<size_t>(S), 0);
@@ -305,6 +315,8 @@ struct Simulator::Impl {
             if (!lagging.empty()) {
                 const RowRanges r = rows_of_vertices(model, lagging);
                 const Eigen::VectorXd dr = solver.deformation(r);
+                std::unique_lock<std::mutex> write;
+                if (mx) write = std::unique_lock<std::mutex>(*mx);
                 for (int v : lagging) {
                     for (int ax = 0; ax < 3; ++ax) d(v, ax) = dr[sf.row(v, ax)];
                     fresh[static_cast<size_t>(v)] = 1;
@@ -315,16 +327,14 @@ struct Simulator::Impl {
         const Eigen::MatrixX3d& x = x_grid;
         std::vector<char> candidate(static_cast<size_t>(S), 0);
         for (Eigen::Index v = 0; v < S; ++v)
-            candidate[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)] && st[static_cast<size_t>(v)] != NodeState::HELD;
+            candidate[static_cast<size_t>(v)] = in_region[static_cast<size_t>(v)] && st_seen[static_cast<size_t>(v)] != NodeState::HELD;
         grid.build(x, cell, &candidate);
         // New contacts: depth per vertex and part.
         std::vector<double> depth(static_cast<size_t>(S), 0.0);
         std::vector<Eigen::Vector3d> push_dir(static_cast<size_t>(S), Eigen::Vector3d::Zero());
         std::vector<int> hit(static_cast<size_t>(S), -1);
         std::vector<char> kept(static_cast<size_t>(S), 0);
-        std::vector<Eigen::Vector3d> tips(ins.size());
         for (size_t i = 0; i < ins.size(); ++i) {
-            tips[i] = ins[i].in.pose.position;
             for (const auto& [part, shape] : parts[i]) {
                 grid.query(shape.bounds().grown(scene.release_tolerance_mm), cand);
                 for (int v : cand) {
@@ -352,14 +362,15 @@ struct Simulator::Impl {
                             push_dir[s] = dir;
                             hit[s] = part;
                         }
-                    } else if (sd < scene.release_tolerance_mm && (st[s] == NodeState::CONTACT || st[s] == NodeState::STUCK) &&
-                               owner[s] == part) {
+                    } else if (sd < scene.release_tolerance_mm && (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::STUCK) &&
+                               owner_seen[s] == part) {
                         kept[s] = 1;
                     }
                 }
             }
         }
-        // Update node states.
+        if (mx) lock.lock();
+        // Update node states (an action of the haptic thread meanwhile wins: a held node stays held).
         const double decay = std::exp(-dt / scene.relax_time_s);
         for (Eigen::Index v = 0; v < S; ++v) {
             const size_t s = static_cast<size_t>(v);
@@ -453,6 +464,7 @@ struct Simulator::Impl {
         fs.prescribed_nodes = static_cast<int>(p.size());
         const std::vector<int> vertices = last_vertices;
         const GroupMethod method = scene.clip_method;
+        if (mx) lock.unlock();  // the rows to update and the solve run while the haptic loop goes on
         // Rows to update: the whole region at region_hz, else the nodes near an instrument and the prescribed ones.
         std::vector<char> update(static_cast<size_t>(S), 0);
         RowRanges rows;
@@ -476,7 +488,6 @@ struct Simulator::Impl {
         }
         fs.updated_rows = 0;
         for (const auto& [a0, b0] : rows) fs.updated_rows += static_cast<int>(b0 - a0);
-        if (mx) lock.unlock();  // the solve runs while the haptic loop goes on
         SolveResult res = solver.solve(p, static_cast<int>(group_of_clip.size()), method, rows);
         if (mx) lock.lock();
         last = std::move(res);
@@ -524,7 +535,7 @@ struct Simulator::Impl {
             if (hit[q] >= 0) touching[q] = hit[q];
             else if ((kept[q] && st[q] == NodeState::CONTACT) || st[q] == NodeState::STUCK) touching[q] = owner[q];
         }
-        update_areas(touching);
+        update_areas(touching, parts);
         t_phys = t;
         ++a.frames;
         return fs;
@@ -535,14 +546,14 @@ struct Simulator::Impl {
     // within 1.5 mm; an area that no node touches any more lives on while the part is still below its plane
     // (the node set of a sliding tool flickers, its plane must not), and fades out over one physics period
     // once the part is above it.
-    void update_areas(const std::vector<int>& touching) {
+    void update_areas(const std::vector<int>& touching, const std::vector<std::vector<std::pair<int, Shape>>>& parts) {
         const SimSurface& sf = model.surface;
         std::map<int, std::vector<int>> by_part;
         for (Eigen::Index v = 0; v < S; ++v)
             if (touching[static_cast<size_t>(v)] >= 0) by_part[touching[static_cast<size_t>(v)]].push_back(static_cast<int>(v));
-        std::map<int, Shape> shapes;
-        for (size_t i = 0; i < ins.size(); ++i)
-            for (auto& [part, sh] : parts_of(i)) shapes.emplace(part, std::move(sh));
+        std::map<int, Shape> shapes;  // the parts as this frame's collision saw them
+        for (const auto& pi : parts)
+            for (const auto& [part, sh] : pi) shapes.emplace(part, sh);
         // A part that touches no node yet but is within the approach margin of the surface gets the plane of
         // its nearest node and that node's one-ring now, so that contact starts on the plane at the haptic
         // rate (the force grows from zero) instead of when a node is first found inside the part.
@@ -822,6 +833,7 @@ void Simulator::apply_script(double t_prev, double t) {
 }
 FrameStats Simulator::physics_step(double t, std::mutex* mx) { return m_impl->physics_step(t, mx); }
 const std::vector<Eigen::Vector3d>& Simulator::haptic_step(double t) { return m_impl->haptic_step(t); }
+void Simulator::set_solver_threads(int n) { m_impl->solver.set_threads(n); }
 Eigen::MatrixX3d Simulator::deformed_surface(bool region_only) { return m_impl->deformed(region_only); }
 const std::vector<Clip>& Simulator::clips() const { return m_impl->clips; }
 Assessment Simulator::assess() { return m_impl->assess(); }

@@ -86,6 +86,8 @@ public:
     FrameStats physics_step(double t, std::mutex* mx = nullptr);
     /// Haptic force on each instrument at time t by the contact-plane method (cheap; the haptic rate).
     /// Also accumulates the force/velocity assessment.
+    /// Threads of the deformation SMVM (default 2). The threaded runner leaves a core to the haptic loop.
+    void set_solver_threads(int n);
     const std::vector<Eigen::Vector3d>& haptic_step(double t);
 
     /// Deformed positions of the simulated surface: region rows from the last physics step; the rest
@@ -115,8 +117,15 @@ struct RunOptions {
 /// @return the assessment
 Assessment run_scene(Simulator& sim, const RunOptions& opt);
 
+/// Timing of the haptic loop in threaded mode: wall-clock time of every tick and how long its step took.
+struct HapticTiming {
+    std::vector<double> tick_s;  ///< start of each tick [s]
+    std::vector<double> step_s;  ///< duration of each tick's input + force computation [s]
+};
+
 /// Writes the assessment as JSON and a readable summary (report path; the summary goes to path + ".txt").
+/// `haptic` (threaded runs) adds the haptic loop's rate, period percentiles and step times.
 void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
-                  const std::vector<FrameStats>& frames);
+                  const std::vector<FrameStats>& frames, const HapticTiming* haptic = nullptr);
 
 }  // namespace aneu::sim
