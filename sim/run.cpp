@@ -285,8 +285,12 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             }
             F = sim.haptic_step(t);
             hlog.line(t, F);
+            const auto to = std::chrono::steady_clock::now();
             if (n % log_every == 0) log.line(last, t, F, sim.clips());
-            if (series.on() && series_every && n % series_every == 0) series.add(t, sim.deformed_surface(), sim.model().surface.X, all_jaws(sim));
+            if (series.on() && series_every && n % series_every == 0) {
+                series.add(t, sim.deformed_surface(), sim.model().surface.X, all_jaws(sim));
+                htime.output_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - to).count());
+            }
             flush_messages();
             ++n;
         };
@@ -385,7 +389,9 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                         x = sim.deformed_surface(true);  // region rows: the solver belongs to the physics thread
                         jaws = all_jaws(sim);
                     }
+                    const double to = now();
                     series.add(t, x, sim.model().surface.X, jaws);
+                    htime.output_s.push_back(now() - to);
                     next_series += sp;
                 }
                 std::this_thread::sleep_for(std::chrono::microseconds(500));
@@ -439,7 +445,7 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
     log.out.finish();
     hlog.out.finish();
     series.finish();
-    if (!sc.report.empty()) write_report(sc.report, sc, sim.model(), a, frames, opt.deterministic ? nullptr : &htime);
+    if (!sc.report.empty()) write_report(sc.report, sc, sim.model(), a, frames, &htime);
     return a;
 }
 
@@ -487,6 +493,16 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                        {"factorisation", stats([](const FrameStats& f) { return f.factor_s; })},
                        {"solve", stats([](const FrameStats& f) { return f.solve_s; })},
                        {"smvm", stats([](const FrameStats& f) { return f.smvm_s; })}};
+    if (haptic && !haptic->output_s.empty()) {
+        std::vector<double> v;
+        for (double x : haptic->output_s) v.push_back(1e3 * x);
+        std::sort(v.begin(), v.end());
+        double sum = 0;
+        for (double x : v) sum += x;
+        j["time_split"]["output_series_frame"] = {{"mean_ms", sum / static_cast<double>(v.size())},
+                                                  {"p95_ms", v[std::min(v.size() - 1, static_cast<size_t>(0.95 * static_cast<double>(v.size())))]},
+                                                  {"max_ms", v.back()}};
+    }
     std::string haptic_line;
     if (haptic && haptic->tick_s.size() > 2) {
         std::vector<double> period, step = haptic->step_s;

@@ -117,14 +117,16 @@ struct RunOptions {
 /// @return the assessment
 Assessment run_scene(Simulator& sim, const RunOptions& opt);
 
-/// Timing of the haptic loop in threaded mode: wall-clock time of every tick and how long its step took.
+/// Timing of a run: the haptic loop's ticks (threaded mode) and the output of each series frame.
 struct HapticTiming {
-    std::vector<double> tick_s;  ///< start of each tick [s]
-    std::vector<double> step_s;  ///< duration of each tick's input + force computation [s]
+    std::vector<double> tick_s;    ///< start of each haptic tick [s] (threaded mode)
+    std::vector<double> step_s;    ///< duration of each tick's input + force computation [s]
+    std::vector<double> output_s;  ///< writing one frame of the surface series (and the log line with it) [s]
 };
 
 /// Writes the assessment as JSON and a readable summary (report path; the summary goes to path + ".txt").
-/// `haptic` (threaded runs) adds the haptic loop's rate, period percentiles and step times.
+/// `haptic` adds the output time per series frame and (threaded runs) the haptic loop's rate, period
+/// percentiles and step times.
 void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
                   const std::vector<FrameStats>& frames, const HapticTiming* haptic = nullptr);
 
