@@ -488,6 +488,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["physics_frames"] = a.frames;
     j["haptic_ticks"] = a.haptic_ticks;
     j["refactorisations"] = refactors;
+    j["wcc_condition_estimate_max"] = a.max_condition_estimate;
     j["load_s"] = model.load_seconds;
     j["time_split"] = {{"collision", stats([](const FrameStats& f) { return f.collision_s; })},
                        {"factorisation", stats([](const FrameStats& f) { return f.factor_s; })},

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <map>
 #include <mutex>
@@ -93,6 +94,17 @@ struct Simulator::Impl {
     double update_margin = 0;  ///< effective update margin [mm] (see Scene::update_margin_mm); 0 = whole region
     double t_phys = 0, dt_phys = 0;
     double t_region = -1;  ///< when the whole working region's deformation was last computed (-1: never)
+    double t_cond = -1;    ///< when W_CC's condition was last estimated
+    bool warned_condition = false;
+
+    static std::string fmt_condition(double cond, int nodes, double eps) {
+        char b[320];
+        std::snprintf(b, sizeof b,
+                      "W_CC is ill-conditioned: cond estimate %.3g with %d prescribed nodes, so the contact forces keep about %.0f "
+                      "significant digits in this precision (crowded contact nodes; a float64 working precision keeps 9 more)",
+                      cond, nodes, std::max(0.0, -std::log10(cond * eps)));
+        return b;
+    }
     std::vector<char> fresh;  ///< vertex's d is that of the last solve (updated by it); others lag, up to 1/region_hz
     std::vector<Area> areas;
     std::vector<Shape> obstacles;                   // the scene's obstacles as shapes, built once
@@ -489,7 +501,22 @@ struct Simulator::Impl {
         fs.updated_rows = 0;
         for (const auto& [a0, b0] : rows) fs.updated_rows += static_cast<int>(b0 - a0);
         SolveResult res = solver.solve(p, static_cast<int>(group_of_clip.size()), method, rows);
+        // Conditioning of W_CC, at most twice a second when the set changed (O(n²)): crowded contact nodes make it
+        // nearly singular, and the forces then keep fewer digits of the working precision.
+        double cond = 0;
+        if (res.refactored && (t_cond < 0 || t - t_cond >= 0.5)) {
+            t_cond = t;
+            cond = solver.condition_estimate();
+        }
         if (mx) lock.lock();
+        if (cond > 0) {
+            a.max_condition_estimate = std::max(a.max_condition_estimate, cond);
+            const double eps = model.is_float() ? 6e-8 : 1.1e-16;
+            if (cond * eps > 1e-4 && !warned_condition) {
+                warn(fmt_condition(cond, static_cast<int>(p.size()), eps));
+                warned_condition = true;
+            }
+        }
         last = std::move(res);
         last_vertices = vertices;
         fs.refactored = last.refactored;

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <string>
 
@@ -465,6 +466,43 @@ ContactSolver::ContactSolver(const SimModel& model) : m_impl(std::make_unique<Im
 ContactSolver::~ContactSolver() = default;
 
 void ContactSolver::set_threads(int n) { m_impl->threads = std::max(1, n); }
+
+double ContactSolver::condition_estimate() const {
+    auto est = [&](const auto& fac, const auto& Wm) -> double {
+        using Fac = std::decay_t<decltype(fac)>;
+        using Vec = typename Fac::Vec;
+        const Eigen::Index n = fac.L.rows();
+        if (!fac.valid || n == 0) return 1.0;
+        // ‖W_CC‖₁ from W itself (the factor is in its own node order; the norm does not depend on it).
+        double norm = 0;
+        for (Eigen::Index j = 0; j < n; ++j) {
+            const int cj = fac.node_col[static_cast<size_t>(j / 3)] + static_cast<int>(j % 3);
+            double col = 0;
+            for (Eigen::Index i = 0; i < n; ++i) {
+                const int ci = fac.node_col[static_cast<size_t>(i / 3)] + static_cast<int>(i % 3);
+                col += std::abs(static_cast<double>(Wm.data()[static_cast<Eigen::Index>(cj) * Wm.rows() + ci]));
+            }
+            norm = std::max(norm, col);
+        }
+        // ‖W_CC⁻¹‖₁ by Hager's estimator (W_CC⁻¹ is symmetric: its transpose solve is the same solve).
+        Vec x = Vec::Constant(n, typename Vec::Scalar(1.0 / static_cast<double>(n)));
+        double inv = 0;
+        for (int it = 0; it < 5; ++it) {
+            const Vec y = fac.solve(x);
+            inv = static_cast<double>(y.cwiseAbs().sum());
+            Vec xi = y.unaryExpr([](auto v) { return v >= 0 ? decltype(v)(1) : decltype(v)(-1); });
+            const Vec z = fac.solve(xi);
+            Eigen::Index jmax = 0;
+            const double zmax = static_cast<double>(z.cwiseAbs().maxCoeff(&jmax));
+            if (zmax <= static_cast<double>(z.dot(x))) break;
+            x.setZero();
+            x[jmax] = 1;
+        }
+        return norm * inv;
+    };
+    if (m_impl->model.is_float()) return est(m_impl->ff[0], m_impl->model.Wf);
+    return est(m_impl->fd[0], m_impl->model.Wd);
+}
 
 SolveResult ContactSolver::solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, Eigen::Index rows) {
     const Eigen::Index M = m_impl->model.dof_node.size();

@@ -56,6 +56,7 @@ struct Assessment {
     int force_exceedances = 0;      ///< rising edges of |haptic force| above the threshold (any instrument)
     int velocity_exceedances = 0;   ///< rising edges of instrument speed above the threshold while in contact
     double peak_force_n = 0.0;      ///< largest haptic force
+    double max_condition_estimate = 0.0;  ///< largest cond₁(W_CC) estimated (twice a second when the set changed)
     double peak_vessel_force_n = 0.0;  ///< largest ½ Σ|f| on the vessel over all frames
     double neck_closed_fraction = 0.0;  ///< fraction of the neck line (by length) held closed between clip jaws
     double neck_length_mm = 0.0;

@@ -65,6 +65,10 @@ public:
     /// Same, computing d only on `rows` (e.g. the nodes near the instruments; the SMVM is the cost of a frame).
     SolveResult solve(const std::vector<Prescribed>& p, int n_groups, GroupMethod method, const RowRanges& rows);
 
+    /// Estimate of cond₁(W_CC) of the last solve's node set (Hager's estimator with the factor, ‖W_CC‖₁ from W):
+    /// the forces lose about log10 of it digits of the working precision (float32 has 7). O(n²): call it at a
+    /// low rate.
+    double condition_estimate() const;
     /// Threads of the SMVM [2]: it is bound by memory bandwidth, which one core does not saturate here.
     void set_threads(int n);
     /// d on rows [first, last) for the forces of the last solve (e.g. the rest of the surface at output rate).
