@@ -143,8 +143,8 @@ struct LameError {
 };
 
 /// Quarter tube (symmetry planes x = 0, y = 0), u_z = 0 everywhere (plane strain), pressure inside.
-LameError lame_errors(int order, int n_r, int n_theta, bool curved) {
-    const double a = 1.5, b = 1.9, E = 1.0, nu = 0.45, p = 0.01, L = 0.8;
+LameError lame_errors(int order, int n_r, int n_theta, bool curved, double nu = 0.45) {
+    const double a = 1.5, b = 1.9, E = 1.0, p = 0.01, L = 0.8;
     const StructuredMesh m = tube_mesh(a, b, L, n_r, n_theta, 2, M_PI / 2);
     Eigen::MatrixX3d V = m.V;
     Eigen::MatrixXi T = m.T;
@@ -219,6 +219,24 @@ TEST(Lame, LinearTetsConvergeAndCurvedQuadraticTetsAreWithinOnePercent) {
     EXPECT_LT(std::abs(q.outer), 0.01);
     std::printf("Lame u_r error inner/outer: linear h0.4 %.4f/%.4f  h0.2 %.4f/%.4f  h0.1 %.4f/%.4f  quadratic curved h0.4 %.5f/%.5f\n",
                 l1.inner, l1.outer, l2.inner, l2.outer, l3.inner, l3.outer, q.inner, q.outer);
+}
+
+TEST(Lame, NearIncompressibleLinearTetsLockQuadraticTetsDoNot) {
+    // Stability at the extremes: ν from 0.3 to 0.4999. Linear tetrahedra lock (too stiff: the displacement error
+    // grows as ν → 0.5); curved quadratic tetrahedra stay within 1 % of Lamé at the same node spacing.
+    std::vector<double> lin, quad;
+    for (double nu : {0.3, 0.45, 0.49, 0.499, 0.4999}) {
+        const LameError l = lame_errors(1, 2, 14, false, nu), q = lame_errors(2, 1, 7, true, nu);
+        lin.push_back(std::abs(l.inner));
+        quad.push_back(std::abs(q.inner));
+        std::printf("nu %.4f: linear h0.2 u_r error %.4f, quadratic curved h0.4 %.5f\n", nu, l.inner, q.inner);
+        RecordProperty("linear_nu" + std::to_string(nu), std::to_string(l.inner));
+        RecordProperty("quadratic_nu" + std::to_string(nu), std::to_string(q.inner));
+        EXPECT_LT(std::abs(q.inner), 0.01) << "nu " << nu;
+        EXPECT_LT(std::abs(q.outer), 0.01) << "nu " << nu;
+    }
+    EXPECT_GT(lin.back(), 3.0 * lin.front());  // locking
+    EXPECT_GT(lin.back(), 10.0 * quad.back());
 }
 
 TEST(Assembly, BadMaterialsAndSingularMeshesAreRefusedWithNames) {
