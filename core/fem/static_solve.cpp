@@ -77,42 +77,81 @@ Eigen::VectorXd set_pressure_loads(const VolumeData& vol, const std::string& set
     return pressure_loads(vol.nodes, F, p_mpa);
 }
 
-Eigen::VectorXd solve_static(const FemData& fem, const Eigen::VectorXd& f) {
+DirichletResult solve_dirichlet(const FemData& fem, const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd* f) {
     const Eigen::Index n = fem.K.rows();
-    if (f.size() != n) throw InputError("load vector has " + std::to_string(f.size()) + " entries, K " + std::to_string(n) + " rows");
-    std::vector<char> fixed(static_cast<size_t>(n), 0);
-    for (Eigen::Index k = 0; k < fem.fixed_dofs.size(); ++k) fixed.at(static_cast<size_t>(fem.fixed_dofs[k])) = 1;
-    std::vector<int> free_of(static_cast<size_t>(n), -1);
+    if (f && f->size() != n) throw InputError("load vector has " + std::to_string(f->size()) + " entries, K " + std::to_string(n) + " rows");
+    // Role of each DOF: -1 fixed (u = 0), -2 - k prescribed number k, else its index among the free ones.
+    std::vector<int> role(static_cast<size_t>(n), 0);
+    for (Eigen::Index k = 0; k < fem.fixed_dofs.size(); ++k) role.at(static_cast<size_t>(fem.fixed_dofs[k])) = -1;
+    Eigen::VectorXd up = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(prescribed.size()));
+    for (size_t k = 0; k < prescribed.size(); ++k) {
+        const auto [dof, value] = prescribed[k];
+        if (dof < 0 || dof >= n) throw InputError("prescribed DOF " + std::to_string(dof) + " outside 0.." + std::to_string(n - 1));
+        if (role[static_cast<size_t>(dof)] != 0) throw InputError("DOF " + std::to_string(dof) + " is fixed or prescribed twice");
+        role[static_cast<size_t>(dof)] = -2 - static_cast<int>(k);
+        up[static_cast<Eigen::Index>(k)] = value;
+    }
     std::vector<int> dofs;
     for (Eigen::Index i = 0; i < n; ++i) {
-        if (!fixed[static_cast<size_t>(i)]) {
-            free_of[static_cast<size_t>(i)] = static_cast<int>(dofs.size());
+        if (role[static_cast<size_t>(i)] == 0) {
+            role[static_cast<size_t>(i)] = static_cast<int>(dofs.size());
             dofs.push_back(static_cast<int>(i));
         }
     }
-    // K_ff, upper triangle (K may be stored whole or upper only).
-    std::vector<Eigen::Triplet<double>> trip;
-    trip.reserve(static_cast<size_t>(fem.K.nonZeros()));
+    const auto m = static_cast<Eigen::Index>(dofs.size());
+    const auto np = static_cast<Eigen::Index>(prescribed.size());
+    // K_ff (upper), K_fp and K_pp from the stored triangle (or whole K).
+    std::vector<Eigen::Triplet<double>> tff, tfp, tpp;
+    auto add = [&](Eigen::Index r, Eigen::Index c, double v, bool mirror) {
+        const int a = role[static_cast<size_t>(r)], b = role[static_cast<size_t>(c)];
+        if (a == -1 || b == -1) return;
+        if (a >= 0 && b >= 0) {
+            if (a <= b) tff.emplace_back(a, b, v);
+            if (mirror && b < a) tff.emplace_back(b, a, v);
+        } else if (a >= 0 && b <= -2) {
+            tfp.emplace_back(a, -2 - b, v);
+        } else if (a <= -2 && b >= 0) {
+            if (mirror) tfp.emplace_back(b, -2 - a, v);
+        } else {
+            tpp.emplace_back(-2 - a, -2 - b, v);
+            if (mirror && r != c) tpp.emplace_back(-2 - b, -2 - a, v);
+        }
+    };
     for (Eigen::Index r = 0; r < n; ++r) {
-        const int fr = free_of[static_cast<size_t>(r)];
-        if (fr < 0) continue;
         for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(fem.K, r); it; ++it) {
-            const int fc = free_of[static_cast<size_t>(it.col())];
-            if (fc >= fr) trip.emplace_back(fr, fc, it.value());
+            if (fem.K_upper_only) {
+                if (it.col() < r) continue;
+                add(r, it.col(), it.value(), true);
+                if (it.col() != r) add(it.col(), r, it.value(), false);
+            } else {
+                add(r, it.col(), it.value(), false);
+            }
         }
     }
-    const auto m = static_cast<Eigen::Index>(dofs.size());
-    Eigen::SparseMatrix<double> Kff(m, m);
-    Kff.setFromTriplets(trip.begin(), trip.end());
+    Eigen::SparseMatrix<double> Kff(m, m), Kfp(m, np), Kpp(np, np);
+    Kff.setFromTriplets(tff.begin(), tff.end());
+    Kfp.setFromTriplets(tfp.begin(), tfp.end());
+    Kpp.setFromTriplets(tpp.begin(), tpp.end());
+    Eigen::VectorXd rhs(m);
+    for (Eigen::Index i = 0; i < m; ++i) rhs[i] = f ? (*f)[dofs[static_cast<size_t>(i)]] : 0.0;
+    if (np > 0) rhs -= Kfp * up;
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt(Kff);
     if (llt.info() != Eigen::Success) throw NumericalError("K_ff is not positive definite (CHOLMOD factorisation failed)");
-    Eigen::VectorXd ff(m);
-    for (Eigen::Index i = 0; i < m; ++i) ff[i] = f[dofs[static_cast<size_t>(i)]];
-    const Eigen::VectorXd uf = llt.solve(ff);
+    const Eigen::VectorXd uf = llt.solve(rhs);
     if (llt.info() != Eigen::Success) throw NumericalError("CHOLMOD solve failed");
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(n);
-    for (Eigen::Index i = 0; i < m; ++i) u[dofs[static_cast<size_t>(i)]] = uf[i];
-    return u;
+    DirichletResult out;
+    out.u = Eigen::VectorXd::Zero(n);
+    for (Eigen::Index i = 0; i < m; ++i) out.u[dofs[static_cast<size_t>(i)]] = uf[i];
+    for (size_t k = 0; k < prescribed.size(); ++k) out.u[prescribed[k].first] = prescribed[k].second;
+    out.reaction = Eigen::VectorXd::Zero(np);
+    if (np > 0) {
+        out.reaction = Kfp.transpose() * uf + Kpp * up;
+        if (f)
+            for (Eigen::Index k = 0; k < np; ++k) out.reaction[k] -= (*f)[prescribed[static_cast<size_t>(k)].first];
+    }
+    return out;
 }
+
+Eigen::VectorXd solve_static(const FemData& fem, const Eigen::VectorXd& f) { return solve_dirichlet(fem, {}, &f).u; }
 
 }  // namespace aneu::fem

@@ -10,6 +10,7 @@
 
 #include "../fem/fem_test_util.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/static_solve.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/solver.hpp"
 #include "sim_fixtures.hpp"
@@ -224,6 +225,31 @@ TEST_P(SolverVsFem, FactorUpdatedForAChangingContactSetStaysExact) {
     EXPECT_EQ(recomputed, 1);
     EXPECT_LT(rel(r.d, reference(l.c, m, p, r.group_shift)), prec == Precision::FLOAT64 ? 1e-8 : 1e-4);
     RecordProperty("worst_relative_force_difference", std::to_string(worst));
+}
+
+TEST_P(SolverVsFem, ContactForcesAreTheReactionsOfTheFemDirichletSolve) {
+    // fem::solve_dirichlet (the reference of the trade study) prescribes the same displacements on K: its
+    // displacement equals the simulator's deformation and its reactions equal the contact forces W_CC⁻¹ u.
+    const Precision prec = GetParam();
+    test::TempDir d("solver8");
+    const Loaded l = load_tube(prec, d);
+    const sim::SimModel& m = l.m;
+    sim::ContactSolver solver(m);
+    const auto p = patch(m, 30, 2);
+    const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+    std::vector<std::pair<int, double>> pres;
+    for (const auto& q : p)
+        for (int a = 0; a < 3; ++a) pres.emplace_back(3 * m.dof_node[q.cols[a]] + m.dof_axis[q.cols[a]], q.u[a]);
+    const fem::DirichletResult fe = fem::solve_dirichlet(*l.c.bundle.fem, pres);
+    const double tol = prec == Precision::FLOAT64 ? 1e-8 : 1e-4;
+    EXPECT_LT((fe.reaction - r.f).norm(), tol * r.f.norm());
+    Eigen::VectorXd u_rows(m.dof_node.size());
+    for (Eigen::Index k = 0; k < u_rows.size(); ++k) u_rows[k] = fe.u[3 * m.dof_node[k] + m.dof_axis[k]];
+    EXPECT_LT(rel(r.d, u_rows), tol);
+    EXPECT_LT(rel(u_rows, reference(l.c, m, p)), 1e-10);  // the test's own Dirichlet solve
+    // Bad input: a DOF twice.
+    pres.push_back(pres.front());
+    EXPECT_THROW(fem::solve_dirichlet(*l.c.bundle.fem, pres), InputError);
 }
 
 TEST_P(SolverVsFem, StiffnessRangeContrastAndNearIncompressibilityKeepTheAgreement) {

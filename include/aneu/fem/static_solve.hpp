@@ -4,6 +4,9 @@
 /// A static linear solve of the assembled model (K u = f with u = 0 on the fixed DOFs), the faces of a node
 /// set on the mesh boundary, and the loads of a uniform pressure on them: the model checked on its own
 /// (`aneuprep solve`) and against another FEM code (`aneuprep export --format inp`).
+#include <utility>
+#include <vector>
+
 #include <Eigen/Core>
 
 #include "aneu/core/bundle.hpp"
@@ -18,6 +21,17 @@ Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::Ma
 /// Consistent nodal forces [N] (3#N) of a pressure p [MPa] on the faces of node set `set` ("inner": blood
 /// pressure). @throws InputError when the set is missing or has no boundary face
 Eigen::VectorXd set_pressure_loads(const VolumeData& vol, const std::string& set, double p_mpa);
+
+/// Displacement and the reactions at the prescribed DOFs.
+struct DirichletResult {
+    Eigen::VectorXd u;         ///< 3#N [mm]
+    Eigen::VectorXd reaction;  ///< per prescribed DOF, in its order: K u − f there [N] (the force the constraint applies)
+};
+/// u with K u = f (f = 0 when null) on the free DOFs, u = 0 on fem.fixed_dofs and u = value on each prescribed
+/// (DOF, value) (CHOLMOD supernodal Cholesky): the reference of the simulator's contact solve.
+/// @throws InputError a DOF outside K or given twice; NumericalError K_ff is not positive definite
+DirichletResult solve_dirichlet(const FemData& fem, const std::vector<std::pair<int, double>>& prescribed,
+                                const Eigen::VectorXd* f = nullptr);
 
 /// u (3#N) with K u = f on the free DOFs and u = 0 on fem.fixed_dofs (CHOLMOD supernodal Cholesky).
 /// @throws NumericalError when K_ff is not positive definite
