@@ -100,31 +100,27 @@ DirichletResult solve_dirichlet(const FemData& fem, const std::vector<std::pair<
     }
     const auto m = static_cast<Eigen::Index>(dofs.size());
     const auto np = static_cast<Eigen::Index>(prescribed.size());
-    // K_ff (upper), K_fp and K_pp from the stored triangle (or whole K).
+    // K_ff (upper), K_fp and K_pp; `put` takes one entry (i, j) of the whole K, each exactly once.
     std::vector<Eigen::Triplet<double>> tff, tfp, tpp;
-    auto add = [&](Eigen::Index r, Eigen::Index c, double v, bool mirror) {
-        const int a = role[static_cast<size_t>(r)], b = role[static_cast<size_t>(c)];
+    auto put = [&](Eigen::Index i, Eigen::Index j, double v) {
+        const int a = role[static_cast<size_t>(i)], b = role[static_cast<size_t>(j)];
         if (a == -1 || b == -1) return;
         if (a >= 0 && b >= 0) {
             if (a <= b) tff.emplace_back(a, b, v);
-            if (mirror && b < a) tff.emplace_back(b, a, v);
-        } else if (a >= 0 && b <= -2) {
+        } else if (a >= 0) {
             tfp.emplace_back(a, -2 - b, v);
-        } else if (a <= -2 && b >= 0) {
-            if (mirror) tfp.emplace_back(b, -2 - a, v);
-        } else {
+        } else if (b <= -2) {
             tpp.emplace_back(-2 - a, -2 - b, v);
-            if (mirror && r != c) tpp.emplace_back(-2 - b, -2 - a, v);
-        }
+        }  // a prescribed, b free: K_pf, the transpose of K_fp
     };
     for (Eigen::Index r = 0; r < n; ++r) {
         for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(fem.K, r); it; ++it) {
             if (fem.K_upper_only) {
                 if (it.col() < r) continue;
-                add(r, it.col(), it.value(), true);
-                if (it.col() != r) add(it.col(), r, it.value(), false);
+                put(r, it.col(), it.value());
+                if (it.col() != r) put(it.col(), r, it.value());
             } else {
-                add(r, it.col(), it.value(), false);
+                put(r, it.col(), it.value());
             }
         }
     }

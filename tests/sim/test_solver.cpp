@@ -247,6 +247,16 @@ TEST_P(SolverVsFem, ContactForcesAreTheReactionsOfTheFemDirichletSolve) {
     for (Eigen::Index k = 0; k < u_rows.size(); ++k) u_rows[k] = fe.u[3 * m.dof_node[k] + m.dof_axis[k]];
     EXPECT_LT(rel(r.d, u_rows), tol);
     EXPECT_LT(rel(u_rows, reference(l.c, m, p)), 1e-10);  // the test's own Dirichlet solve
+    // K stored as its upper triangle (as assemble writes it): the same.
+    FemData upper = *l.c.bundle.fem;
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> full = upper.K_upper_only
+                                                                  ? Eigen::SparseMatrix<double, Eigen::RowMajor>(upper.K.selfadjointView<Eigen::Upper>())
+                                                                  : upper.K;
+    upper.K = full.triangularView<Eigen::Upper>();
+    upper.K_upper_only = true;
+    const fem::DirichletResult fu = fem::solve_dirichlet(upper, pres);
+    EXPECT_LT((fu.reaction - fe.reaction).norm(), 1e-10 * fe.reaction.norm());
+    EXPECT_LT((fu.u - fe.u).norm(), 1e-10 * fe.u.norm());
     // Bad input: a DOF twice.
     pres.push_back(pres.front());
     EXPECT_THROW(fem::solve_dirichlet(*l.c.bundle.fem, pres), InputError);

@@ -1,0 +1,241 @@
+// SPDX-License-Identifier: MIT
+// One point of the speed/accuracy study (bench/run_study.sh): a clip squeezing the base of the sac, measured on
+// one model so that models of other mesh sizes, element orders and precisions can be compared.
+//
+// The clip: every outer node of the aneurysm region within `--slab-mm` of the sac's base (its lowest x) is pushed
+// `--depth-mm` along its inward normal. Measured with the full FEM (fem::solve_dirichlet on /fem): the total
+// contact force Σ|r_v| and the displacement at probe points (the closest outer-surface point to 26 fixed points
+// around the clip, interpolated in the triangle); and, when a case bundle is given, the same through the
+// simulator (W, in its precision) plus the bundle's load time and the update rate with 100 and 300 contact nodes.
+// Usage: aneu_bench_study FEM.h5 [--case CASE.h5] [--depth-mm 0.2] [--slab-mm 1.0]   (one JSON object on stdout)
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/fem/static_solve.hpp"
+#include "aneu/sim/model.hpp"
+#include "aneu/sim/solver.hpp"
+
+using namespace aneu;
+using clk = std::chrono::steady_clock;
+
+namespace {
+
+double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
+
+/// Closest point of triangle abc to p, as barycentric weights.
+Eigen::Vector3d closest_bary(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    // Ericson, Real-Time Collision Detection, 5.1.5 (regions of the triangle).
+    const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
+    const Eigen::Vector3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        const double v = d1 / (d1 - d3);
+        return {1 - v, v, 0};
+    }
+    const Eigen::Vector3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        const double w = d2 / (d2 - d6);
+        return {1 - w, 0, w};
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return {0, 1 - w, w};
+    }
+    const double den = 1 / (va + vb + vc);
+    const double v = vb * den, w = vc * den;
+    return {1 - v - w, v, w};
+}
+
+struct Probe {
+    int face = -1;
+    Eigen::Vector3d bary;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 2) {
+        std::fprintf(stderr, "usage: %s FEM.h5 [--case CASE.h5] [--depth-mm 0.2] [--slab-mm 1.0]\n", argv[0]);
+        return 2;
+    }
+    std::string case_path;
+    double depth = 0.2, slab = 1.0;
+    for (int a = 2; a + 1 < argc; a += 2) {
+        if (!std::strcmp(argv[a], "--case")) case_path = argv[a + 1];
+        if (!std::strcmp(argv[a], "--depth-mm")) depth = std::atof(argv[a + 1]);
+        if (!std::strcmp(argv[a], "--slab-mm")) slab = std::atof(argv[a + 1]);
+    }
+    BundleParts parts;
+    parts.condensed_W = false;
+    parts.image = false;
+    const Bundle b = read_bundle(argv[1], parts);
+    if (!b.volume || !b.fem) {
+        std::fprintf(stderr, "%s: needs /volume and /fem\n", argv[1]);
+        return 2;
+    }
+    const VolumeData& vol = *b.volume;
+    // The outer surface: every DOF of an outer node gets a "row" (its DOF index) so that extract_surface keeps
+    // the faces whose nodes are all outer.
+    std::vector<int> row_of_dof(static_cast<size_t>(3 * vol.nodes.rows()), -1);
+    const Eigen::VectorXi& outer = vol.node_sets.at("outer");
+    for (Eigen::Index k = 0; k < outer.size(); ++k)
+        for (int a = 0; a < 3; ++a) row_of_dof[static_cast<size_t>(3 * outer[k] + a)] = 3 * outer[k] + a;
+    const sim::SimSurface s = sim::extract_surface(vol.nodes, vol.tets, vol.tet_region, vol.region_names, row_of_dof);
+    // The clip: aneurysm vertices within `slab` of the sac's base.
+    int sac = -1;
+    for (size_t r = 0; r < s.region_names.size(); ++r)
+        if (s.region_names[r] == "aneurysm") sac = static_cast<int>(r);
+    std::vector<char> on_sac(static_cast<size_t>(s.size()), 0);
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        if (s.face_region[f] == sac)
+            for (int k = 0; k < 3; ++k) on_sac[static_cast<size_t>(s.F(f, k))] = 1;
+    double x_base = 1e300;
+    for (Eigen::Index v = 0; v < s.size(); ++v)
+        if (on_sac[static_cast<size_t>(v)]) x_base = std::min(x_base, s.X(v, 0));
+    std::vector<int> clip;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (Eigen::Index v = 0; v < s.size(); ++v)
+        if (on_sac[static_cast<size_t>(v)] && s.X(v, 0) <= x_base + slab) {
+            clip.push_back(static_cast<int>(v));
+            centre += s.X.row(v).transpose();
+        }
+    if (clip.empty()) {
+        std::fprintf(stderr, "%s: no aneurysm vertex to clip\n", argv[1]);
+        return 2;
+    }
+    centre /= static_cast<double>(clip.size());
+    // FEM reference of this model.
+    std::vector<std::pair<int, double>> pres;
+    for (int v : clip)
+        for (int a = 0; a < 3; ++a) pres.emplace_back(3 * s.node[v] + a, -depth * s.N(v, a));
+    auto t0 = clk::now();
+    const fem::DirichletResult fe = fem::solve_dirichlet(*b.fem, pres);
+    const double fem_s = secs(t0);
+    double force = 0;
+    for (size_t k = 0; k < clip.size(); ++k) force += fe.reaction.segment<3>(3 * static_cast<Eigen::Index>(k)).norm();
+    // Probes: closest outer-surface points to 26 points 4 mm around the clip's centre.
+    std::vector<Probe> probes;
+    for (int i = -1; i <= 1; ++i)
+        for (int j = -1; j <= 1; ++j)
+            for (int k = -1; k <= 1; ++k) {
+                if (!i && !j && !k) continue;
+                const Eigen::Vector3d q = centre + 4.0 * Eigen::Vector3d(i, j, k).normalized();
+                Probe best;
+                double bd = 1e300;
+                for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+                    const Eigen::Vector3d a = s.X.row(s.F(f, 0)), bb = s.X.row(s.F(f, 1)), c = s.X.row(s.F(f, 2));
+                    const Eigen::Vector3d w = closest_bary(q, a, bb, c);
+                    const double dd = (w[0] * a + w[1] * bb + w[2] * c - q).squaredNorm();
+                    if (dd < bd) {
+                        bd = dd;
+                        best = {static_cast<int>(f), w};
+                    }
+                }
+                probes.push_back(best);
+            }
+    auto probe_u = [&](auto&& u_of_vertex) {
+        nlohmann::json arr = nlohmann::json::array();
+        for (const Probe& pr : probes) {
+            Eigen::Vector3d u = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 3; ++k) u += pr.bary[k] * u_of_vertex(s.F(pr.face, k));
+            arr.push_back({u.x(), u.y(), u.z()});
+        }
+        return arr;
+    };
+    nlohmann::json out;
+    out["fem"] = argv[1];
+    out["nodes"] = vol.nodes.rows();
+    out["tets"] = vol.tets.rows();
+    out["element_order"] = b.fem->element_order;
+    out["dofs"] = b.fem->K.rows();
+    out["outer_vertices"] = s.size();
+    out["clip_nodes"] = clip.size();
+    out["fem_solve_s"] = fem_s;
+    out["force_fem_n"] = force;
+    out["probes_fem"] = probe_u([&](int v) -> Eigen::Vector3d { return fe.u.segment<3>(3 * s.node[v]); });
+    for (const auto& st : b.meta.stages) out["stage_s"][st.stage] = st.wall_time_s;
+    if (!case_path.empty()) {
+        const sim::SimModel m = sim::load_model(case_path);
+        out["case"] = case_path;
+        out["load_s"] = m.load_seconds;
+        out["kept_dofs"] = m.dof_node.size();
+        out["precision"] = m.is_float() ? "float32" : "float64";
+        out["W_bytes"] = static_cast<double>(m.dof_node.size()) * static_cast<double>(m.dof_node.size() + 1) / 2 * (m.is_float() ? 4 : 8);
+        out["case_file_bytes"] = std::filesystem::file_size(case_path);
+        // node -> permuted rows
+        std::vector<int> row_of(static_cast<size_t>(3 * m.nodes.rows()), -1);
+        for (Eigen::Index r = 0; r < m.dof_node.size(); ++r) row_of[static_cast<size_t>(3 * m.dof_node[r] + m.dof_axis[r])] = static_cast<int>(r);
+        std::vector<sim::Prescribed> p;
+        std::vector<int> order(clip.begin(), clip.end());
+        std::sort(order.begin(), order.end(), [&](int a, int c) { return s.node[a] < s.node[c]; });
+        for (int v : order) {
+            sim::Prescribed q;
+            for (int a = 0; a < 3; ++a) q.cols[a] = row_of[static_cast<size_t>(3 * s.node[v] + a)];
+            q.u = -depth * s.N.row(v).transpose();
+            if (q.cols.minCoeff() < 0) {
+                std::fprintf(stderr, "%s: a clip node is not condensed\n", case_path.c_str());
+                return 2;
+            }
+            p.push_back(q);
+        }
+        sim::ContactSolver solver(m);
+        const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+        double fw = 0;
+        for (size_t k = 0; k < p.size(); ++k) fw += r.f.segment<3>(3 * static_cast<Eigen::Index>(k)).norm();
+        out["force_w_n"] = fw;
+        out["probes_w"] = probe_u([&](int v) -> Eigen::Vector3d {
+            Eigen::Vector3d u;
+            for (int a = 0; a < 3; ++a) u[a] = r.d[row_of[static_cast<size_t>(3 * s.node[v] + a)]];
+            return u;
+        });
+        out["wcc_condition"] = solver.condition_estimate();
+        // Update rates: patches of 100 and 300 outer vertices nearest the clip centre, all rows of W (the whole
+        // working region), factor reused, and with one node swapped each frame.
+        std::vector<std::pair<double, int>> near;
+        for (Eigen::Index v = 0; v < s.size(); ++v) near.emplace_back((s.X.row(v).transpose() - centre).norm(), static_cast<int>(v));
+        std::sort(near.begin(), near.end());
+        for (int n : {100, 300}) {
+            if (n + 1 > static_cast<int>(near.size())) break;
+            std::vector<sim::Prescribed> pa, pb;
+            for (int k = 0; k <= n; ++k) {
+                const int v = near[static_cast<size_t>(k)].second;
+                sim::Prescribed q;
+                for (int a = 0; a < 3; ++a) q.cols[a] = row_of[static_cast<size_t>(3 * s.node[v] + a)];
+                q.u = -0.05 * s.N.row(v).transpose();
+                if (k < n) pa.push_back(q);
+                if (k != n / 2) pb.push_back(q);
+            }
+            auto by_col = [](const sim::Prescribed& x, const sim::Prescribed& y) { return x.cols[0] < y.cols[0]; };
+            std::sort(pa.begin(), pa.end(), by_col);
+            std::sort(pb.begin(), pb.end(), by_col);
+            solver.solve(pa, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+            const int reps = 50;
+            t0 = clk::now();
+            for (int k = 0; k < reps; ++k) solver.solve(pa, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+            const double same = secs(t0) / reps;
+            t0 = clk::now();
+            for (int k = 0; k < reps; ++k) solver.solve(k % 2 ? pa : pb, 0, sim::GroupMethod::EXACT, m.dof_node.size());
+            const double changed = secs(t0) / reps;
+            out["update_hz_" + std::to_string(n)] = 1.0 / same;
+            out["update_changed_hz_" + std::to_string(n)] = 1.0 / changed;
+        }
+    }
+    std::cout << out.dump() << std::endl;
+    return 0;
+}
