@@ -2,12 +2,13 @@
 // One point of the speed/accuracy study (bench/run_study.sh): a clip squeezing the base of the sac, measured on
 // one model so that models of other mesh sizes, element orders and precisions can be compared.
 //
-// The clip: every outer node of the aneurysm region within `--slab-mm` of the sac's base (its lowest x) is pushed
-// `--depth-mm` along its inward normal. Measured with the full FEM (fem::solve_dirichlet on /fem): the total
-// contact force Σ|r_v| and the displacement at probe points (the closest outer-surface point to 26 fixed points
-// around the clip, interpolated in the triangle); and, when a case bundle is given, the same through the
-// simulator (W, in its precision) plus the bundle's load time and the update rate with 100 and 300 contact nodes.
-// Usage: aneu_bench_study FEM.h5 [--case CASE.h5] [--depth-mm 0.2] [--slab-mm 1.0]   (one JSON object on stdout)
+// The load: an indenter pushes the outer wall in around `--centre` (default: the sac's apex, the outer vertex
+// farthest along +x) by `--depth-mm`·(1 − (r/R)²)² within R = `--radius-mm`, along the inward normals. Measured
+// with the full FEM (fem::solve_dirichlet on /fem): the indenter force Σ r_v·u_v/depth and the displacement at probe
+// points (the closest outer-surface point to 26 fixed points 4 mm around the centre, interpolated in the
+// triangle); and, when a case bundle is given, the same through the simulator (W, in its precision) plus the
+// bundle's load time and the update rate with 100 and 300 contact nodes.
+// Usage: aneu_bench_study FEM.h5 [--case CASE.h5] [--centre x,y,z] [--radius-mm 1.5] [--depth-mm 0.2]
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -71,15 +72,20 @@ struct Probe {
 
 int main(int argc, char** argv) {
     if (argc < 2) {
-        std::fprintf(stderr, "usage: %s FEM.h5 [--case CASE.h5] [--depth-mm 0.2] [--slab-mm 1.0]\n", argv[0]);
+        std::fprintf(stderr, "usage: %s FEM.h5 [--case CASE.h5] [--centre x,y,z] [--radius-mm 1.5] [--depth-mm 0.2]\n", argv[0]);
         return 2;
     }
     std::string case_path;
-    double depth = 0.2, slab = 1.0;
+    double depth = 0.2, radius = 1.5;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    bool have_centre = false;
     for (int a = 2; a + 1 < argc; a += 2) {
         if (!std::strcmp(argv[a], "--case")) case_path = argv[a + 1];
         if (!std::strcmp(argv[a], "--depth-mm")) depth = std::atof(argv[a + 1]);
-        if (!std::strcmp(argv[a], "--slab-mm")) slab = std::atof(argv[a + 1]);
+        if (!std::strcmp(argv[a], "--radius-mm")) radius = std::atof(argv[a + 1]);
+        if (!std::strcmp(argv[a], "--centre")) {
+            have_centre = std::sscanf(argv[a + 1], "%lf,%lf,%lf", &centre.x(), &centre.y(), &centre.z()) == 3;
+        }
     }
     BundleParts parts;
     parts.condensed_W = false;
@@ -97,38 +103,41 @@ int main(int argc, char** argv) {
     for (Eigen::Index k = 0; k < outer.size(); ++k)
         for (int a = 0; a < 3; ++a) row_of_dof[static_cast<size_t>(3 * outer[k] + a)] = 3 * outer[k] + a;
     const sim::SimSurface s = sim::extract_surface(vol.nodes, vol.tets, vol.tet_region, vol.region_names, row_of_dof);
-    // The clip: aneurysm vertices within `slab` of the sac's base.
-    int sac = -1;
-    for (size_t r = 0; r < s.region_names.size(); ++r)
-        if (s.region_names[r] == "aneurysm") sac = static_cast<int>(r);
-    std::vector<char> on_sac(static_cast<size_t>(s.size()), 0);
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
-        if (s.face_region[f] == sac)
-            for (int k = 0; k < 3; ++k) on_sac[static_cast<size_t>(s.F(f, k))] = 1;
-    double x_base = 1e300;
-    for (Eigen::Index v = 0; v < s.size(); ++v)
-        if (on_sac[static_cast<size_t>(v)]) x_base = std::min(x_base, s.X(v, 0));
+    // The indentation: outer vertices within `radius` of the centre (default: the outer vertex farthest along +x,
+    // the sac's apex), pushed along their inward normal by depth·(1 − (r/radius)²)², a bump that fades to zero at
+    // its rim so that where a mesh's nodes happen to fall there hardly matters.
+    if (!have_centre) {
+        Eigen::Index vmax = 0;
+        s.X.col(0).maxCoeff(&vmax);
+        centre = s.X.row(vmax).transpose();
+    }
     std::vector<int> clip;
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (Eigen::Index v = 0; v < s.size(); ++v)
-        if (on_sac[static_cast<size_t>(v)] && s.X(v, 0) <= x_base + slab) {
+    std::vector<double> bump;
+    for (Eigen::Index v = 0; v < s.size(); ++v) {
+        const double r = (s.X.row(v).transpose() - centre).norm();
+        if (r < radius) {
             clip.push_back(static_cast<int>(v));
-            centre += s.X.row(v).transpose();
+            const double q = 1 - (r / radius) * (r / radius);
+            bump.push_back(q * q);
         }
+    }
     if (clip.empty()) {
-        std::fprintf(stderr, "%s: no aneurysm vertex to clip\n", argv[1]);
+        std::fprintf(stderr, "%s: no outer vertex within %g mm of the centre\n", argv[1], radius);
         return 2;
     }
-    centre /= static_cast<double>(clip.size());
     // FEM reference of this model.
     std::vector<std::pair<int, double>> pres;
-    for (int v : clip)
-        for (int a = 0; a < 3; ++a) pres.emplace_back(3 * s.node[v] + a, -depth * s.N(v, a));
+    for (size_t k = 0; k < clip.size(); ++k)
+        for (int a = 0; a < 3; ++a) pres.emplace_back(3 * s.node[clip[k]] + a, -depth * bump[k] * s.N(clip[k], a));
     auto t0 = clk::now();
     const fem::DirichletResult fe = fem::solve_dirichlet(*b.fem, pres);
     const double fem_s = secs(t0);
+    // The indenter's force: the generalised force conjugate to `depth`, Σ r_v · u_v / depth (u_v the prescribed
+    // displacement); it converges with the mesh (∫ traction · shape dA), unlike a net force whose radial parts cancel.
     double force = 0;
-    for (size_t k = 0; k < clip.size(); ++k) force += fe.reaction.segment<3>(3 * static_cast<Eigen::Index>(k)).norm();
+    for (size_t k = 0; k < clip.size(); ++k) {
+        force += fe.reaction.segment<3>(3 * static_cast<Eigen::Index>(k)).dot(-bump[k] * s.N.row(clip[k]).transpose());
+    }
     // Probes: closest outer-surface points to 26 points 4 mm around the clip's centre.
     std::vector<Probe> probes;
     for (int i = -1; i <= 1; ++i)
@@ -166,6 +175,7 @@ int main(int argc, char** argv) {
     out["dofs"] = b.fem->K.rows();
     out["outer_vertices"] = s.size();
     out["clip_nodes"] = clip.size();
+    out["centre"] = {centre.x(), centre.y(), centre.z()};
     out["fem_solve_s"] = fem_s;
     out["force_fem_n"] = force;
     out["probes_fem"] = probe_u([&](int v) -> Eigen::Vector3d { return fe.u.segment<3>(3 * s.node[v]); });
@@ -182,12 +192,14 @@ int main(int argc, char** argv) {
         std::vector<int> row_of(static_cast<size_t>(3 * m.nodes.rows()), -1);
         for (Eigen::Index r = 0; r < m.dof_node.size(); ++r) row_of[static_cast<size_t>(3 * m.dof_node[r] + m.dof_axis[r])] = static_cast<int>(r);
         std::vector<sim::Prescribed> p;
-        std::vector<int> order(clip.begin(), clip.end());
-        std::sort(order.begin(), order.end(), [&](int a, int c) { return s.node[a] < s.node[c]; });
-        for (int v : order) {
+        std::vector<size_t> order(clip.size());
+        for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+        std::sort(order.begin(), order.end(), [&](size_t a, size_t c) { return s.node[clip[a]] < s.node[clip[c]]; });
+        for (size_t k : order) {
+            const int v = clip[k];
             sim::Prescribed q;
             for (int a = 0; a < 3; ++a) q.cols[a] = row_of[static_cast<size_t>(3 * s.node[v] + a)];
-            q.u = -depth * s.N.row(v).transpose();
+            q.u = -depth * bump[k] * s.N.row(v).transpose();
             if (q.cols.minCoeff() < 0) {
                 std::fprintf(stderr, "%s: a clip node is not condensed\n", case_path.c_str());
                 return 2;
@@ -197,7 +209,7 @@ int main(int argc, char** argv) {
         sim::ContactSolver solver(m);
         const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());
         double fw = 0;
-        for (size_t k = 0; k < p.size(); ++k) fw += r.f.segment<3>(3 * static_cast<Eigen::Index>(k)).norm();
+        for (size_t k = 0; k < p.size(); ++k) fw += r.f.segment<3>(3 * static_cast<Eigen::Index>(k)).dot(p[k].u) / depth;
         out["force_w_n"] = fw;
         out["probes_w"] = probe_u([&](int v) -> Eigen::Vector3d {
             Eigen::Vector3d u;

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# The speed/accuracy study (issue #6), part 1: a tube with a sac of known dimensions (the demo's, configs/tube_wall.toml:
+# lumen radius 1.7 mm, wall 0.3 mm, 12 mm long, sac lumen radius 2.5 mm with a 0.1 mm wall, neck radius 1.5 mm),
+# built at several target edge lengths and both element orders; for each, W condensed in float32 and float64 when
+# it fits, and an indenter pushing the sac's apex 0.2 mm (aneu_bench_study) measured against a reference model
+# (the finest, quadratic, by the full FEM). Writes bench/results/study/study.jsonl, study.md and PNG plots.
+#
+#   bash bench/run_study.sh            # default sweep: h 0.6 0.5 0.4 0.3, reference h 0.25 quadratic
+#   bash bench/run_study.sh --quick    # h 0.6 0.5, reference h 0.4 quadratic (a few minutes)
+# (Coarser than 0.6 mm the 0.1 mm sac wall of this generator self-intersects at the neck and tetmesh refuses it.)
+#
+# Build first (bash scripts/build.sh). Plots need python3-matplotlib (installed here if missing and root/sudo).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+prep=build/tools/aneuprep
+probe=build/bench/aneu_bench_study
+py=python3
+[ -x /usr/bin/python3 ] && py=/usr/bin/python3   # Debian's, where python3-matplotlib lives (not a pyenv's)
+quick=0
+[ "${1:-}" = "--quick" ] && quick=1
+if [ $quick = 1 ]; then hs="0.6 0.5"; href=0.4; else hs="0.6 0.5 0.4 0.3"; href=0.25; fi
+max_w_dofs=${MAX_W_DOFS:-25000}   # condense only models whose W fits comfortably in memory (float64: 2.5 GB)
+out=bench/results/study
+work=build/study
+mkdir -p "$out" "$work"
+for t in "$prep" "$probe"; do [ -x "$t" ] || { echo "run_study.sh: $t missing: build first (bash scripts/build.sh)" >&2; exit 2; }; done
+if ! $py -c "import matplotlib" 2>/dev/null; then
+  if [ "$(id -u)" -eq 0 ]; then apt-get install -y -q --no-install-recommends python3-matplotlib >/dev/null || true
+  elif command -v sudo >/dev/null; then sudo apt-get install -y -q --no-install-recommends python3-matplotlib >/dev/null || true; fi
+fi
+
+geometry="--inner-radius-mm 1.7 --thickness-mm 0.3 --length-mm 12 --sac-radius-mm 2.5 --sac-thickness-mm 0.1 --neck-radius-mm 1.5"
+jsonl="$out/study.jsonl"
+: >"$jsonl"
+point() {  # h order [reference]
+  local h=$1 order=$2 ref=${3:-0}
+  local d="$work/h${h}_p${order}"
+  mkdir -p "$d"
+  local nt nz
+  nt=$($py -c "import math; print(max(8, round(2*math.pi*1.85/$h)))")
+  nz=$($py -c "print(max(4, round(12/$h)))")
+  echo "== h $h mm, order $order$([ "$ref" = 1 ] && echo ' (reference)')"
+  "$prep" tubewall -o "$d/wall.h5" $geometry --n-theta "$nt" --n-z "$nz" --edge-mm "$h" -q
+  "$prep" tetmesh "$d/wall.h5" -o "$d/vol.h5" -q
+  "$prep" assemble "$d/vol.h5" -o "$d/fem.h5" --element-order "$order" -q
+  local kept
+  kept=$("$prep" inspect "$d/fem.h5" --json | $py -c "
+import json,sys
+for e in json.load(sys.stdin)['entries']:
+    if e.get('path') == '/volume/node_sets/outer': print(3 * e['shape'][0])" 2>/dev/null || echo 0)
+  if [ "$ref" = 1 ] || [ "${kept:-0}" -gt "$max_w_dofs" ] || [ "${kept:-0}" = 0 ]; then
+    "$probe" "$d/fem.h5" $centre_arg | $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$h, reference=$ref); print(json.dumps(j))" >>"$jsonl"
+    return
+  fi
+  for prec in float32 float64; do
+    local t0 t1
+    t0=$(date +%s.%N)
+    "$prep" condense "$d/fem.h5" -o "$d/case_$prec.h5" --precision "$prec" -q
+    t1=$(date +%s.%N)
+    "$probe" "$d/fem.h5" --case "$d/case_$prec.h5" $centre_arg |
+      $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$h, reference=0, condense_s=$t1-$t0); print(json.dumps(j))" >>"$jsonl"
+    rm -f "$d/case_$prec.h5"
+  done
+}
+centre_arg=""
+point "$href" 2 1
+# Every model is indented at the reference's sac apex (the same physical point).
+centre_arg="--centre $($py -c "import json; print(','.join(str(x) for x in json.loads(open('$jsonl').readline())['centre']))")"
+for h in $hs; do for order in 1 2; do point "$h" "$order"; done; done
+$py bench/study_report.py "$jsonl" "$out"
+echo "report: $out/study.md"

@@ -1,0 +1,91 @@
+# SPDX-License-Identifier: MIT
+"""Report of the speed/accuracy study: bench/run_study.sh's JSON lines -> study.md and PNG plots.
+
+Errors are against the reference point (the finest quadratic model, full FEM, double):
+  force error  |F - F_ref| / F_ref, F = the force of an indenter pushing the sac's apex in by 0.2 mm (a smooth
+               bump of radius 1.5 mm), the generalised force conjugate to the depth (sum of r_v . u_v / depth);
+  displacement error  ||u - u_ref|| / ||u_ref|| over 26 probe points on the outer surface 4 mm around it.
+The 'W route' is what the simulator computes (condensed W in its precision); the 'FEM route' the same model
+solved directly in double: their difference is the cost of condensation and storage precision.
+"""
+import json
+import math
+import os
+import sys
+
+
+def err_u(p, ref):
+    num = sum((a - b) ** 2 for pa, pr in zip(p, ref) for a, b in zip(pa, pr))
+    den = sum(b ** 2 for pr in ref for b in pr)
+    return math.sqrt(num / den)
+
+
+def main(jsonl, outdir):
+    rows = [json.loads(l) for l in open(jsonl) if l.strip()]
+    ref = next(r for r in rows if r.get("reference"))
+    pts = [r for r in rows if not r.get("reference")]
+    for r in pts:
+        r["e_force_fem"] = abs(r["force_fem_n"] - ref["force_fem_n"]) / ref["force_fem_n"]
+        r["e_u_fem"] = err_u(r["probes_fem"], ref["probes_fem"])
+        if "force_w_n" in r:
+            r["e_force_w"] = abs(r["force_w_n"] - ref["force_fem_n"]) / ref["force_fem_n"]
+            r["e_u_w"] = err_u(r["probes_w"], ref["probes_fem"])
+            r["e_u_w_vs_fem"] = err_u(r["probes_w"], r["probes_fem"])
+        st = r.get("stage_s", {})
+        r["precompute_s"] = sum(st.get(k, 0) for k in ("tubewall", "tetmesh", "assemble")) + r.get("condense_s", 0)
+    out = []
+    w = out.append
+    w("# Speed/accuracy study: tube with a sac of known dimensions\n")
+    w(f"Reference: h {ref['h']} mm, order {ref['element_order']}, {ref['nodes']} nodes, {ref['tets']} tets, {ref['dofs']} DOFs, "
+      f"full FEM in double (solve {ref['fem_solve_s']:.1f} s): indenter force {ref['force_fem_n']:.4g} N "
+      f"({ref['clip_nodes']} nodes pushed in, up to 0.2 mm, around the sac's apex).\n")
+    w("Produced by `bash bench/run_study.sh` (see its header); errors as defined in bench/study_report.py.\n")
+    w("| h [mm] | order | precision | nodes | tets | kept DOFs | W [MB] | precompute [s] | load [s] | update 100 [Hz] | update 300 [Hz] | "
+      "100, set changing [Hz] | force error | u error | u error of W vs its FEM | cond(W_CC) indenter |")
+    w("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted(pts, key=lambda r: (-r["h"], r["element_order"], r.get("precision", ""))):
+        if "force_w_n" in r:
+            w(f"| {r['h']} | {r['element_order']} | {r['precision']} | {r['nodes']} | {r['tets']} | {r['kept_dofs']} | "
+              f"{r['W_bytes'] / 2**20:.0f} | {r['precompute_s']:.1f} | {r['load_s']:.2f} | {r.get('update_hz_100', float('nan')):.0f} | "
+              f"{r.get('update_hz_300', float('nan')):.0f} | {r.get('update_changed_hz_100', float('nan')):.0f} | "
+              f"{r['e_force_w']:.3%} | {r['e_u_w']:.3%} | {r['e_u_w_vs_fem']:.1e} | {r['wcc_condition']:.3g} |")
+        else:
+            w(f"| {r['h']} | {r['element_order']} | (FEM only: W too large) | {r['nodes']} | {r['tets']} | - | - | "
+              f"{r['precompute_s']:.1f} | - | - | - | - | {r['e_force_fem']:.3%} | {r['e_u_fem']:.3%} | - | - |")
+    w("")
+    plots = []
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        wpts = [r for r in pts if "force_w_n" in r]
+        for key, xlabel, fname in (("precompute_s", "precompute time [s]", "error_vs_precompute.png"),
+                                   ("update_changed_hz_100", "update rate, 100 contact nodes, set changing [Hz]", "error_vs_rate.png")):
+            fig, ax = plt.subplots(figsize=(6.4, 4.2))
+            for order, mk in ((1, "o"), (2, "s")):
+                for prec, col in (("float32", "tab:blue"), ("float64", "tab:orange")):
+                    sel = [r for r in wpts if r["element_order"] == order and r["precision"] == prec]
+                    if sel:
+                        ax.plot([r[key] for r in sel], [100 * r["e_u_w"] for r in sel], mk, color=col,
+                                label=f"order {order}, {prec}")
+                        for r in sel:
+                            ax.annotate(f"h {r['h']}", (r[key], 100 * r["e_u_w"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel("displacement error vs reference [%]")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=8)
+            fig.tight_layout()
+            fig.savefig(os.path.join(outdir, fname), dpi=110)
+            plt.close(fig)
+            plots.append(fname)
+    except ImportError:
+        w("(No plots: python3-matplotlib is not installed.)\n")
+    for p in plots:
+        w(f"![{p}]({p})\n")
+    open(os.path.join(outdir, "study.md"), "w").write("\n".join(out) + "\n")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2])
