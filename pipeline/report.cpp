@@ -17,6 +17,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/provenance.hpp"
+#include "aneu/core/text.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/pipeline/snapshot.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -73,12 +74,6 @@ std::string read_all(const fs::path& p) {
 std::string num(double v) {
     if (v == std::floor(v) && std::abs(v) < 1e12) return fmt::format("{:.0f}", v);
     return fmt::format("{:.4g}", v);
-}
-
-std::string human_bytes(double b) {
-    if (b >= 1024.0 * 1024 * 1024) return fmt::format("{:.2f} GiB", b / (1024.0 * 1024 * 1024));
-    if (b >= 1024.0 * 1024) return fmt::format("{:.1f} MiB", b / (1024.0 * 1024));
-    return fmt::format("{:.0f} KiB", b / 1024.0);
 }
 
 const StageRecord* record_of(const Meta& m, const std::string& stage) {
@@ -270,7 +265,7 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
         }
         total_time += r ? r->wall_time_s : 0;
         rows.push_back({esc(s.stage), "<span class=\"ok\">done</span>", r ? esc(r->created_utc) : "?",
-                        r ? fmt::format("{:.1f}", r->wall_time_s) : "?", human_bytes(static_cast<double>(size)), esc(s.output)});
+                        r ? fmt::format("{:.1f}", r->wall_time_s) : "?", human_bytes(size), esc(s.output)});
     }
     pg.h2("Stages", "stages");
     pg.table({"stage", "state", "made (UTC)", "time [s]", "size", "file"}, rows);
@@ -304,11 +299,11 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
         const auto& c = *files["condense"].condensed;
         const double bytes = c.precision == Precision::FLOAT32 ? 4.0 : 8.0;
         key.push_back({"condense", "kept DOFs (W is #M×#M)", std::to_string(c.size()), ""});
-        key.push_back({"condense", "W storage (upper triangle)", fmt::format("{} ({})", human_bytes(bytes * static_cast<double>(c.size()) * static_cast<double>(c.size() + 1) / 2),
+        key.push_back({"condense", "W storage (upper triangle)", fmt::format("{} ({})", human_bytes(static_cast<std::uint64_t>(bytes * static_cast<double>(c.size()) * static_cast<double>(c.size() + 1) / 2)),
                                                                            c.precision == Precision::FLOAT32 ? "float32" : "float64"), ""});
         key.push_back({"condense", "method", esc(c.method), ""});
         for (const auto& [k, v] : c.diagnostics) {
-            key.push_back({"condense", esc(k), k.find("bytes") != std::string::npos ? human_bytes(v) : num(v), ""});
+            key.push_back({"condense", esc(k), k.find("bytes") != std::string::npos ? human_bytes(static_cast<std::uint64_t>(v)) : num(v), ""});
         }
     }
     pg.table({"stage", "figure", "value", "acceptance"}, key);
@@ -415,7 +410,7 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
         if (!f) throw IoError(tmp.string() + ": cannot write");
     }
     fs::rename(tmp, out);
-    rep.info(fmt::format("report: {} pictures, {} -> {}", pg.pictures, human_bytes(static_cast<double>(page.size())), html));
+    rep.info(fmt::format("report: {} pictures, {} -> {}", pg.pictures, human_bytes(page.size()), html));
 }
 
 }  // namespace aneu::pipeline

@@ -8,23 +8,13 @@
 #include "aneu/core/error.hpp"
 #include "aneu/core/file_summary.hpp"
 #include "aneu/pipeline/snapshot.hpp"
+#include "aneu/core/text.hpp"
 #include "cli_common.hpp"
 #include "commands.hpp"
 
 namespace aneu::tools {
 
 namespace {
-
-std::string human_bytes(std::uint64_t b) {
-    const char* unit[] = {"B", "KiB", "MiB", "GiB", "TiB"};
-    double v = static_cast<double>(b);
-    int u = 0;
-    while (v >= 1024.0 && u < 4) {
-        v /= 1024.0;
-        ++u;
-    }
-    return u == 0 ? fmt::format("{} B", b) : fmt::format("{:.1f} {}", v, unit[u]);
-}
 
 std::string shape_text(const std::vector<std::uint64_t>& s) {
     std::string o = "[";

@@ -13,6 +13,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/provenance.hpp"
+#include "aneu/core/text.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/pipeline/report.hpp"
 #include "case_chain.hpp"
@@ -209,12 +210,6 @@ int remove_stale_parts(const std::string& output) {
 
 void touch(const std::string& path) { fs::last_write_time(path, fs::file_time_type::clock::now()); }
 
-std::string human_size(std::uintmax_t b) {
-    if (b >= (1u << 30)) return fmt::format("{:.2f} GB", static_cast<double>(b) / (1u << 30));
-    if (b >= (1u << 20)) return fmt::format("{:.1f} MB", static_cast<double>(b) / (1u << 20));
-    return fmt::format("{:.0f} kB", static_cast<double>(b) / 1024.0);
-}
-
 int run_case(const RunOptions& o) {
     const auto& names = all_case_stages();
     for (const auto* opt : {&o.stage, &o.from}) {
@@ -293,7 +288,7 @@ int run_case(const RunOptions& o) {
         const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         std::uintmax_t size = fs::exists(chain.bundle()) ? fs::file_size(chain.bundle()) : 0;
         fmt::print("done: {} ran, {} up to date, {:.1f} s; case bundle {} ({})\n", ran, current, total, chain.bundle(),
-                   human_size(size));
+                   human_bytes(size));
     }
     return 0;
 }

@@ -3,6 +3,8 @@
 /// @file
 /// Number formatting for messages and provenance.
 #include <charconv>
+#include <cstdint>
+#include <cstdio>
 #include <string>
 
 namespace aneu {
@@ -13,6 +15,24 @@ inline std::string shortest(double v) {
     char buf[32];
     const auto r = std::to_chars(buf, buf + sizeof buf, v);
     return std::string(buf, r.ptr);
+}
+
+/// A byte count for people: "812 B", "3.6 MiB", "1.2 GiB" (powers of 1024, one decimal).
+inline std::string human_bytes(std::uint64_t b) {
+    const char* unit[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    double v = static_cast<double>(b);
+    int u = 0;
+    while (v >= 1024.0 && u < 4) {
+        v /= 1024.0;
+        ++u;
+    }
+    char buf[32];
+    if (u == 0) {
+        std::snprintf(buf, sizeof buf, "%llu B", static_cast<unsigned long long>(b));
+    } else {
+        std::snprintf(buf, sizeof buf, "%.1f %s", v, unit[u]);
+    }
+    return buf;
 }
 
 }  // namespace aneu
