@@ -20,20 +20,29 @@ using namespace aneu;
 
 namespace {
 
-// Prescribes displacements on `count` surface vertices (in the working region) around vertex `centre`.
+// The working region's surface vertices by distance from the middle vertex, nearest first.
+std::vector<int> by_distance(const sim::SimModel& m) {
+    const auto& s = m.surface;
+    std::vector<std::pair<double, int>> d;
+    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
+    for (Eigen::Index v = 0; v < s.size(); ++v)
+        if (s.row(v, 0) < m.n_active && s.row(v, 1) < m.n_active && s.row(v, 2) < m.n_active)
+            d.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
+    std::sort(d.begin(), d.end());
+    std::vector<int> out;
+    for (const auto& [dist, v] : d) out.push_back(v);
+    return out;
+}
+
+// Prescribes random displacements on the `count` vertices nearest the middle one.
 std::vector<sim::Prescribed> patch(const sim::SimModel& m, int count, unsigned seed, int group = -1) {
     const auto& s = m.surface;
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> U(-0.2, 0.2);
-    std::vector<std::pair<double, int>> by_dist;
-    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
-    for (Eigen::Index v = 0; v < s.size(); ++v)
-        if (s.row(v, 0) < m.n_active && s.row(v, 1) < m.n_active && s.row(v, 2) < m.n_active)
-            by_dist.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
-    std::sort(by_dist.begin(), by_dist.end());
+    const std::vector<int> near = by_distance(m);
     std::vector<sim::Prescribed> p;
-    for (int k = 0; k < count && k < static_cast<int>(by_dist.size()); ++k) {
-        const int v = by_dist[static_cast<size_t>(k)].second;
+    for (int k = 0; k < count && k < static_cast<int>(near.size()); ++k) {
+        const int v = near[static_cast<size_t>(k)];
         sim::Prescribed q;
         q.cols = s.row.row(v).transpose();
         q.u = Eigen::Vector3d(U(rng), U(rng), U(rng));
@@ -175,10 +184,7 @@ TEST_P(SolverVsFem, FactorUpdatedForAChangingContactSetStaysExact) {
     const Loaded l = load_tube(prec, d);
     const sim::SimModel& m = l.m;
     const auto& s = m.surface;
-    std::vector<std::pair<double, int>> by_dist;
-    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
-    for (Eigen::Index v = 0; v < s.size(); ++v) by_dist.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
-    std::sort(by_dist.begin(), by_dist.end());
+    const std::vector<int> by_dist = by_distance(m);
     ASSERT_GT(by_dist.size(), 200u);
     std::mt19937 rng(3);
     std::uniform_real_distribution<double> U(-0.1, 0.1);
@@ -190,8 +196,8 @@ TEST_P(SolverVsFem, FactorUpdatedForAChangingContactSetStaysExact) {
         return q;
     };
     std::vector<int> held, free_nodes;  // held: a clip's 6 nodes (group 0); free: 60 contacts, sliding outward
-    for (int k = 0; k < 6; ++k) held.push_back(by_dist[static_cast<size_t>(k)].second);
-    for (int k = 6; k < 66; ++k) free_nodes.push_back(by_dist[static_cast<size_t>(k)].second);
+    for (int k = 0; k < 6; ++k) held.push_back(by_dist[static_cast<size_t>(k)]);
+    for (int k = 6; k < 66; ++k) free_nodes.push_back(by_dist[static_cast<size_t>(k)]);
     size_t next = 66;
     sim::ContactSolver solver(m);
     int updated = 0, recomputed = 0;
@@ -202,7 +208,7 @@ TEST_P(SolverVsFem, FactorUpdatedForAChangingContactSetStaysExact) {
     for (int frame = 0; frame < 90; ++frame) {
         if (frame > 0) {  // two nodes leave (from anywhere in the list), two new ones come
             for (int k = 0; k < 2; ++k) free_nodes.erase(free_nodes.begin() + static_cast<long>(rng() % free_nodes.size()));
-            for (int k = 0; k < 2; ++k) free_nodes.push_back(by_dist[next++].second);
+            for (int k = 0; k < 2; ++k) free_nodes.push_back(by_dist[next++]);
         }
         std::vector<int> verts = held;
         verts.insert(verts.end(), free_nodes.begin(), free_nodes.end());
@@ -356,10 +362,7 @@ TEST_P(SolverVsFem, CrowdedContactSetsRaiseTheConditionEstimateAndStayAccurate) 
     const sim::SimModel& m = l.m;
     const auto& s = m.surface;
     sim::ContactSolver solver(m);
-    std::vector<std::pair<double, int>> by_dist;
-    const Eigen::RowVector3d c = s.X.row(s.size() / 2);
-    for (Eigen::Index v = 0; v < s.size(); ++v) by_dist.emplace_back((s.X.row(v) - c).norm(), static_cast<int>(v));
-    std::sort(by_dist.begin(), by_dist.end());
+    const std::vector<int> by_dist = by_distance(m);
     auto set_of = [&](const std::vector<int>& verts) {
         std::vector<sim::Prescribed> p;
         for (int v : verts) {
@@ -373,8 +376,8 @@ TEST_P(SolverVsFem, CrowdedContactSetsRaiseTheConditionEstimateAndStayAccurate) 
     };
     const int n = 12;
     std::vector<int> adjacent, spread;
-    for (int k = 0; k < n; ++k) adjacent.push_back(by_dist[static_cast<size_t>(k)].second);
-    for (int k = 0; k < n; ++k) spread.push_back(by_dist[static_cast<size_t>(k * (by_dist.size() / n))].second);
+    for (int k = 0; k < n; ++k) adjacent.push_back(by_dist[static_cast<size_t>(k)]);
+    for (int k = 0; k < n; ++k) spread.push_back(by_dist[static_cast<size_t>(k * (by_dist.size() / n))]);
     solver.solve(set_of(adjacent), 0, sim::GroupMethod::EXACT, m.dof_node.size());
     const double c_adj = solver.condition_estimate();
     solver.solve(set_of(spread), 0, sim::GroupMethod::EXACT, m.dof_node.size());
@@ -398,7 +401,7 @@ TEST_P(SolverVsFem, CrowdedContactSetsRaiseTheConditionEstimateAndStayAccurate) 
     EXPECT_GT(c_adj, 2.0 * c_spr);
     // Every surface node of half the tube: several hundred adjacent nodes.
     std::vector<int> many;
-    for (size_t k = 0; k < by_dist.size() / 2; ++k) many.push_back(by_dist[k].second);
+    for (size_t k = 0; k < by_dist.size() / 2; ++k) many.push_back(by_dist[k]);
     const auto p = set_of(many);
     const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());
     const double c_many = solver.condition_estimate();
