@@ -4,6 +4,8 @@
 #include <chrono>
 #include <set>
 
+#include <Eigen/Geometry>
+
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
@@ -148,6 +150,34 @@ void assemble_file(const std::string& in, const std::string& out, const Assemble
             mats.push_back({r, p.E_aneurysm_mpa, p.nu_aneurysm});
         } else {
             throw InputError(in + ": region '" + r + "' has no material (expected artery or aneurysm)");
+        }
+    }
+    // Slivers: quality η = 6√2·V / l_rms³ (1 for a regular tetrahedron, → 0 when flat). Their stiffness grows as
+    // 1/η and spoils K's conditioning; say where they are (TetGen's bounds normally keep η well above 0.01).
+    {
+        double worst = 1e300;
+        Eigen::Index worst_t = -1, n_bad = 0;
+        for (Eigen::Index t = 0; t < v.tets.rows(); ++t) {
+            const Eigen::Vector3d a = v.nodes.row(v.tets(t, 0)), b = v.nodes.row(v.tets(t, 1)), c = v.nodes.row(v.tets(t, 2)),
+                                  d = v.nodes.row(v.tets(t, 3));
+            const double vol = std::abs((b - a).cross(c - a).dot(d - a)) / 6.0;
+            const double l2 = ((b - a).squaredNorm() + (c - a).squaredNorm() + (d - a).squaredNorm() + (c - b).squaredNorm() +
+                               (d - b).squaredNorm() + (d - c).squaredNorm()) / 6.0;
+            const double eta = 6.0 * std::sqrt(2.0) * vol / std::pow(l2, 1.5);
+            if (eta < worst) {
+                worst = eta;
+                worst_t = t;
+            }
+            n_bad += eta < 1e-3;
+        }
+        stage.qa.emplace_back("min_tet_quality", worst);
+        stage.qa.emplace_back("tets_quality_below_1e-3", static_cast<double>(n_bad));
+        if (n_bad > 0) {
+            const Eigen::Vector3d g = (v.nodes.row(v.tets(worst_t, 0)) + v.nodes.row(v.tets(worst_t, 1)) + v.nodes.row(v.tets(worst_t, 2)) +
+                                       v.nodes.row(v.tets(worst_t, 3))).transpose() / 4.0;
+            rep.warn("assemble: " + std::to_string(n_bad) + " sliver tetrahedra (quality < 1e-3; the worst " + shortest(worst) + ", tet " +
+                     std::to_string(worst_t) + " near " + shortest(g.x()) + ", " + shortest(g.y()) + ", " + shortest(g.z()) +
+                     " mm): K is ill-conditioned there; remesh (tetmesh --min-dihedral-deg, --max-volume-mm3)");
         }
     }
     // Near incompressibility, 4-node tetrahedra lock: measured on the Lamé tube at h = 0.2 mm (test

@@ -107,6 +107,11 @@ void print_text(const FileSummary& s) {
         std::string params;
         for (const auto& [k, v] : st.parameters) params += fmt::format("{}{}={}", params.empty() ? "" : " ", k, v);
         fmt::print("      parameters  {}\n", params);
+        if (!st.qa.empty()) {
+            std::string qa;
+            for (const auto& [k, v] : st.qa) qa += fmt::format("{}{}={}", qa.empty() ? "" : " ", k, shortest(v));
+            fmt::print("      qa          {}\n", qa);
+        }
         if (st.inputs.empty()) fmt::print("      inputs      (none)\n");
         for (const auto& in : st.inputs) fmt::print("      input       {}  sha256 {}\n", in.path, in.sha256);
     }
@@ -140,6 +145,8 @@ nlohmann::json to_json(const FileSummary& s) {
                          {"command_line", st.command_line}, {"wall_time_s", st.wall_time_s}};
         p["parameters"] = nlohmann::json::object();
         for (const auto& [k, v] : st.parameters) p["parameters"][k] = v;
+        p["qa"] = nlohmann::json::object();
+        for (const auto& [k, v] : st.qa) p["qa"][k] = v;
         p["inputs"] = nlohmann::json::array();
         for (const auto& in : st.inputs) p["inputs"].push_back({{"path", in.path}, {"sha256", in.sha256}});
         j["provenance"].push_back(p);

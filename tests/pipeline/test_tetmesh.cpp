@@ -183,3 +183,40 @@ TEST(TubeSac, WallIsClosedLabelledAndMeshesIntoTwoRegions) {
     ASSERT_FALSE(kept.empty());
     for (int n : kept) ASSERT_LT((v.nodes.row(n).transpose() - C).norm(), p.sac_radius_mm + p.sac_thickness_mm + 3 * p.edge_mm);
 }
+
+TEST(Stages, AssembleNamesSliverTetrahedra) {
+    // Stability at the extremes: a sliver (four nearly coplanar corners, quality 1e-4) beside a regular tetrahedron.
+    // Assembly goes on (the element is valid) but warns, naming how many, the worst and where; QA records it.
+    test::TempDir d("sliver");
+    Bundle b;
+    b.meta.case_id = "sliver";
+    VolumeData v;
+    v.nodes.resize(5, 3);
+    v.nodes << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.5, 0.5, -1e-4;
+    v.tets.resize(2, 4);
+    v.tets << 0, 1, 2, 3, 0, 2, 1, 4;
+    v.tet_region = Eigen::VectorXi::Zero(2);
+    v.region_names = {"artery"};
+    v.node_sets["fixed"] = (Eigen::VectorXi(3) << 0, 1, 2).finished();
+    v.node_sets["outer"] = (Eigen::VectorXi(2) << 3, 4).finished();
+    v.node_sets["inner"] = Eigen::VectorXi();
+    b.volume = v;
+    write_bundle(d.file("vol.h5"), b);
+    std::vector<std::string> warnings;
+    Reporter rep;
+    rep.on_message = [&](Level lv, const std::string& m) {
+        if (lv == Level::WARN) warnings.push_back(m);
+    };
+    StageRecord r;
+    r.stage = "assemble";
+    assemble_file(d.file("vol.h5"), d.file("fem.h5"), AssembleParams{}, r, rep);
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("1 sliver tetrahedra"), std::string::npos) << warnings[0];
+    EXPECT_NE(warnings[0].find("tet 1 near 0.375, 0.375"), std::string::npos) << warnings[0];
+    const Meta m = read_meta(d.file("fem.h5"));
+    double q = -1;
+    for (const auto& [k, val] : m.stages.back().qa)
+        if (k == "min_tet_quality") q = val;
+    EXPECT_GT(q, 0.0);
+    EXPECT_LT(q, 1e-3);
+}
