@@ -220,3 +220,80 @@ TEST(Stages, AssembleNamesSliverTetrahedra) {
     EXPECT_GT(q, 0.0);
     EXPECT_LT(q, 1e-3);
 }
+
+TEST(Stages, NearDegenerateSurfaceTrianglesGiveSliversThatAreNamed) {
+    // Stability at the extremes: the wall surface carries two needle triangles (an outer edge split 1e-5 of its
+    // length from one end). The mesher keeps the surface, so tiny tetrahedra appear there, and assembly names them
+    // (never silently).
+    test::TempDir d("needle");
+    TubeWallParams tw;
+    tw.n_theta = 16;
+    tw.n_z = 10;
+    StageRecord r;
+    r.stage = "tubewall";
+    tubewall_file(tw, d.file("wall.h5"), r);
+    Bundle b = read_bundle(d.file("wall.h5"));
+    SurfaceData& w = b.surfaces.at("wall");
+    // An outer face (label "outer") and its neighbour across its first edge.
+    int outer_label = -1;
+    for (size_t k = 0; k < w.label_names.size(); ++k)
+        if (w.label_names[k] == "outer") outer_label = static_cast<int>(k);
+    ASSERT_GE(outer_label, 0);
+    Eigen::Index f0 = -1, f1 = -1;
+    for (Eigen::Index f = 0; f < w.F.rows() && f1 < 0; ++f) {
+        if (w.face_label[f] != outer_label) continue;
+        const int a = w.F(f, 0), bb = w.F(f, 1);
+        for (Eigen::Index g = 0; g < w.F.rows(); ++g)
+            for (int k = 0; k < 3; ++k)
+                if (g != f && w.F(g, k) == bb && w.F(g, (k + 1) % 3) == a) {
+                    f0 = f;
+                    f1 = g;
+                }
+    }
+    ASSERT_GE(f1, 0);
+    const int a = w.F(f0, 0), bb = w.F(f0, 1), c = w.F(f0, 2);
+    int dd = -1;
+    for (int k = 0; k < 3; ++k)
+        if (w.F(f1, k) != a && w.F(f1, k) != bb) dd = w.F(f1, k);
+    const int p = static_cast<int>(w.V.rows());
+    w.V.conservativeResize(p + 1, 3);
+    w.V.row(p) = w.V.row(a) + 1e-5 * (w.V.row(bb) - w.V.row(a));
+    const Eigen::Index nf = w.F.rows();
+    w.F.conservativeResize(nf + 2, 3);
+    w.face_label.conservativeResize(nf + 2);
+    if (w.face_region.size() == nf) w.face_region.conservativeResize(nf + 2);
+    w.F.row(f0) << a, p, c;
+    w.F.row(nf) << p, bb, c;
+    w.F.row(f1) << bb, p, dd;
+    w.F.row(nf + 1) << p, a, dd;
+    w.face_label[nf] = w.face_label[f0];
+    w.face_label[nf + 1] = w.face_label[f1];
+    if (w.face_region.size() == nf + 2) {
+        w.face_region[nf] = w.face_region[f0];
+        w.face_region[nf + 1] = w.face_region[f1];
+    }
+    if (w.vertex_thickness.size() == p) {
+        w.vertex_thickness.conservativeResize(p + 1);
+        w.vertex_thickness[p] = w.vertex_thickness[a];
+    }
+    write_bundle(d.file("needle.h5"), b);
+    r.stage = "tetmesh";
+    // TetGen keeps the needle edge (the boundary is preserved): the mesh is made, with tiny tetrahedra there.
+    tetmesh_file(d.file("needle.h5"), d.file("vol.h5"), {}, r);
+    std::vector<std::string> warnings;
+    Reporter rep;
+    rep.on_message = [&](Level lv, const std::string& m) {
+        if (lv == Level::WARN) warnings.push_back(m);
+    };
+    r.stage = "assemble";
+    assemble_file(d.file("vol.h5"), d.file("fem.h5"), AssembleParams{}, r, rep);
+    double q = -1;
+    const Meta meta = read_meta(d.file("fem.h5"));
+    for (const auto& [k, val] : meta.stages.back().qa)
+        if (k == "min_tet_quality") q = val;
+    std::printf("needle triangles: min tet quality %g, %zu warnings\n", q, warnings.size());
+    RecordProperty("min_tet_quality", std::to_string(q));
+    EXPECT_LT(q, 1e-3);  // measured 4.3e-6
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings.front().find("sliver tetrahedra"), std::string::npos) << warnings.front();
+}
