@@ -211,11 +211,17 @@ int main(int argc, char** argv) {
         double fw = 0;
         for (size_t k = 0; k < p.size(); ++k) fw += r.f.segment<3>(3 * static_cast<Eigen::Index>(k)).dot(p[k].u) / depth;
         out["force_w_n"] = fw;
-        out["probes_w"] = probe_u([&](int v) -> Eigen::Vector3d {
-            Eigen::Vector3d u;
-            for (int a = 0; a < 3; ++a) u[a] = r.d[row_of[static_cast<size_t>(3 * s.node[v] + a)]];
-            return u;
-        });
+        bool probes_condensed = true;  // a working region may leave the probes out: then there is no W-route answer
+        for (const Probe& pr : probes)
+            for (int k = 0; k < 3; ++k)
+                for (int a = 0; a < 3; ++a) probes_condensed = probes_condensed && row_of[static_cast<size_t>(3 * s.node[s.F(pr.face, k)] + a)] >= 0;
+        if (probes_condensed) {
+            out["probes_w"] = probe_u([&](int v) -> Eigen::Vector3d {
+                Eigen::Vector3d u;
+                for (int a = 0; a < 3; ++a) u[a] = r.d[row_of[static_cast<size_t>(3 * s.node[v] + a)]];
+                return u;
+            });
+        }
         out["wcc_condition"] = solver.condition_estimate();
         // The condensation's own diagnostics: condition of K (CHOLMOD's estimate) and W's residual check.
         for (const auto& [k, v] : read_condensed_header(case_path).diagnostics) {
@@ -224,7 +230,11 @@ int main(int argc, char** argv) {
         // Update rates: patches of 100 and 300 outer vertices nearest the clip centre, all rows of W (the whole
         // working region), factor reused, and with one node swapped each frame.
         std::vector<std::pair<double, int>> near;
-        for (Eigen::Index v = 0; v < s.size(); ++v) near.emplace_back((s.X.row(v).transpose() - centre).norm(), static_cast<int>(v));
+        for (Eigen::Index v = 0; v < s.size(); ++v) {
+            bool condensed = true;  // a bundle of a working region holds only its nodes
+            for (int a = 0; a < 3; ++a) condensed = condensed && row_of[static_cast<size_t>(3 * s.node[v] + a)] >= 0;
+            if (condensed) near.emplace_back((s.X.row(v).transpose() - centre).norm(), static_cast<int>(v));
+        }
         std::sort(near.begin(), near.end());
         for (int n : {100, 300}) {
             if (n + 1 > static_cast<int>(near.size())) break;

@@ -68,5 +68,22 @@ point "$href" 2 1
 # Every model is indented at the reference's sac apex (the same physical point).
 centre_arg="--centre $($py -c "import json; print(','.join(str(x) for x in json.loads(open('$jsonl').readline())['centre']))")"
 for h in $hs; do for order in 1 2; do point "$h" "$order"; done; done
+# Condensed set: W on working regions of growing radius around the indenter (h 0.4 quadratic, float32) against
+# all outer nodes (the point above): memory, precompute, load and update rate; the indenter's answer is the same
+# as long as the region holds it (condensation is exact).
+hr=0.4; [ $quick = 1 ] && hr=0.5
+d="$work/h${hr}_p2"
+if [ -f "$d/fem.h5" ]; then
+  c=$($py -c "import json; print(','.join(str(x) for x in json.loads(open('$jsonl').readline())['centre']))")
+  for R in 2.5 4 6; do
+    echo "== region sphere $R mm, h $hr, order 2, float32"
+    t0=$(date +%s.%N)
+    "$prep" condense "$d/fem.h5" -o "$d/case_r$R.h5" --precision float32 --region-sphere "$c,$R" -q
+    t1=$(date +%s.%N)
+    "$probe" "$d/fem.h5" --case "$d/case_r$R.h5" $centre_arg |
+      $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$hr, reference=0, region_mm=$R, condense_s=$t1-$t0); print(json.dumps(j))" >>"$jsonl"
+    rm -f "$d/case_r$R.h5"
+  done
+fi
 $py bench/study_report.py "$jsonl" "$out"
 echo "report: $out/study.md"
