@@ -85,5 +85,46 @@ if [ -f "$d/fem.h5" ]; then
     rm -f "$d/case_r$R.h5"
   done
 fi
-$py bench/study_report.py "$jsonl" "$out"
+# The sample phantom case (configs/cases/sample.toml: CT → segment → surface → wall → tetmesh → assemble → condense)
+# at several surface edge lengths and both orders, W float32, indented at the sac's apex (truth: sac centre + (dome
+# radius + sac wall) along the neck normal), against its finest quadratic model by the full FEM.
+if [ $quick = 1 ]; then pes="0.6"; peref=0.45; else pes="0.6 0.45 0.35"; peref=0.3; fi
+phantom_point() {  # edge order [reference]
+  local e=$1 order=$2 ref=${3:-0}
+  local d="$work/phantom_e${e}"
+  echo "== phantom, edge $e mm, order $order$([ "$ref" = 1 ] && echo ' (reference)')"
+  "$prep" run configs/cases/sample.toml --out-dir "$d" --set surface.edge-mm="$e" --set assemble.element-order="$order" \
+    --stage phantom --quiet >/dev/null
+  for st in segment surface wall tetmesh assemble; do
+    "$prep" run configs/cases/sample.toml --out-dir "$d" --set surface.edge-mm="$e" --set assemble.element-order="$order" \
+      --stage "$st" --quiet >/dev/null
+  done
+  local pc
+  pc=$($py -c "
+import json; t = json.load(open('$d/phantom/truth.json')); c = t['sac']['centre_mm']; n = t['neck']['normal']
+r = t['sac']['radius_mm'] + 0.4 / 3
+print(','.join(str(c[k] + r * n[k]) for k in range(3)))")
+  local kept
+  kept=$("$prep" inspect "$d/fem.h5" --json | $py -c "
+import json,sys
+for e in json.load(sys.stdin)['entries']:
+    if e.get('path') == '/volume/node_sets/outer': print(3 * e['shape'][0])")
+  if [ "$ref" = 1 ] || [ "${kept:-0}" -gt "$max_w_dofs" ]; then
+    "$probe" "$d/fem.h5" --centre "$pc" |
+      $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$e, reference=$ref, case_name='phantom'); print(json.dumps(j))" >>"$pjsonl"
+  else
+    local t0 t1
+    t0=$(date +%s.%N)
+    "$prep" condense "$d/fem.h5" -o "$d/case_f32.h5" --precision float32 -q
+    t1=$(date +%s.%N)
+    "$probe" "$d/fem.h5" --case "$d/case_f32.h5" --centre "$pc" |
+      $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$e, reference=0, case_name='phantom', condense_s=$t1-$t0); print(json.dumps(j))" >>"$pjsonl"
+    rm -f "$d/case_f32.h5"
+  fi
+}
+pjsonl="$out/study_phantom.jsonl"
+: >"$pjsonl"
+phantom_point "$peref" 2 1
+for e in $pes; do for order in 1 2; do phantom_point "$e" "$order"; done; done
+$py bench/study_report.py "$jsonl" "$out" "$pjsonl"
 echo "report: $out/study.md"

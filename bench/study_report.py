@@ -20,7 +20,29 @@ def err_u(p, ref):
     return math.sqrt(num / den)
 
 
-def main(jsonl, outdir):
+def phantom_section(path, w):
+    rows = [json.loads(l) for l in open(path) if l.strip()]
+    if not rows:
+        return
+    ref = next(r for r in rows if r.get("reference"))
+    w("\n## The sample phantom case (CT → every stage), W float32\n")
+    w(f"Reference: surface edge {ref['h']} mm, order {ref['element_order']}, {ref['nodes']} nodes, {ref['dofs']} DOFs, full FEM "
+      f"(solve {ref['fem_solve_s']:.1f} s): indenter force {ref['force_fem_n']:.4g} N at the sac's apex.\n")
+    w("| edge [mm] | order | nodes | tets | kept DOFs | W [MB] | stages + condense [s] | load [s] | update 100 [Hz] | update 300 [Hz] | force error | u error |")
+    w("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in sorted((r for r in rows if not r.get("reference")), key=lambda r: (-r["h"], r["element_order"])):
+        e_f = abs((r.get("force_w_n", r["force_fem_n"])) - ref["force_fem_n"]) / ref["force_fem_n"]
+        e_u = err_u(r.get("probes_w", r["probes_fem"]), ref["probes_fem"])
+        st = sum(r.get("stage_s", {}).values()) + r.get("condense_s", 0)
+        if "force_w_n" in r:
+            w(f"| {r['h']} | {r['element_order']} | {r['nodes']} | {r['tets']} | {r['kept_dofs']} | {r['W_bytes'] / 2**20:.0f} | {st:.1f} | "
+              f"{r['load_s']:.2f} | {r.get('update_hz_100', float('nan')):.0f} | {r.get('update_hz_300', float('nan')):.0f} | {e_f:.3%} | {e_u:.3%} |")
+        else:
+            w(f"| {r['h']} | {r['element_order']} | {r['nodes']} | {r['tets']} | (FEM only) | - | {st:.1f} | - | - | - | {e_f:.3%} | {e_u:.3%} |")
+    w("")
+
+
+def main(jsonl, outdir, phantom=None):
     rows = [json.loads(l) for l in open(jsonl) if l.strip()]
     ref = next(r for r in rows if r.get("reference"))
     pts = [r for r in rows if not r.get("reference") and "region_mm" not in r]
@@ -99,8 +121,10 @@ def main(jsonl, outdir):
         w("(No plots: python3-matplotlib is not installed.)\n")
     for p in plots:
         w(f"![{p}]({p})\n")
+    if phantom and os.path.exists(phantom):
+        phantom_section(phantom, w)
     open(os.path.join(outdir, "study.md"), "w").write("\n".join(out) + "\n")
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    main(sys.argv[1], sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else None)
