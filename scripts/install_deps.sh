@@ -20,6 +20,8 @@ PACKAGES=(
   xvfb xauth
   # workflow checks: CalculiX (the exported .inp is run in ccx) and headless Chromium (the QA report)
   calculix-ccx chromium
+  # the batch test finds the running stage with pgrep (procps is not in minimal Debian images)
+  procps
 )
 
 if [ "$(id -u)" -eq 0 ]; then
