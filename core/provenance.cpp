@@ -83,6 +83,14 @@ std::string sha256_path(const std::string& path) {
     return sha256_file(path);
 }
 
+std::string read_file(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    if (!f) throw IoError(path + ": cannot open for reading");
+    std::string out((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    if (f.bad()) throw IoError(path + ": read failed");
+    return out;
+}
+
 std::string utc_now_iso8601() {
     const std::time_t t = std::chrono::system_clock::to_time_t(std::chrono::system_clock::now());
     std::tm tm{};

@@ -9,7 +9,6 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <sstream>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
@@ -62,13 +61,6 @@ std::string base64(const std::string& in) {
         o += '=';
     }
     return o;
-}
-
-std::string read_all(const fs::path& p) {
-    std::ifstream f(p, std::ios::binary);
-    std::ostringstream s;
-    s << f.rdbuf();
-    return s.str();
 }
 
 std::string num(double v) {
@@ -243,7 +235,7 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
     auto render = [&](const SnapshotScene& sc) {
         const fs::path png = tmpdir / "p.png";
         snapshot_scene(sc, png.string(), in.width, in.height);
-        return read_all(png);
+        return read_file(png.string());
     };
 
     Page pg;

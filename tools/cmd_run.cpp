@@ -8,7 +8,6 @@
 #include <fstream>
 #include <memory>
 #include <optional>
-#include <sstream>
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
@@ -131,16 +130,9 @@ std::string params_text(const StagePlan& p) {
     return t;
 }
 
-std::string read_text(const fs::path& p) {
-    std::ifstream f(p, std::ios::binary);
-    std::ostringstream s;
-    s << f.rdbuf();
-    return s.str();
-}
-
 /// Writes `text` to `path` through a temporary name; leaves the file (and its time) alone when it holds it.
 void write_if_changed(const fs::path& path, const std::string& text) {
-    if (fs::exists(path) && read_text(path) == text) return;
+    if (fs::exists(path) && read_file(path.string()) == text) return;
     fs::create_directories(path.parent_path());
     const fs::path tmp = path.string() + ".part";
     {
@@ -342,7 +334,7 @@ void add_report_command(CLI::App& app, std::function<int()>& action) {
                 pipeline::ReportInput in;
                 in.case_id = chain.id;
                 in.config_path = chain.config;
-                in.config_text = read_text(chain.config);
+                in.config_text = read_file(chain.config);
                 for (const auto& s : chain.steps) in.stages.push_back({s.stage, s.output, s.provenance_file});
                 const std::string html = o->html.empty() ? (fs::path(chain.out_dir) / "report.html").string() : o->html;
                 Reporter rep = make_log_reporter();

@@ -17,6 +17,9 @@ std::string sha256_hex(const std::string& bytes);
 /// @throws IoError if the path cannot be read
 std::string sha256_path(const std::string& path);
 
+/// The whole content of a file. @throws IoError if it cannot be read
+std::string read_file(const std::string& path);
+
 /// Current UTC time as ISO 8601 with seconds, e.g. "2026-11-21T11:44:47Z".
 std::string utc_now_iso8601();
 
