@@ -25,8 +25,9 @@ void fill_B(Eigen::Matrix<double, 6, 3 * N>& B, int a, const Eigen::Vector3d& g)
     B(5, c + 1) = g.x();
 }
 
-/// ∂N/∂ξ (10×3) of the quadratic tetrahedron at barycentric point ξ = (L1, L2, L3), L0 = 1 − ΣLk.
-Eigen::Matrix<double, 10, 3> quadratic_shape_gradients(const Eigen::Vector3d& xi) {
+}  // namespace
+
+Eigen::Matrix<double, 10, 3> quadratic_tet_shape_gradients(const Eigen::Vector3d& xi) {
     const double L[4] = {1.0 - xi.sum(), xi[0], xi[1], xi[2]};
     Eigen::Matrix<double, 10, 4> dNdL = Eigen::Matrix<double, 10, 4>::Zero();
     for (int i = 0; i < 4; ++i) dNdL(i, i) = 4.0 * L[i] - 1.0;
@@ -39,8 +40,6 @@ Eigen::Matrix<double, 10, 3> quadratic_shape_gradients(const Eigen::Vector3d& xi
     for (int k = 0; k < 3; ++k) dNdxi.col(k) = dNdL.col(k + 1) - dNdL.col(0);  // chain rule through L0
     return dNdxi;
 }
-
-}  // namespace
 
 Eigen::Matrix<double, 6, 6> elasticity_matrix(double E, double nu) {
     const double lambda = E * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
@@ -71,13 +70,11 @@ Eigen::Matrix<double, 12, 12> linear_tet_stiffness(const Eigen::Matrix<double, 4
 }
 
 Eigen::Matrix<double, 30, 30> quadratic_tet_stiffness(const Eigen::Matrix<double, 10, 3>& X, double E, double nu) {
-    // 4-point rule, degree 2: barycentric (a,b,b,b) and permutations, weight 1/4 of the reference volume 1/6.
-    constexpr double a = 0.5854101966249685, b = 0.1381966011250105, w = 1.0 / 24.0;
-    const Eigen::Vector3d points[4] = {{b, b, b}, {a, b, b}, {b, a, b}, {b, b, a}};
     const Eigen::Matrix<double, 6, 6> D = elasticity_matrix(E, nu);
+    const double w = QUADRATIC_TET_RULE_WEIGHT;
     Eigen::Matrix<double, 30, 30> K = Eigen::Matrix<double, 30, 30>::Zero();
-    for (const auto& xi : points) {
-        const Eigen::Matrix<double, 10, 3> dNdxi = quadratic_shape_gradients(xi);
+    for (const auto& pt : QUADRATIC_TET_RULE_POINTS) {
+        const Eigen::Matrix<double, 10, 3> dNdxi = quadratic_tet_shape_gradients(Eigen::Vector3d(pt[0], pt[1], pt[2]));
         const Eigen::Matrix3d J = X.transpose() * dNdxi;  // J(i,j) = ∂x_i/∂ξ_j
         const double detJ = J.determinant();
         if (!(detJ > 0.0)) {

@@ -131,10 +131,15 @@ DirichletResult solve_dirichlet(const FemData& fem, const std::vector<std::pair<
     Eigen::VectorXd rhs(m);
     for (Eigen::Index i = 0; i < m; ++i) rhs[i] = f ? (*f)[dofs[static_cast<size_t>(i)]] : 0.0;
     if (np > 0) rhs -= Kfp * up;
-    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt(Kff);
-    if (llt.info() != Eigen::Success) throw NumericalError("K_ff is not positive definite (CHOLMOD factorisation failed)");
-    const Eigen::VectorXd uf = llt.solve(rhs);
-    if (llt.info() != Eigen::Success) throw NumericalError("CHOLMOD solve failed");
+    Eigen::VectorXd uf(m);
+    if (m > 0) {
+        Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+        llt.cholmod().print = 0;  // failures are reported by the exceptions below (Newton probes indefinite tangents)
+        llt.compute(Kff);
+        if (llt.info() != Eigen::Success) throw NumericalError("K_ff is not positive definite (CHOLMOD factorisation failed)");
+        uf = llt.solve(rhs);
+        if (llt.info() != Eigen::Success) throw NumericalError("CHOLMOD solve failed");
+    }
     DirichletResult out;
     out.u = Eigen::VectorXd::Zero(n);
     for (Eigen::Index i = 0; i < m; ++i) out.u[dofs[static_cast<size_t>(i)]] = uf[i];

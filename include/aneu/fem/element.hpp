@@ -26,6 +26,19 @@ Eigen::Matrix<double, 12, 12> linear_tet_stiffness(const Eigen::Matrix<double, 4
 Eigen::Matrix<double, 30, 30> quadratic_tet_stiffness(const Eigen::Matrix<double, 10, 3>& X, double E_mpa,
                                                       double nu);
 
+/// ∂N/∂ξ (10×3) of the 10-node tetrahedron's shape functions at reference point ξ (barycentric L1, L2, L3;
+/// L0 = 1 − ΣLk).
+Eigen::Matrix<double, 10, 3> quadratic_tet_shape_gradients(const Eigen::Vector3d& xi);
+
+/// The 4-point, degree-2 Gauss rule on the reference tetrahedron (points ξ; each weight 1/24, a quarter of
+/// the reference volume): the rule of quadratic_tet_stiffness.
+inline constexpr double QUADRATIC_TET_RULE_A = 0.5854101966249685, QUADRATIC_TET_RULE_B = 0.1381966011250105;
+inline constexpr double QUADRATIC_TET_RULE_POINTS[4][3] = {{QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_B},
+                                                           {QUADRATIC_TET_RULE_A, QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_B},
+                                                           {QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_A, QUADRATIC_TET_RULE_B},
+                                                           {QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_B, QUADRATIC_TET_RULE_A}};
+inline constexpr double QUADRATIC_TET_RULE_WEIGHT = 1.0 / 24.0;
+
 /// The (a,b) corner pair of each mid-edge node 4..9 of a 10-node tetrahedron.
 inline constexpr int QUADRATIC_TET_EDGES[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
 

@@ -1,0 +1,419 @@
+// SPDX-License-Identifier: MIT
+#include "aneu/fem/hyperelastic.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include <Eigen/LU>
+
+#include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
+#include "aneu/fem/element.hpp"
+#include "aneu/fem/static_solve.hpp"
+
+namespace aneu::fem {
+
+namespace {
+
+using Mat3 = Eigen::Matrix3d;
+
+/// Quantities of one integration point at deformation gradient F.
+struct PointState {
+    double J = 1, logJ = 0;
+    Mat3 Finv = Mat3::Identity();
+};
+
+bool point_state(const Mat3& F, PointState& s) {
+    s.J = F.determinant();
+    if (!(s.J > 0.0)) return false;
+    s.logJ = std::log(s.J);
+    s.Finv = F.inverse();
+    return true;
+}
+
+double energy_density(const Mat3& F, const PointState& s, double mu, double lambda) {
+    return 0.5 * mu * (F.squaredNorm() - 3.0) - mu * s.logJ + 0.5 * lambda * s.logJ * s.logJ;
+}
+
+/// First Piola–Kirchhoff stress.
+Mat3 piola(const Mat3& F, const PointState& s, double mu, double lambda) {
+    const Mat3 FinvT = s.Finv.transpose();
+    return mu * (F - FinvT) + lambda * s.logJ * FinvT;
+}
+
+std::string inverted_message(Eigen::Index e, double J) {
+    return "element " + std::to_string(e) + " is inverted (det F = " + std::to_string(J) + " at an integration point)";
+}
+
+}  // namespace
+
+template <int NN>
+void NeoHookeanSolid::init(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T) {
+    const Eigen::Index ne = T.rows();
+    points_per_element_ = NN == 4 ? 1 : 4;
+    w_.resize(static_cast<size_t>(ne * points_per_element_));
+    dN_.resize(static_cast<size_t>(ne * points_per_element_ * NN * 3));
+    std::string failure;
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index e = 0; e < ne; ++e) {
+        Eigen::Matrix<double, NN, 3> X;
+        for (int a = 0; a < NN; ++a) X.row(a) = V.row(T(e, a));
+        for (int q = 0; q < points_per_element_; ++q) {
+            Eigen::Matrix<double, NN, 3> dNdxi;
+            double weight = 1.0 / 6.0;
+            if constexpr (NN == 4) {
+                dNdxi << -1, -1, -1, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+            } else {
+                const auto& pt = QUADRATIC_TET_RULE_POINTS[q];
+                dNdxi = quadratic_tet_shape_gradients(Eigen::Vector3d(pt[0], pt[1], pt[2]));
+                weight = QUADRATIC_TET_RULE_WEIGHT;
+            }
+            const Mat3 J0 = X.transpose() * dNdxi;
+            const double det = J0.determinant();
+            if (!(det > 0.0)) {
+#pragma omp critical
+                if (failure.empty()) failure = "element " + std::to_string(e) + " has reference Jacobian " + std::to_string(det);
+                continue;
+            }
+            const Eigen::Matrix<double, NN, 3> dNdX = dNdxi * J0.inverse();
+            const auto k = static_cast<size_t>(e * points_per_element_ + q);
+            w_[k] = weight * det;
+            for (int a = 0; a < NN; ++a)
+                for (int j = 0; j < 3; ++j) dN_[(k * NN + static_cast<size_t>(a)) * 3 + static_cast<size_t>(j)] = dNdX(a, j);
+        }
+    }
+    if (!failure.empty()) throw MeshingError("neo-Hookean solid: " + failure + " (inverted or degenerate)");
+}
+
+NeoHookeanSolid::NeoHookeanSolid(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& region,
+                                 const std::vector<Material>& materials)
+    : n_nodes_(V.rows()), nn_(static_cast<int>(T.cols())), T_(T) {
+    if (nn_ != 4 && nn_ != 10) throw InputError("neo-Hookean solid: elements have " + std::to_string(nn_) + " nodes, expected 4 or 10");
+    if (region.size() != T.rows()) throw InputError("neo-Hookean solid: " + std::to_string(region.size()) + " regions for " + std::to_string(T.rows()) + " elements");
+    if (T.size() && (T.minCoeff() < 0 || T.maxCoeff() >= V.rows())) throw InputError("neo-Hookean solid: element node index outside the nodes");
+    if (region.size() && region.minCoeff() < 0) throw InputError("neo-Hookean solid: negative region index");
+    validate_materials(materials, region.size() ? region.maxCoeff() + 1 : 0);
+    mu_.resize(static_cast<size_t>(T.rows()));
+    lambda_.resize(static_cast<size_t>(T.rows()));
+    for (Eigen::Index e = 0; e < T.rows(); ++e) {
+        const Material& m = materials[static_cast<size_t>(region[e])];
+        mu_[static_cast<size_t>(e)] = m.E_mpa / (2.0 * (1.0 + m.nu));
+        lambda_[static_cast<size_t>(e)] = m.E_mpa * m.nu / ((1.0 + m.nu) * (1.0 - 2.0 * m.nu));
+    }
+    if (nn_ == 4) {
+        init<4>(V, T);
+    } else {
+        init<10>(V, T);
+    }
+    // Tangent pattern from the node graph: row 3i+p holds columns 3j+q for every neighbour j of i.
+    std::vector<std::vector<int>> nb(static_cast<size_t>(n_nodes_));
+    for (Eigen::Index e = 0; e < T.rows(); ++e)
+        for (int a = 0; a < nn_; ++a)
+            for (int b = 0; b < nn_; ++b) nb[static_cast<size_t>(T(e, a))].push_back(T(e, b));
+    std::vector<std::int64_t> row_start(static_cast<size_t>(3 * n_nodes_ + 1), 0);
+    std::int64_t nnz = 0;
+    for (Eigen::Index i = 0; i < n_nodes_; ++i) {
+        auto& v = nb[static_cast<size_t>(i)];
+        std::sort(v.begin(), v.end());
+        v.erase(std::unique(v.begin(), v.end()), v.end());
+        for (int p = 0; p < 3; ++p) {
+            row_start[static_cast<size_t>(3 * i + p)] = nnz;
+            nnz += 3 * static_cast<std::int64_t>(v.size());
+        }
+    }
+    row_start.back() = nnz;
+    pattern_.resize(3 * n_nodes_, 3 * n_nodes_);
+    pattern_.resizeNonZeros(nnz);
+    for (Eigen::Index r = 0; r <= 3 * n_nodes_; ++r) pattern_.outerIndexPtr()[r] = static_cast<int>(row_start[static_cast<size_t>(r)]);
+    for (Eigen::Index i = 0; i < n_nodes_; ++i) {
+        const auto& v = nb[static_cast<size_t>(i)];
+        for (int p = 0; p < 3; ++p) {
+            int* cols = pattern_.innerIndexPtr() + row_start[static_cast<size_t>(3 * i + p)];
+            for (size_t k = 0; k < v.size(); ++k)
+                for (int q = 0; q < 3; ++q) cols[3 * k + static_cast<size_t>(q)] = 3 * v[k] + q;
+        }
+    }
+    std::fill(pattern_.valuePtr(), pattern_.valuePtr() + nnz, 0.0);
+    // slot_: for element e and local nodes (a, b), the value index of entry (3T(e,a), 3T(e,b)); the entry
+    // (3T(e,a)+p, 3T(e,b)+q) is at slot + p·(row length) + q (every row of a node has the same length).
+    slot_.resize(static_cast<size_t>(T.rows() * nn_ * nn_));
+    for (Eigen::Index e = 0; e < T.rows(); ++e)
+        for (int a = 0; a < nn_; ++a) {
+            const auto& v = nb[static_cast<size_t>(T(e, a))];
+            for (int b = 0; b < nn_; ++b) {
+                const auto pos = std::lower_bound(v.begin(), v.end(), T(e, b)) - v.begin();
+                slot_[static_cast<size_t>((e * nn_ + a) * nn_ + b)] = row_start[static_cast<size_t>(3 * T(e, a))] + 3 * pos;
+            }
+        }
+}
+
+double NeoHookeanSolid::energy(const Eigen::VectorXd& u) const {
+    if (u.size() != dofs()) throw InputError("neo-Hookean energy: u has " + std::to_string(u.size()) + " entries, expected " + std::to_string(dofs()));
+    const Eigen::Index ne = T_.rows();
+    double total = 0;
+    bool inverted = false;
+#pragma omp parallel for schedule(static) reduction(+ : total) reduction(|| : inverted)
+    for (Eigen::Index e = 0; e < ne; ++e) {
+        for (int q = 0; q < points_per_element_; ++q) {
+            const auto k = static_cast<size_t>(e * points_per_element_ + q);
+            const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
+            Mat3 F = Mat3::Identity();
+            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            PointState s;
+            if (!point_state(F, s)) {
+                inverted = true;
+                continue;
+            }
+            total += w_[k] * energy_density(F, s, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)]);
+        }
+    }
+    return inverted ? std::numeric_limits<double>::infinity() : total;
+}
+
+double NeoHookeanSolid::min_jacobian(const Eigen::VectorXd& u) const {
+    const Eigen::Index ne = T_.rows();
+    double mj = std::numeric_limits<double>::infinity();
+#pragma omp parallel for schedule(static) reduction(min : mj)
+    for (Eigen::Index e = 0; e < ne; ++e) {
+        for (int q = 0; q < points_per_element_; ++q) {
+            const auto k = static_cast<size_t>(e * points_per_element_ + q);
+            const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
+            Mat3 F = Mat3::Identity();
+            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            mj = std::min(mj, F.determinant());
+        }
+    }
+    return mj;
+}
+
+Eigen::VectorXd NeoHookeanSolid::internal_force(const Eigen::VectorXd& u) const {
+    if (u.size() != dofs()) throw InputError("neo-Hookean force: u has " + std::to_string(u.size()) + " entries, expected " + std::to_string(dofs()));
+    const Eigen::Index ne = T_.rows();
+    // Element forces in parallel, gathered in element order (reproducible sums).
+    Eigen::MatrixXd fe(3 * nn_, ne);
+    Eigen::Index bad = -1;
+    double bad_J = 0;
+#pragma omp parallel for schedule(static)
+    for (Eigen::Index e = 0; e < ne; ++e) {
+        fe.col(e).setZero();
+        for (int q = 0; q < points_per_element_; ++q) {
+            const auto k = static_cast<size_t>(e * points_per_element_ + q);
+            const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
+            Mat3 F = Mat3::Identity();
+            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            PointState s;
+            if (!point_state(F, s)) {
+#pragma omp critical
+                if (bad < 0) {
+                    bad = e;
+                    bad_J = s.J;
+                }
+                continue;
+            }
+            const Mat3 P = w_[k] * piola(F, s, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)]);
+            for (int a = 0; a < nn_; ++a) fe.col(e).segment<3>(3 * a) += P * Eigen::Vector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+        }
+    }
+    if (bad >= 0) throw NumericalError("neo-Hookean force: " + inverted_message(bad, bad_J));
+    Eigen::VectorXd f = Eigen::VectorXd::Zero(dofs());
+    for (Eigen::Index e = 0; e < ne; ++e)
+        for (int a = 0; a < nn_; ++a) f.segment<3>(3 * T_(e, a)) += fe.col(e).segment<3>(3 * a);
+    return f;
+}
+
+Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eigen::VectorXd& u) const {
+    if (u.size() != dofs()) throw InputError("neo-Hookean tangent: u has " + std::to_string(u.size()) + " entries, expected " + std::to_string(dofs()));
+    Eigen::SparseMatrix<double, Eigen::RowMajor> K = pattern_;
+    double* val = K.valuePtr();
+    const Eigen::Index ne = T_.rows();
+    const int m = 3 * nn_;
+    constexpr Eigen::Index CHUNK = 4096;
+    Eigen::MatrixXd Ke(m, m * std::min(CHUNK, std::max<Eigen::Index>(ne, 1)));
+    Eigen::Index bad = -1;
+    double bad_J = 0;
+    for (Eigen::Index e0 = 0; e0 < ne; e0 += CHUNK) {
+        const Eigen::Index e1 = std::min(ne, e0 + CHUNK);
+#pragma omp parallel for schedule(static)
+        for (Eigen::Index e = e0; e < e1; ++e) {
+            auto Kb = Ke.middleCols(m * (e - e0), m);
+            Kb.setZero();
+            const double mu = mu_[static_cast<size_t>(e)], lambda = lambda_[static_cast<size_t>(e)];
+            for (int q = 0; q < points_per_element_; ++q) {
+                const auto k = static_cast<size_t>(e * points_per_element_ + q);
+                const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
+                Mat3 F = Mat3::Identity();
+                for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+                PointState s;
+                if (!point_state(F, s)) {
+#pragma omp critical
+                    if (bad < 0) {
+                        bad = e;
+                        bad_J = s.J;
+                    }
+                    continue;
+                }
+                // A_iJkL = μ δik δJL + (μ − λ ln J) F⁻¹_Li F⁻¹_Jk + λ F⁻¹_Ji F⁻¹_Lk, contracted with ∇₀N_a (J) and
+                // ∇₀N_b (L): with G = ∇₀N and the spatial gradients g = F⁻ᵀ G,
+                // K_ab(i,k) = w [μ (G_a·G_b) δik + (μ − λ ln J) g_b,i g_a,k + λ g_a,i g_b,k].
+                const double w = w_[k], c2 = mu - lambda * s.logJ;
+                Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, 10> G(3, nn_), gs(3, nn_);
+                for (int a = 0; a < nn_; ++a) G.col(a) = Eigen::Vector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+                gs.noalias() = s.Finv.transpose() * G;
+                for (int a = 0; a < nn_; ++a)
+                    for (int b = a; b < nn_; ++b) {
+                        Mat3 Kab = (w * c2) * gs.col(b) * gs.col(a).transpose() + (w * lambda) * gs.col(a) * gs.col(b).transpose();
+                        Kab.diagonal().array() += w * mu * G.col(a).dot(G.col(b));
+                        Kb.block<3, 3>(3 * a, 3 * b) += Kab;
+                    }
+            }
+            for (int a = 0; a < nn_; ++a)
+                for (int b = 0; b < a; ++b) Kb.block<3, 3>(3 * a, 3 * b) = Kb.block<3, 3>(3 * b, 3 * a).transpose();
+        }
+        if (bad >= 0) throw NumericalError("neo-Hookean tangent: " + inverted_message(bad, bad_J));
+        for (Eigen::Index e = e0; e < e1; ++e) {
+            const auto Kb = Ke.middleCols(m * (e - e0), m);
+            for (int a = 0; a < nn_; ++a) {
+                const int row = 3 * T_(e, a);
+                const std::int64_t len = K.outerIndexPtr()[row + 1] - K.outerIndexPtr()[row];
+                for (int b = 0; b < nn_; ++b) {
+                    const std::int64_t s0 = slot_[static_cast<size_t>((e * nn_ + a) * nn_ + b)];
+                    for (int p = 0; p < 3; ++p)
+                        for (int q = 0; q < 3; ++q) val[s0 + p * len + q] += Kb(3 * a + p, 3 * b + q);
+                }
+            }
+        }
+    }
+    return K;
+}
+
+NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::VectorXi& fixed_dofs,
+                               const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd& u0,
+                               const NewtonOptions& opt) {
+    const Eigen::Index n = solid.dofs();
+    if (u0.size() != n) throw InputError("neo-Hookean solve: u0 has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
+    std::vector<char> constrained(static_cast<size_t>(n), 0);
+    for (Eigen::Index k = 0; k < fixed_dofs.size(); ++k) {
+        if (fixed_dofs[k] < 0 || fixed_dofs[k] >= n) throw InputError("neo-Hookean solve: fixed DOF " + std::to_string(fixed_dofs[k]) + " outside the model");
+        constrained[static_cast<size_t>(fixed_dofs[k])] = 1;
+    }
+    for (const auto& [dof, v] : prescribed) {
+        (void)v;
+        if (dof < 0 || dof >= n) throw InputError("neo-Hookean solve: prescribed DOF " + std::to_string(dof) + " outside the model");
+        if (constrained[static_cast<size_t>(dof)]) throw InputError("neo-Hookean solve: DOF " + std::to_string(dof) + " is fixed or prescribed twice");
+        constrained[static_cast<size_t>(dof)] = 1;
+    }
+    auto free_norm = [&](const Eigen::VectorXd& g) {
+        double s = 0;
+        for (Eigen::Index i = 0; i < n; ++i)
+            if (!constrained[static_cast<size_t>(i)]) s += g[i] * g[i];
+        return std::sqrt(s);
+    };
+    FemData tangent_fem;
+    tangent_fem.K_upper_only = false;
+    tangent_fem.fixed_dofs = fixed_dofs;
+    NewtonResult out;
+    // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp = the prescribed increments, or none), shifting a
+    // tangent that is not positive definite by τ·diag(K) until CHOLMOD accepts it.
+    auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const std::vector<std::pair<int, double>>& dp) {
+        tangent_fem.K = solid.tangent(u);
+        const Eigen::VectorXd rhs = -g;
+        Eigen::VectorXd diag = tangent_fem.K.diagonal();
+        for (double tau = 0;;) {
+            try {
+                return solve_dirichlet(tangent_fem, dp, &rhs).u;
+            } catch (const NumericalError&) {
+                if (tau > 1.0) throw;
+                const double next = tau == 0 ? 1e-8 : 10 * tau;
+                for (Eigen::Index i = 0; i < n; ++i) tangent_fem.K.coeffRef(i, i) += (next - tau) * diag[i];
+                if (tau == 0) ++out.shifted;
+                tau = next;
+            }
+        }
+    };
+    Eigen::VectorXd u = u0;
+    for (Eigen::Index k = 0; k < fixed_dofs.size(); ++k) u[fixed_dofs[k]] = 0;
+    Eigen::VectorXd start(static_cast<Eigen::Index>(prescribed.size())), target(start.size());
+    for (size_t k = 0; k < prescribed.size(); ++k) {
+        start[static_cast<Eigen::Index>(k)] = u[prescribed[k].first];
+        target[static_cast<Eigen::Index>(k)] = prescribed[k].second;
+    }
+    double s = 0, ds = 1;
+    std::string last_failure = "no iteration";
+    // Tries to reach load fraction s1 from the converged state u (at s); true on convergence (u updated).
+    auto substep = [&](double s1) {
+        std::vector<std::pair<int, double>> dp(prescribed.size());
+        for (size_t k = 0; k < prescribed.size(); ++k) {
+            const auto kk = static_cast<Eigen::Index>(k);
+            dp[k] = {prescribed[k].first, start[kk] + s1 * (target[kk] - start[kk]) - u[prescribed[k].first]};
+        }
+        Eigen::VectorXd g = solid.internal_force(u);
+        Eigen::VectorXd v = u + newton_step(u, g, dp);  // predictor: moves the prescribed DOFs
+        double E = solid.energy(v);
+        if (!std::isfinite(E)) {
+            last_failure = "the predictor inverts elements";
+            return false;
+        }
+        const std::vector<std::pair<int, double>> zero = [&] {
+            auto z = dp;
+            for (auto& [d, x] : z) x = 0;
+            return z;
+        }();
+        for (int it = 0; it < opt.max_iterations; ++it) {
+            g = solid.internal_force(v);
+            const double r = free_norm(g), scale = g.norm();
+            out.residual = scale > 0 ? r / scale : 0;
+            if (r <= opt.tolerance * scale + 1e-14) {
+                u = v;
+                return true;
+            }
+            ++out.iterations;
+            const Eigen::VectorXd du = newton_step(v, g, zero);
+            const double slope = g.dot(du);
+            double alpha = 1;
+            bool accepted = false;
+            for (int ls = 0; ls < 40; ++ls, alpha *= 0.5) {
+                const Eigen::VectorXd trial = v + alpha * du;
+                const double Et = solid.energy(trial);
+                // Armijo on the energy; near convergence the energy differences drown in rounding, so a step
+                // that lowers the residual is taken as well.
+                if (std::isfinite(Et) && (Et <= E + 1e-4 * alpha * slope || (Et - E) <= 1e-13 * std::abs(E))) {
+                    v = trial;
+                    E = Et;
+                    accepted = true;
+                    break;
+                }
+            }
+            if (!accepted) {
+                last_failure = "the line search found no decrease of the energy";
+                return false;
+            }
+        }
+        last_failure = "no convergence in " + std::to_string(opt.max_iterations) + " iterations (residual " + std::to_string(out.residual) + ")";
+        return false;
+    };
+    while (s < 1.0) {
+        const double s1 = std::min(1.0, s + ds);
+        if (substep(s1)) {
+            s = s1;
+            ++out.substeps;
+            ds = std::min(2 * ds, 1.0);
+        } else {
+            if (ds < std::ldexp(1.0, -opt.max_halvings)) {
+                throw NumericalError("neo-Hookean solve: no convergence at load fraction " + std::to_string(s1) + " with the step " +
+                                     "halved " + std::to_string(opt.max_halvings) + " times: " + last_failure +
+                                     "; smallest det F " + std::to_string(solid.min_jacobian(u)));
+            }
+            ds *= 0.5;
+        }
+    }
+    const Eigen::VectorXd g = solid.internal_force(u);
+    out.reaction.resize(static_cast<Eigen::Index>(prescribed.size()));
+    for (size_t k = 0; k < prescribed.size(); ++k) out.reaction[static_cast<Eigen::Index>(k)] = g[prescribed[k].first];
+    out.min_J = solid.min_jacobian(u);
+    out.u = std::move(u);
+    return out;
+}
+
+}  // namespace aneu::fem

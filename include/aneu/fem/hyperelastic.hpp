@@ -1,0 +1,89 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// Large deformation, offline: a compressible neo-Hookean solid on the same 4-node / 10-node tetrahedra, the
+/// same quadrature and the same materials as assemble_stiffness, and a static Newton solve with prescribed
+/// displacements. It is the reference the linear model is measured against (bench/bench_closure.cpp, issue #6):
+/// at small strain the two coincide — the tangent at u = 0 *is* K — so every difference is large-deformation
+/// physics, not a different discretisation.
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "aneu/core/bundle.hpp"
+
+namespace aneu::fem {
+
+/// Ψ(F) = μ/2 (tr FᵀF − 3) − μ ln J + λ/2 (ln J)² per unit reference volume (Bonet & Wood's compressible
+/// neo-Hookean), μ and λ the Lamé constants of each region's E and ν. Total Lagrangian: first Piola stress
+/// P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ. Units: mm, N, MPa; energy in N·mm.
+class NeoHookeanSolid {
+public:
+    /// @param[in] V #N×3 reference nodes [mm]; T #T×4 or #T×10 (element.hpp ordering); region #T → materials
+    /// @throws InputError bad sizes, indices or materials; MeshingError a reference element with Jacobian ≤ 0
+    NeoHookeanSolid(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& region,
+                    const std::vector<Material>& materials);
+
+    Eigen::Index dofs() const { return 3 * n_nodes_; }
+    /// Stored strain energy at displacement u (3#N); +∞ when J ≤ 0 at some integration point (inverted).
+    double energy(const Eigen::VectorXd& u) const;
+    /// Internal nodal forces ∂Ψ/∂u [N] (3#N). @throws NumericalError when an element is inverted
+    Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const;
+    /// Tangent stiffness ∂²Ψ/∂u² [N/mm], both triangles, on a fixed pattern (the element graph).
+    /// @throws NumericalError when an element is inverted
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u) const;
+    /// Smallest J = det F over the integration points (≤ 0: inverted).
+    double min_jacobian(const Eigen::VectorXd& u) const;
+
+private:
+    template <int NN>
+    void init(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T);
+
+    Eigen::Index n_nodes_ = 0;
+    int nn_ = 4;                        ///< nodes per element
+    Eigen::MatrixXi T_;
+    std::vector<double> mu_, lambda_;   ///< per element
+    // Per integration point q (element q / points_per_element_): weight·det J₀ and ∂N/∂X (nn_×3, row-major).
+    int points_per_element_ = 1;
+    std::vector<double> w_;
+    std::vector<double> dN_;
+    // Tangent pattern: RowMajor 3#N×3#N, and for every element entry (3nn × 3nn, row-major) its value index.
+    Eigen::SparseMatrix<double, Eigen::RowMajor> pattern_;
+    std::vector<std::int64_t> slot_;
+};
+
+/// Options of the Newton solve.
+struct NewtonOptions {
+    double tolerance = 1e-9;   ///< converged when ‖free residual‖ ≤ tolerance · ‖internal force‖ (all DOFs) + 1e-14
+    int max_iterations = 30;   ///< per load substep
+    int max_halvings = 10;     ///< smallest substep 2^−max_halvings of the prescribed increment (a substep that inverts
+                               ///< elements or does not converge is halved)
+};
+
+struct NewtonResult {
+    Eigen::VectorXd u;          ///< 3#N [mm]
+    Eigen::VectorXd reaction;   ///< per prescribed DOF, in its order: the internal force there [N] (what the constraint applies)
+    int iterations = 0;         ///< Newton iterations over all substeps
+    int substeps = 0;           ///< substeps the prescribed increment was split into
+    int shifted = 0;            ///< iterations whose tangent was not positive definite and was shifted
+    double residual = 0;        ///< final ‖free residual‖ / ‖internal force‖
+    double min_J = 1;           ///< smallest det F at the end
+};
+
+/// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed
+/// (DOF, value), the other DOFs free, from the state `u0` (its prescribed entries are moved to the new values
+/// along a straight path, in substeps). Newton's method on the energy: CHOLMOD Cholesky of the free tangent (a
+/// tangent that is not positive definite — buckling — is shifted by a multiple of its diagonal until it is),
+/// backtracking line search on the energy (an inverting step is never taken), and halving of the prescribed
+/// increment when a substep does not converge.
+/// @throws InputError bad DOF indices; NumericalError when no substep of the allowed size converges (names the
+///         residual and the smallest J reached)
+NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::VectorXi& fixed_dofs,
+                               const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd& u0,
+                               const NewtonOptions& options = {});
+
+}  // namespace aneu::fem

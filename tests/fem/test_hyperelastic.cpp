@@ -1,0 +1,239 @@
+// SPDX-License-Identifier: MIT
+// The neo-Hookean reference solid: its tangent at rest is the linear K, its force and tangent are the
+// derivatives of its energy, it reproduces a homogeneous large deformation exactly, it tends to the linear
+// model at small loads, and it refuses what it cannot solve.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include <Eigen/LU>
+
+#include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/static_solve.hpp"
+#include "aneu/fem/structured_mesh.hpp"
+
+namespace {
+
+using namespace aneu;
+
+struct Model {
+    Eigen::MatrixX3d V;
+    Eigen::MatrixXi T;
+    Eigen::VectorXi region;
+    std::vector<Material> mats;
+};
+
+/// A 1×1.2×2 mm box, two materials (the upper half 5× stiffer); quadratic with curved (moved) mid-edge nodes.
+Model box_model(int order, bool curved = true) {
+    const fem::StructuredMesh b = fem::box_mesh(1.0, 1.2, 2.0, 2, 2, 3);
+    Model m;
+    m.V = b.V;
+    m.T = b.T;
+    if (order == 2) {
+        const fem::QuadraticMesh q = fem::quadratic_mesh(b.V, b.T);
+        m.V = q.V;
+        m.T = q.T;
+        if (curved)  // bend the mid-edge nodes a little, as curved boundary elements are
+            for (Eigen::Index i = b.V.rows(); i < m.V.rows(); ++i) m.V(i, 0) += 0.03 * std::sin(3 * m.V(i, 2)) * m.V(i, 1);
+    }
+    m.region.resize(m.T.rows());
+    for (Eigen::Index e = 0; e < m.T.rows(); ++e) m.region[e] = m.V(m.T(e, 0), 2) + m.V(m.T(e, 1), 2) + m.V(m.T(e, 2), 2) + m.V(m.T(e, 3), 2) > 4.0 ? 1 : 0;
+    m.mats = {{"soft", 1.0, 0.45}, {"stiff", 5.0, 0.3}};
+    return m;
+}
+
+Eigen::VectorXd smooth_field(const Eigen::MatrixX3d& V, double amp) {
+    Eigen::VectorXd u(3 * V.rows());
+    for (Eigen::Index i = 0; i < V.rows(); ++i) {
+        const double x = V(i, 0), y = V(i, 1), z = V(i, 2);
+        u.segment<3>(3 * i) = amp * Eigen::Vector3d(std::sin(1.3 * z + y), 0.5 * x * z - 0.3 * y, std::cos(x + 0.7 * y) * z);
+    }
+    return u;
+}
+
+class NeoHookeanOrder : public ::testing::TestWithParam<int> {};
+
+TEST_P(NeoHookeanOrder, TangentAtRestIsTheLinearStiffness) {
+    const Model m = box_model(GetParam());
+    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
+    const auto K = fem::assemble_stiffness(m.V, m.T, m.region, m.mats);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(solid.dofs());
+    const Eigen::MatrixXd diff = Eigen::MatrixXd(solid.tangent(zero)) - Eigen::MatrixXd(K);
+    const double scale = Eigen::MatrixXd(K).cwiseAbs().maxCoeff();
+    EXPECT_LT(diff.cwiseAbs().maxCoeff(), 1e-12 * scale);
+    EXPECT_LT(solid.internal_force(zero).norm(), 1e-14);
+    EXPECT_EQ(solid.energy(zero), 0.0);
+}
+
+TEST_P(NeoHookeanOrder, ForceAndTangentAreDerivativesOfTheEnergy) {
+    const Model m = box_model(GetParam());
+    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
+    const Eigen::VectorXd u = smooth_field(m.V, 0.15);  // strains of tens of percent
+    ASSERT_GT(solid.min_jacobian(u), 0.3);
+    const Eigen::VectorXd f = solid.internal_force(u);
+    const auto K = solid.tangent(u);
+    std::mt19937 rng(7);
+    std::normal_distribution<double> nd;
+    Eigen::VectorXd v(solid.dofs());
+    for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = nd(rng);
+    const double h = 1e-6;
+    // Directional derivatives by central differences (error O(h²)).
+    const double dE = (solid.energy(u + h * v) - solid.energy(u - h * v)) / (2 * h);
+    EXPECT_NEAR(dE, f.dot(v), 1e-6 * std::abs(f.dot(v)));
+    const Eigen::VectorXd df = (solid.internal_force(u + h * v) - solid.internal_force(u - h * v)) / (2 * h);
+    EXPECT_LT((df - K * v).norm(), 1e-6 * df.norm());
+    // symmetric
+    const Eigen::MatrixXd Kd(K);
+    EXPECT_LT((Kd - Kd.transpose()).cwiseAbs().maxCoeff(), 1e-12 * Kd.cwiseAbs().maxCoeff());
+}
+
+TEST_P(NeoHookeanOrder, HomogeneousLargeDeformationIsReproducedExactly) {
+    // The boundary follows x = F X (40 % stretch, 20 % compression, shears); the interior, free, must follow
+    // it too, and the boundary forces must carry the analytic stress: Σ f_a ⊗ X_a = P(F) · volume.
+    Model m = box_model(GetParam(), false);
+    m.mats = {{"a", 2.0, 0.45}, {"b", 2.0, 0.45}};
+    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
+    Eigen::Matrix3d F;
+    F << 1.4, 0.2, 0.0, 0.0, 0.8, 0.1, 0.05, 0.0, 1.1;
+    std::vector<std::pair<int, double>> pres;
+    std::vector<char> interior(static_cast<size_t>(m.V.rows()), 1);
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+        const Eigen::Vector3d X = m.V.row(i);
+        const bool on_boundary = X.x() < 1e-9 || X.x() > 1 - 1e-9 || X.y() < 1e-9 || X.y() > 1.2 - 1e-9 || X.z() < 1e-9 || X.z() > 2 - 1e-9;
+        if (!on_boundary) continue;
+        interior[static_cast<size_t>(i)] = 0;
+        const Eigen::Vector3d u = (F - Eigen::Matrix3d::Identity()) * X;
+        for (int k = 0; k < 3; ++k) pres.emplace_back(static_cast<int>(3 * i + k), u[k]);
+    }
+    const fem::NewtonResult r = fem::solve_neo_hookean(solid, Eigen::VectorXi(), pres, Eigen::VectorXd::Zero(solid.dofs()));
+    double err = 0;
+    int n_interior = 0;
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+        if (!interior[static_cast<size_t>(i)]) continue;
+        ++n_interior;
+        const Eigen::Vector3d X = m.V.row(i);
+        err = std::max(err, (r.u.segment<3>(3 * i) - (F - Eigen::Matrix3d::Identity()) * X).norm());
+    }
+    ASSERT_GT(n_interior, 0);
+    EXPECT_LT(err, 1e-9);
+    const double mu = 2.0 / (2 * 1.45), lambda = 2.0 * 0.45 / (1.45 * 0.1), J = F.determinant();
+    const Eigen::Matrix3d FinvT = F.inverse().transpose();
+    const Eigen::Matrix3d P = mu * (F - FinvT) + lambda * std::log(J) * FinvT;
+    Eigen::Matrix3d virial = Eigen::Matrix3d::Zero();
+    for (size_t k = 0; k < pres.size(); ++k) {
+        const int node = pres[k].first / 3, axis = pres[k].first % 3;
+        virial.row(axis) += r.reaction[static_cast<Eigen::Index>(k)] * m.V.row(node);
+    }
+    const double vol = 1.0 * 1.2 * 2.0;
+    EXPECT_LT((virial - P * vol).norm(), 1e-8 * P.norm() * vol) << "virial\n" << virial << "\nP V\n" << P * vol;
+    const double psi = 0.5 * mu * (F.squaredNorm() - 3) - mu * std::log(J) + 0.5 * lambda * std::log(J) * std::log(J);
+    EXPECT_NEAR(solid.energy(r.u), psi * vol, 1e-10 * psi * vol);
+    EXPECT_NEAR(r.min_J, J, 1e-9);
+    EXPECT_LT(r.residual, 1e-9);
+}
+
+INSTANTIATE_TEST_SUITE_P(Orders, NeoHookeanOrder, ::testing::Values(1, 2), [](const auto& i) {
+    return i.param == 1 ? std::string("Linear") : std::string("Quadratic");
+});
+
+TEST(NeoHookean, SmallLoadsGiveTheLinearModelAndLargeOnesDoNot) {
+    // A tube wall held at both ends, a patch of its outer surface pushed in radially. The difference to the
+    // linear model is a large-deformation effect: it vanishes with the load, in proportion to it.
+    const fem::StructuredMesh t = fem::tube_mesh(1.5, 1.9, 6.0, 2, 20, 10);
+    const fem::QuadraticMesh q = fem::quadratic_mesh(t.V, t.T);
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(q.T.rows());
+    const std::vector<Material> mats = {{"wall", 1.0, 0.45}};
+    const fem::NeoHookeanSolid solid(q.V, q.T, region, mats);
+    std::vector<int> fd;
+    for (Eigen::Index i = 0; i < q.V.rows(); ++i)
+        if (q.V(i, 2) < 1e-9 || q.V(i, 2) > 6 - 1e-9)
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+    const Eigen::VectorXi fixed_dofs = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    FemData linear;
+    linear.K = fem::assemble_stiffness(q.V, q.T, region, mats);
+    linear.K_upper_only = false;
+    linear.fixed_dofs = fixed_dofs;
+    std::vector<int> patch;
+    for (Eigen::Index i = 0; i < q.V.rows(); ++i) {
+        const Eigen::Vector3d X = q.V.row(i);
+        if (std::hypot(X.x(), X.y()) > 1.9 - 1e-6 && X.x() > 1.6 && std::abs(X.z() - 3) < 1.0) patch.push_back(static_cast<int>(i));
+    }
+    ASSERT_GT(patch.size(), 4u);
+    auto compare = [&](double depth) {
+        std::vector<std::pair<int, double>> pres;
+        for (int v : patch)
+            for (int k = 0; k < 3; ++k) pres.emplace_back(3 * v + k, k == 0 ? -depth : 0.0);
+        const Eigen::VectorXd ul = fem::solve_dirichlet(linear, pres).u;
+        const fem::NewtonResult r = fem::solve_neo_hookean(solid, fixed_dofs, pres, Eigen::VectorXd::Zero(solid.dofs()));
+        EXPECT_LT(r.residual, 1e-9);
+        return (r.u - ul).norm() / ul.norm();
+    };
+    const double small = compare(1e-4), larger = compare(1e-2);
+    EXPECT_LT(small, 1e-4);
+    EXPECT_GT(larger / small, 30.0);   // about 100: the deviation grows with the load
+    EXPECT_LT(larger / small, 300.0);
+    // and at 0.4 mm (a fifth of the wall's radius) it is a real difference
+    EXPECT_GT(compare(0.4), 0.02);
+}
+
+TEST(NeoHookean, CompressedColumnPastBucklingIsSolvedWithAShiftedTangent) {
+    // A slender column clamped at both ends and shortened by 8 %, far beyond its Euler strain (~0.3 %): the
+    // straight state's tangent is indefinite. Newton shifts the tangent, and the solve still ends in
+    // equilibrium with no element inverted.
+    const fem::StructuredMesh b = fem::box_mesh(0.3, 0.3, 6.0, 1, 1, 30);
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(b.T.rows());
+    const fem::NeoHookeanSolid solid(b.V, b.T, region, {{"col", 1.0, 0.3}});
+    std::vector<int> fd;
+    std::vector<std::pair<int, double>> pres;
+    for (Eigen::Index i = 0; i < b.V.rows(); ++i) {
+        if (b.V(i, 2) < 1e-9) {
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        } else if (b.V(i, 2) > 6 - 1e-9) {
+            pres.emplace_back(static_cast<int>(3 * i), 0.0);
+            pres.emplace_back(static_cast<int>(3 * i + 1), 0.0);
+            pres.emplace_back(static_cast<int>(3 * i + 2), -0.48);
+        }
+    }
+    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    // A tiny lateral imperfection lets it leave the straight path.
+    Eigen::VectorXd u0 = Eigen::VectorXd::Zero(solid.dofs());
+    for (Eigen::Index i = 0; i < b.V.rows(); ++i) u0[3 * i] = 1e-4 * std::sin(M_PI * b.V(i, 2) / 6.0);
+    const fem::NewtonResult r = fem::solve_neo_hookean(solid, fixed, pres, u0);
+    EXPECT_GT(r.shifted, 0);
+    EXPECT_LT(r.residual, 1e-9);
+    EXPECT_GT(r.min_J, 0.0);
+    double lateral = 0;
+    for (Eigen::Index i = 0; i < b.V.rows(); ++i) lateral = std::max(lateral, std::abs(r.u[3 * i]));
+    EXPECT_GT(lateral, 0.3);  // it buckled sideways (a straight column would only shorten)
+}
+
+TEST(NeoHookean, RefusesWhatItCannotSolve) {
+    Eigen::MatrixX3d V(4, 3);
+    V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+    Eigen::MatrixXi T(1, 4);
+    T << 0, 1, 2, 3;
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(1);
+    const fem::NeoHookeanSolid solid(V, T, region, {{"r", 1.0, 0.3}});
+    Eigen::VectorXi fixed(9);
+    for (int k = 0; k < 9; ++k) fixed[k] = k;
+    // The apex pushed through the opposite face: every path crosses J = 0.
+    const std::vector<std::pair<int, double>> through = {{9, 0.0}, {10, 0.0}, {11, -1.5}};
+    try {
+        fem::solve_neo_hookean(solid, fixed, through, Eigen::VectorXd::Zero(12));
+        FAIL() << "expected NumericalError";
+    } catch (const NumericalError& e) {
+        EXPECT_NE(std::string(e.what()).find("no convergence at load fraction"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(fem::solve_neo_hookean(solid, fixed, {{12, 0.1}}, Eigen::VectorXd::Zero(12)), InputError);
+    EXPECT_THROW(fem::solve_neo_hookean(solid, fixed, {{3, 0.1}}, Eigen::VectorXd::Zero(12)), InputError);
+    Eigen::VectorXd inverted = Eigen::VectorXd::Zero(12);
+    inverted[11] = -1.5;
+    EXPECT_TRUE(std::isinf(solid.energy(inverted)));
+    EXPECT_THROW(solid.internal_force(inverted), NumericalError);
+    EXPECT_THROW(fem::NeoHookeanSolid(V, T, region, {{"r", 1.0, 0.5}}), InputError);
+}
+
+}  // namespace
