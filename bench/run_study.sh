@@ -4,7 +4,9 @@
 # lumen radius 1.7 mm, wall 0.3 mm, 12 mm long, sac lumen radius 2.5 mm with a 0.1 mm wall, neck radius 1.5 mm),
 # built at several target edge lengths and both element orders; for each, W condensed in float32 and float64 when
 # it fits, and an indenter pushing the sac's apex 0.2 mm (aneu_bench_study) measured against a reference model
-# (the finest, quadratic, by the full FEM). Writes bench/results/study/study.jsonl, study.md and PNG plots.
+# (the finest, quadratic, by the full FEM); the same for the sample phantom case (CT -> every stage); and a clip
+# closing across the sac's neck, linear model vs a neo-Hookean reference (aneu_bench_closure).
+# Writes bench/results/study/{study,study_phantom,closure}.jsonl, study.md and PNG plots.
 #
 #   bash bench/run_study.sh            # default sweep: h 0.6 0.5 0.4 0.3, reference h 0.25 quadratic
 #   bash bench/run_study.sh --quick    # h 0.6 0.5, reference h 0.4 quadratic (a few minutes)
@@ -15,6 +17,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 prep=build/tools/aneuprep
 probe=build/bench/aneu_bench_study
+closure=build/bench/aneu_bench_closure
 py=python3
 [ -x /usr/bin/python3 ] && py=/usr/bin/python3   # Debian's, where python3-matplotlib lives (not a pyenv's)
 quick=0
@@ -24,7 +27,7 @@ max_w_dofs=${MAX_W_DOFS:-25000}   # condense only models whose W fits comfortabl
 out=bench/results/study
 work=build/study
 mkdir -p "$out" "$work"
-for t in "$prep" "$probe"; do [ -x "$t" ] || { echo "run_study.sh: $t missing: build first (bash scripts/build.sh)" >&2; exit 2; }; done
+for t in "$prep" "$probe" "$closure"; do [ -x "$t" ] || { echo "run_study.sh: $t missing: build first (bash scripts/build.sh)" >&2; exit 2; }; done
 if ! $py -c "import matplotlib" 2>/dev/null; then
   if [ "$(id -u)" -eq 0 ]; then apt-get install -y -q --no-install-recommends python3-matplotlib >/dev/null || true
   elif command -v sudo >/dev/null; then sudo apt-get install -y -q --no-install-recommends python3-matplotlib >/dev/null || true; fi
@@ -126,5 +129,12 @@ pjsonl="$out/study_phantom.jsonl"
 : >"$pjsonl"
 phantom_point "$peref" 2 1
 for e in $pes; do for order in 1 2; do phantom_point "$e" "$order"; done; done
-$py bench/study_report.py "$jsonl" "$out" "$pjsonl"
+# Linear vs large deformation: a clip closing across the sac's neck, linear model vs the neo-Hookean reference
+# (bench/bench_closure.cpp), on the h 0.5 mm quadratic tube-with-sac. --quick stops at 30 % closure.
+cjsonl="$out/closure.jsonl"
+closures=""
+[ $quick = 1 ] && closures="--closures 0.01,0.02,0.05,0.1,0.2,0.3"
+echo "== clip closing on the sac: linear vs neo-Hookean (h 0.5, order 2)"
+"$closure" "$work/h0.5_p2/fem.h5" $closures >"$cjsonl"
+$py bench/study_report.py "$jsonl" "$out" "$pjsonl" "$cjsonl"
 echo "report: $out/study.md"

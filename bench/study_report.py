@@ -42,7 +42,96 @@ def phantom_section(path, w):
     w("")
 
 
-def main(jsonl, outdir, phantom=None):
+def closure_section(path, outdir, w):
+    """Linear vs large deformation: bench/bench_closure.cpp's lines (one per closure, a summary last)."""
+    rows = [json.loads(l) for l in open(path) if l.strip()]
+    summ = next((r for r in rows if r.get("summary")), None)
+    steps = [r for r in rows if "closure" in r and "failed" not in r]
+    failed = [r for r in rows if "failed" in r]
+    if not steps or not summ:
+        return
+    what = summ.get("label", "sac")
+    w(f"\n### Clip closing on the {what}\n")
+    mats = ", ".join(f"{m['region']} E {m['E_mpa']:g} MPa, ν {m['nu']:g}" for m in summ["materials"])
+    c = summ["clip_centre"]
+    w(f"Model: {summ['nodes']} nodes, {summ['tets']} tets, order {summ['element_order']}, {summ['dofs']} DOFs ({mats}); the "
+      f"neo-Hookean reference uses the same mesh, elements, quadrature and materials (its tangent at rest equals K to "
+      f"{summ['tangent_at_rest_vs_K']:.1e}), solved by Newton's method (bench/bench_closure.cpp, fem::solve_neo_hookean).\n")
+    w(f"Clip: two flat blades {summ['blade_width_mm']} mm wide and {summ['blade_length_mm']} mm long along the parent artery, centred "
+      f"at ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) across the neck, closing along y from touching (gap {summ['gap0_mm']:.2f} mm, closure 0) to "
+      f"{summ['full_gap_mm']} mm (twice the sac wall: lumen closed, closure 1). Contact as in the simulator (nodes through a blade are "
+      f"prescribed onto it and stick; adhesive ones are released), iterated to a settled contact set for each model. "
+      f"Errors of the linear model: clip force (the y force of one blade) and displacement of the {summ['probe_nodes']} outer nodes "
+      f"within {summ['region_mm']} mm of the clip centre (RMS), both relative to the neo-Hookean solution.\n")
+    w("| closure | gap [mm] | force, linear [N] | force, neo-Hookean [N] | force error | displacement error | max |u| [mm] | contact nodes lin / NH | min det F | Newton iterations (cumulative) | time lin / NH [s] (cumulative) |")
+    w("|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in steps:
+        w(f"| {r['closure']:g} | {r['gap_mm']:.2f} | {r['force_linear_N']:.4g} | {r['force_nonlinear_N']:.4g} | {r['force_error']:.1%} | "
+          f"{r['u_error']:.1%} | {r['u_max_mm']:.2f} | {r['contacts_linear']} / {r['contacts_nonlinear']} | {r['min_J']:.3f} | "
+          f"{r['newton_iterations']} | {r['seconds_linear']:.0f} / {r['seconds_nonlinear']:.0f} |")
+    for r in failed:
+        w(f"\nThe neo-Hookean solve stopped at closure {r['closure']:g} (gap {r['gap_mm']:.2f} mm): {r['failed']}\n")
+    cf, cu = summ["closure_force_error_10pct"], summ["closure_u_error_10pct"]
+    def fmt(x):
+        return f"{x:.3f} (gap {summ['gap0_mm'] - x * (summ['gap0_mm'] - summ['full_gap_mm']):.2f} mm)" if x >= 0 else "not within the closures run"
+    w(f"\n**The linear model's error passes 10 %** at closure {fmt(cf)} for the clip force and {fmt(cu)} for the clip-region "
+      f"displacement (linear interpolation between the closures above, from zero error at closure 0).\n")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+        x = [r["closure"] for r in steps]
+        a1.plot(x, [r["force_linear_N"] for r in steps], "o-", label="linear (simulator)")
+        a1.plot(x, [r["force_nonlinear_N"] for r in steps], "s-", label="neo-Hookean")
+        a1.set_xlabel("closure")
+        a1.set_xscale("log")
+        a1.set_ylabel("clip force [N]")
+        a1.legend(fontsize=8)
+        a1.grid(True, alpha=0.3)
+        a2.plot(x, [100 * r["force_error"] for r in steps], "o-", label="clip force")
+        a2.plot(x, [100 * r["u_error"] for r in steps], "s-", label="clip-region displacement")
+        a2.axhline(10, color="k", lw=0.8, ls="--")
+        a2.set_yscale("log")
+        a2.set_xscale("log")
+        a2.set_xlabel("closure")
+        a2.set_ylabel("linear model's error [%]")
+        a2.legend(fontsize=8)
+        a2.grid(True, which="both", alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(os.path.join(outdir, f"closure_error_{what}.png"), dpi=110)
+        plt.close(fig)
+        w(f"![closure_error_{what}.png](closure_error_{what}.png)\n")
+        secs = [r for r in steps if "section" in r]
+        if secs:
+            nc = min(2, len(secs))
+            nr = (len(secs) + nc - 1) // nc
+            fig, axs = plt.subplots(nr, nc, figsize=(5.5 * nc, 4.6 * nr), squeeze=False)
+            for ax in axs.flat[len(secs):]:
+                ax.axis("off")
+            for ax, r in zip(axs.flat, secs):
+                s = r["section"]
+                ax.plot([p[0] for p in s], [p[1] for p in s], ".", ms=2, color="0.7", label="at rest")
+                ax.plot([p[2] for p in s], [p[3] for p in s], ".", ms=2, color="tab:blue", label="linear")
+                ax.plot([p[4] for p in s], [p[5] for p in s], ".", ms=2, color="tab:red", label="neo-Hookean")
+                g = r["gap_mm"] / 2
+                x0, hw = summ["clip_centre"][0], summ["blade_width_mm"] / 2
+                for yy in (g, -g):
+                    ax.plot([x0 - hw, x0 + hw], [summ["clip_centre"][1] + yy] * 2, "k-", lw=2)
+                ax.set_aspect("equal")
+                ax.set_title(f"closure {r['closure']:g}: section through the clip", fontsize=9)
+                ax.set_xlabel("x [mm]")
+                ax.set_ylabel("y [mm]")
+                ax.legend(fontsize=7, markerscale=4)
+            fig.tight_layout()
+            fig.savefig(os.path.join(outdir, f"closure_sections_{what}.png"), dpi=110)
+            plt.close(fig)
+            w(f"![closure_sections_{what}.png](closure_sections_{what}.png)\n")
+    except ImportError:
+        pass
+
+
+def main(jsonl, outdir, phantom=None, closure=None):
     rows = [json.loads(l) for l in open(jsonl) if l.strip()]
     ref = next(r for r in rows if r.get("reference"))
     pts = [r for r in rows if not r.get("reference") and "region_mm" not in r]
@@ -123,8 +212,13 @@ def main(jsonl, outdir, phantom=None):
         w(f"![{p}]({p})\n")
     if phantom and os.path.exists(phantom):
         phantom_section(phantom, w)
+    closure_files = [f for f in (closure or "").split(",") if f and os.path.exists(f)]
+    if closure_files:
+        w("\n## Linear vs large deformation: a clip closing\n")
+        for f in closure_files:
+            closure_section(f, outdir, w)
     open(os.path.join(outdir, "study.md"), "w").write("\n".join(out) + "\n")
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else None)
+    main(sys.argv[1], sys.argv[2], sys.argv[3] if len(sys.argv) > 3 else None, sys.argv[4] if len(sys.argv) > 4 else None)

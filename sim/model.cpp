@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <tuple>
@@ -13,6 +14,8 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/static_solve.hpp"
+#include "aneu/sim/shapes.hpp"
 
 namespace aneu::sim {
 namespace {
@@ -66,6 +69,41 @@ std::vector<std::vector<int>> chain_loops(const std::vector<std::array<int, 2>>&
 }
 
 }  // namespace
+
+Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets,
+                               const Eigen::VectorXi& inner) {
+    Eigen::VectorXd t = Eigen::VectorXd::Constant(s.size(), std::numeric_limits<double>::quiet_NaN());
+    if (inner.size() == 0) return t;
+    const Eigen::MatrixXi F = fem::boundary_faces_in_set(nodes, tets, inner);  // corners in columns 0..2
+    if (F.rows() == 0) return t;
+    Eigen::MatrixX3d C(F.rows(), 3);
+    double reach = 0;  // largest centroid-to-corner distance: a face within r of p has its centroid within r + reach
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+        C.row(f) = (nodes.row(F(f, 0)) + nodes.row(F(f, 1)) + nodes.row(F(f, 2))) / 3.0;
+        for (int k = 0; k < 3; ++k) reach = std::max(reach, (nodes.row(F(f, k)) - C.row(f)).norm());
+    }
+    PointGrid grid;
+    grid.build(C, std::max(0.5, 2 * reach));
+    std::vector<int> cand;
+    for (Eigen::Index v = 0; v < s.size(); ++v) {
+        const Eigen::Vector3d p = s.X.row(v).transpose();
+        for (double r = 0.5; r <= 8.0; r *= 2) {
+            const Eigen::Vector3d h = Eigen::Vector3d::Constant(r + reach);
+            grid.query(Aabb{p - h, p + h}, cand);
+            double best = std::numeric_limits<double>::infinity();
+            for (int f : cand) {
+                const Eigen::Vector3d q = closest_point_on_triangle(p, nodes.row(F(f, 0)).transpose(), nodes.row(F(f, 1)).transpose(),
+                                                                    nodes.row(F(f, 2)).transpose());
+                best = std::min(best, (q - p).norm());
+            }
+            if (best <= r) {
+                t[v] = best;
+                break;
+            }
+        }
+    }
+    return t;
+}
 
 SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
                            const std::vector<std::string>& region_names, const std::vector<int>& row_of_dof) {
@@ -278,6 +316,9 @@ SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
         throw InputError(bundle_path + ": no boundary face of /volume/tets has all its nodes in /condensed (expected the "
                          "outer wall surface to be condensed)");
     }
+    const auto inner = b.volume->node_sets.find("inner");
+    m.surface.thickness = wall_thickness(m.surface, m.nodes, b.volume->tets,
+                                         inner == b.volume->node_sets.end() ? Eigen::VectorXi() : inner->second);
     m.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return m;
 }

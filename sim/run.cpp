@@ -489,6 +489,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["haptic_ticks"] = a.haptic_ticks;
     j["refactorisations"] = refactors;
     j["wcc_condition_estimate_max"] = a.max_condition_estimate;
+    j["linear_limit"] = scene.linear_limit;
+    j["max_displacement_to_thickness"] = a.max_displacement_to_thickness;
+    j["max_displacement_mm"] = a.max_displacement_mm;
+    j["max_displacement_wall_thickness_mm"] = a.max_displacement_thickness_mm;
     j["load_s"] = model.load_seconds;
     j["time_split"] = {{"collision", stats([](const FrameStats& f) { return f.collision_s; })},
                        {"factorisation", stats([](const FrameStats& f) { return f.factor_s; })},
@@ -543,6 +547,12 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                   scene.velocity_threshold_mm_s, a.velocity_exceedances, 100.0 * a.neck_closed_fraction, a.neck_length_mm);
     o << buf;
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
+    if (a.max_displacement_to_thickness > 0) {
+        std::snprintf(buf, sizeof buf, "  largest push / wall        %.3g mm on %.3g mm (%.2g x; linear model trusted to %.2g x)%s\n",
+                      a.max_displacement_mm, a.max_displacement_thickness_mm, a.max_displacement_to_thickness, scene.linear_limit,
+                      scene.linear_limit > 0 && a.max_displacement_to_thickness > scene.linear_limit ? "  BEYOND" : "");
+        o << buf;
+    }
     o << haptic_line;
     tx.finish();
 }

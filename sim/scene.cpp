@@ -171,6 +171,7 @@ Scene read_scene(const std::string& path) {
         s.release_tolerance_mm = o.num("release_tolerance_mm", s.release_tolerance_mm, 0, 10);
         s.relax_time_s = o.num("relax_time_s", s.relax_time_s, 1e-4, 100);
         s.update_margin_mm = o.num("update_margin_mm", s.update_margin_mm, 0, 1e3);
+        s.linear_limit = o.num("linear_limit", s.linear_limit, 0, 1e3);
         s.jaw_push = o.choice("jaw_push", {"shape", "node_normal"}) == 0 ? JawPush::SHAPE : JawPush::NODE_NORMAL;
         s.clip_method = o.choice("deposited_clips", {"exact", "two-solve"}) == 0 ? GroupMethod::EXACT : GroupMethod::TWO_SOLVE;
         o.done();

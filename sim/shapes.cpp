@@ -41,6 +41,12 @@ long long edge_key(long long i, long long j, long long n) { return std::min(i, j
 
 }  // namespace
 
+Eigen::Vector3d closest_point_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                          const Eigen::Vector3d& c) {
+    int region = 0;
+    return closest_on_triangle(p, a, b, c, region);
+}
+
 void TriMesh::finish() {
     if (V.rows() == 0 || F.rows() == 0) throw InputError("triangle mesh is empty");
     face_normal.resize(F.rows(), 3);

@@ -96,6 +96,7 @@ struct Simulator::Impl {
     double t_region = -1;  ///< when the whole working region's deformation was last computed (-1: never)
     double t_cond = -1;    ///< when W_CC's condition was last estimated
     bool warned_condition = false;
+    bool warned_linear = false;
 
     static std::string fmt_condition(double cond, int nodes, double eps) {
         char b[320];
@@ -472,6 +473,27 @@ struct Simulator::Impl {
             }
             p.push_back(q);
             last_vertices.push_back(static_cast<int>(v));
+            // The linear model's range: a prescribed displacement of a few tenths of the local wall thickness
+            // already makes its forces too large (bench/results/study: clip closing, linear vs neo-Hookean).
+            const double th = model.surface.thickness.size() ? model.surface.thickness[v] : std::nan("");
+            if (std::isfinite(th) && th > 0) {
+                const double ratio = q.u.norm() / th;
+                if (ratio > a.max_displacement_to_thickness) {
+                    a.max_displacement_to_thickness = ratio;
+                    a.max_displacement_mm = q.u.norm();
+                    a.max_displacement_thickness_mm = th;
+                }
+                if (scene.linear_limit > 0 && ratio > scene.linear_limit && !warned_linear) {
+                    char b[400];
+                    std::snprintf(b, sizeof b,
+                                  "beyond the linear model's range at t=%.3f s: a prescribed displacement of %.3g mm at (%.2f, %.2f, %.2f) is "
+                                  "%.2g times the local wall thickness (%.3g mm); past %.2g times the linear model's forces there are "
+                                  "too large by more than 10 %% (contact.linear_limit)",
+                                  t, q.u.norm(), sf.X(v, 0), sf.X(v, 1), sf.X(v, 2), ratio, th, scene.linear_limit);
+                    warn(b);
+                    warned_linear = true;
+                }
+            }
         }
         fs.prescribed_nodes = static_cast<int>(p.size());
         const std::vector<int> vertices = last_vertices;

@@ -3,15 +3,17 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <string>
 
+#include <Eigen/CholmodSupport>
 #include <Eigen/LU>
 
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/fem/element.hpp"
-#include "aneu/fem/static_solve.hpp"
 
 namespace aneu::fem {
 
@@ -33,8 +35,16 @@ bool point_state(const Mat3& F, PointState& s) {
     return true;
 }
 
-double energy_density(const Mat3& F, const PointState& s, double mu, double lambda) {
-    return 0.5 * mu * (F.squaredNorm() - 3.0) - mu * s.logJ + 0.5 * lambda * s.logJ * s.logJ;
+/// Ψ from the displacement gradient H = F − I, without the cancellations of the textbook form (½|F|² − 3/2 and
+/// ln J computed from H directly), so that energy differences near equilibrium stay above rounding and the line
+/// search can see them. Returns false if inverted.
+bool energy_density(const Mat3& H, double mu, double lambda, double& psi) {
+    const double tr = H.trace();
+    const double Jm1 = tr + 0.5 * (tr * tr - (H * H).trace()) + H.determinant();  // det(I + H) − 1, exactly
+    if (!(Jm1 > -1.0)) return false;
+    const double logJ = std::log1p(Jm1);
+    psi = mu * (tr + 0.5 * H.squaredNorm() - logJ) + 0.5 * lambda * logJ * logJ;
+    return true;
 }
 
 /// First Piola–Kirchhoff stress.
@@ -159,14 +169,14 @@ double NeoHookeanSolid::energy(const Eigen::VectorXd& u) const {
         for (int q = 0; q < points_per_element_; ++q) {
             const auto k = static_cast<size_t>(e * points_per_element_ + q);
             const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
-            Mat3 F = Mat3::Identity();
-            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
-            PointState s;
-            if (!point_state(F, s)) {
+            Mat3 H = Mat3::Zero();
+            for (int a = 0; a < nn_; ++a) H += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            double psi = 0;
+            if (!energy_density(H, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)], psi)) {
                 inverted = true;
                 continue;
             }
-            total += w_[k] * energy_density(F, s, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)]);
+            total += w_[k] * psi;
         }
     }
     return inverted ? std::numeric_limits<double>::infinity() : total;
@@ -310,27 +320,81 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
             if (!constrained[static_cast<size_t>(i)]) s += g[i] * g[i];
         return std::sqrt(s);
     };
-    FemData tangent_fem;
-    tangent_fem.K_upper_only = false;
-    tangent_fem.fixed_dofs = fixed_dofs;
-    NewtonResult out;
-    // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp = the prescribed increments, or none), shifting a
-    // tangent that is not positive definite by τ·diag(K) until CHOLMOD accepts it.
-    auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const std::vector<std::pair<int, double>>& dp) {
-        tangent_fem.K = solid.tangent(u);
-        const Eigen::VectorXd rhs = -g;
-        Eigen::VectorXd diag = tangent_fem.K.diagonal();
-        for (double tau = 0;;) {
-            try {
-                return solve_dirichlet(tangent_fem, dp, &rhs).u;
-            } catch (const NumericalError&) {
-                if (tau > 1.0) throw;
-                const double next = tau == 0 ? 1e-8 : 10 * tau;
-                for (Eigen::Index i = 0; i < n; ++i) tangent_fem.K.coeffRef(i, i) += (next - tau) * diag[i];
-                if (tau == 0) ++out.shifted;
-                tau = next;
+    // The free block of the tangent: its pattern (upper triangle) and where each tangent entry goes, built once,
+    // so that CHOLMOD orders and analyses it once per call and only refactorises in the iterations.
+    std::vector<int> free_index(static_cast<size_t>(n), -1);
+    Eigen::Index m = 0;
+    for (Eigen::Index i = 0; i < n; ++i)
+        if (!constrained[static_cast<size_t>(i)]) free_index[static_cast<size_t>(i)] = static_cast<int>(m++);
+    Eigen::SparseMatrix<double, Eigen::RowMajor> K = solid.pattern();
+    Eigen::SparseMatrix<double> Kff(m, m);
+    std::vector<std::int64_t> to_ff(static_cast<size_t>(K.nonZeros()), -1);
+    std::vector<Eigen::Index> diag_pos(static_cast<size_t>(m), 0);
+    {
+        std::vector<Eigen::Triplet<double>> trip;
+        for (Eigen::Index r = 0; r < n; ++r) {
+            const int a = free_index[static_cast<size_t>(r)];
+            if (a < 0) continue;
+            for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, r); it; ++it) {
+                const int b = free_index[static_cast<size_t>(it.col())];
+                if (b >= a) trip.emplace_back(a, b, 1.0);
             }
         }
+        Kff.setFromTriplets(trip.begin(), trip.end());
+        Kff.makeCompressed();
+        for (Eigen::Index r = 0; r < n; ++r) {
+            const int a = free_index[static_cast<size_t>(r)];
+            if (a < 0) continue;
+            for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
+                const int b = free_index[static_cast<size_t>(K.innerIndexPtr()[p])];
+                if (b < a) continue;
+                const int* rows = Kff.innerIndexPtr() + Kff.outerIndexPtr()[b];
+                const int* rend = Kff.innerIndexPtr() + Kff.outerIndexPtr()[b + 1];
+                const Eigen::Index pos = Kff.outerIndexPtr()[b] + (std::lower_bound(rows, rend, a) - rows);
+                to_ff[static_cast<size_t>(p)] = pos;
+                if (a == b) diag_pos[static_cast<size_t>(a)] = pos;
+            }
+        }
+    }
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    llt.cholmod().print = 0;  // a tangent that is not positive definite is expected (buckling) and handled below
+    if (m > 0) llt.analyzePattern(Kff);
+    NewtonResult out;
+    // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp: the prescribed increments, zero in the corrector
+    // iterations), shifting a tangent that is not positive definite by τ·diag(K) until CHOLMOD accepts it.
+    auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const Eigen::VectorXd* dp) {
+        K = solid.tangent(u);
+        Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
+        if (dp) du = *dp;
+        Eigen::VectorXd rhs(m);
+        for (Eigen::Index r = 0; r < n; ++r) {
+            const int a = free_index[static_cast<size_t>(r)];
+            if (a < 0) continue;
+            double v = -g[r];
+            if (dp)
+                for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, r); it; ++it)
+                    if (free_index[static_cast<size_t>(it.col())] < 0) v -= it.value() * (*dp)[it.col()];
+            rhs[a] = v;
+        }
+        if (m == 0) return du;
+        std::fill(Kff.valuePtr(), Kff.valuePtr() + Kff.nonZeros(), 0.0);
+        for (size_t p = 0; p < to_ff.size(); ++p)
+            if (to_ff[p] >= 0) Kff.valuePtr()[to_ff[p]] = K.valuePtr()[p];
+        Eigen::VectorXd diag(m);
+        for (Eigen::Index a = 0; a < m; ++a) diag[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
+        for (double tau = 0;;) {
+            llt.factorize(Kff);
+            if (llt.info() == Eigen::Success) break;
+            if (tau > 1e4) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a shift of 1e4 times its diagonal");
+            const double next = tau == 0 ? 1e-8 : 10 * tau;
+            for (Eigen::Index a = 0; a < m; ++a) Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]] += (next - tau) * diag[a];
+            if (tau == 0) ++out.shifted;
+            tau = next;
+        }
+        const Eigen::VectorXd x = llt.solve(rhs);
+        for (Eigen::Index r = 0; r < n; ++r)
+            if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+        return du;
     };
     Eigen::VectorXd u = u0;
     for (Eigen::Index k = 0; k < fixed_dofs.size(); ++k) u[fixed_dofs[k]] = 0;
@@ -340,26 +404,22 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
         target[static_cast<Eigen::Index>(k)] = prescribed[k].second;
     }
     double s = 0, ds = 1;
+    const bool trace = std::getenv("ANEU_NEWTON_TRACE") != nullptr;
     std::string last_failure = "no iteration";
     // Tries to reach load fraction s1 from the converged state u (at s); true on convergence (u updated).
     auto substep = [&](double s1) {
-        std::vector<std::pair<int, double>> dp(prescribed.size());
+        Eigen::VectorXd dp = Eigen::VectorXd::Zero(n);
         for (size_t k = 0; k < prescribed.size(); ++k) {
             const auto kk = static_cast<Eigen::Index>(k);
-            dp[k] = {prescribed[k].first, start[kk] + s1 * (target[kk] - start[kk]) - u[prescribed[k].first]};
+            dp[prescribed[k].first] = start[kk] + s1 * (target[kk] - start[kk]) - u[prescribed[k].first];
         }
         Eigen::VectorXd g = solid.internal_force(u);
-        Eigen::VectorXd v = u + newton_step(u, g, dp);  // predictor: moves the prescribed DOFs
+        Eigen::VectorXd v = u + newton_step(u, g, &dp);  // predictor: moves the prescribed DOFs
         double E = solid.energy(v);
         if (!std::isfinite(E)) {
             last_failure = "the predictor inverts elements";
             return false;
         }
-        const std::vector<std::pair<int, double>> zero = [&] {
-            auto z = dp;
-            for (auto& [d, x] : z) x = 0;
-            return z;
-        }();
         for (int it = 0; it < opt.max_iterations; ++it) {
             g = solid.internal_force(v);
             const double r = free_norm(g), scale = g.norm();
@@ -369,16 +429,21 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
                 return true;
             }
             ++out.iterations;
-            const Eigen::VectorXd du = newton_step(v, g, zero);
+            const Eigen::VectorXd du = newton_step(v, g, nullptr);
             const double slope = g.dot(du);
+            if (trace) std::fprintf(stderr, "newton s %.4g it %d residual %.3e / %.3e energy %.12e slope %.3e |du| %.3e\n", s1, it, r, scale, E, slope, du.norm());
             double alpha = 1;
             bool accepted = false;
             for (int ls = 0; ls < 40; ++ls, alpha *= 0.5) {
                 const Eigen::VectorXd trial = v + alpha * du;
                 const double Et = solid.energy(trial);
-                // Armijo on the energy; near convergence the energy differences drown in rounding, so a step
-                // that lowers the residual is taken as well.
-                if (std::isfinite(Et) && (Et <= E + 1e-4 * alpha * slope || (Et - E) <= 1e-13 * std::abs(E))) {
+                if (!std::isfinite(Et)) continue;
+                // Armijo on the energy. Near convergence the energy change drowns in rounding: a step whose
+                // energy change is at that level is taken when it lowers the residual.
+                bool ok = Et <= E + 1e-4 * alpha * slope;
+                if (!ok && Et - E <= 1e-11 * std::abs(E)) ok = free_norm(solid.internal_force(trial)) < r;
+                if (ok) {
+                    if (trace) std::fprintf(stderr, "  alpha %g energy %.15e\n", alpha, Et);
                     v = trial;
                     E = Et;
                     accepted = true;

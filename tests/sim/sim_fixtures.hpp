@@ -47,6 +47,7 @@ inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, d
     v.tet_region = region;
     v.region_names = {"artery", "aneurysm"};
     v.node_sets["outer"] = m.outer;
+    v.node_sets["inner"] = m.inner;
     b.volume = v;
     FemData f;
     f.K = c.K;

@@ -56,3 +56,19 @@ TEST(SimModel, RefusesBundleWithoutCondensedOrEmptyRegion) {
         EXPECT_NE(std::string(e.what()).find("no /condensed group"), std::string::npos) << e.what();
     }
 }
+
+TEST(SimModel, WallThicknessIsTheDistanceToTheInnerWall) {
+    // Tube wall 1.5..1.9 mm: every outer vertex is 0.4 mm from the inner surface (its nodes lie on the circle at
+    // the same angles). Without an inner node set the thickness is unknown (NaN), not guessed.
+    test::TempDir d("thick");
+    test::TubeCase c = test::tube_case(Precision::FLOAT64, 24, 12);
+    write_bundle(d.file("t.h5"), c.bundle);
+    const sim::SimModel m = sim::load_model(d.file("t.h5"));
+    ASSERT_EQ(m.surface.thickness.size(), m.surface.size());
+    EXPECT_NEAR(m.surface.thickness.minCoeff(), 0.4, 1e-9);
+    EXPECT_NEAR(m.surface.thickness.maxCoeff(), 0.4, 1e-9);
+    c.bundle.volume->node_sets.erase("inner");
+    write_bundle(d.file("u.h5"), c.bundle);
+    const sim::SimModel n = sim::load_model(d.file("u.h5"));
+    EXPECT_TRUE(n.surface.thickness.array().isNaN().all());
+}

@@ -36,6 +36,8 @@ public:
     /// Tangent stiffness ∂²Ψ/∂u² [N/mm], both triangles, on a fixed pattern (the element graph).
     /// @throws NumericalError when an element is inverted
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u) const;
+    /// The tangent's sparsity pattern (values zero).
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const { return pattern_; }
     /// Smallest J = det F over the integration points (≤ 0: inverted).
     double min_jacobian(const Eigen::VectorXd& u) const;
 
@@ -76,7 +78,8 @@ struct NewtonResult {
 
 /// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed
 /// (DOF, value), the other DOFs free, from the state `u0` (its prescribed entries are moved to the new values
-/// along a straight path, in substeps). Newton's method on the energy: CHOLMOD Cholesky of the free tangent (a
+/// along a straight path, in substeps). Newton's method on the energy: CHOLMOD Cholesky of the free tangent,
+/// ordered and analysed once per call (a
 /// tangent that is not positive definite — buckling — is shifted by a multiple of its diagonal until it is),
 /// backtracking line search on the energy (an inverting step is never taken), and halving of the prescribed
 /// increment when a substep does not converge.

@@ -31,8 +31,16 @@ struct SimSurface {
     std::vector<int> adj_offsets;      ///< #S+1: neighbours of s are adj[adj_offsets[s] .. adj_offsets[s+1])
     std::vector<int> adj;
     std::vector<std::vector<int>> neck_loops;  ///< closed vertex loops between an "aneurysm" and another region
+    /// #S local wall thickness [mm]: distance to the inner wall surface (faces of node set "inner"); NaN where
+    /// the bundle has no inner node set or no inner face lies within 8 mm. Set by load_model.
+    Eigen::VectorXd thickness;
     Eigen::Index size() const { return X.rows(); }
 };
+
+/// Local wall thickness at every vertex of `s`: the distance to the nearest boundary face of `tets` whose
+/// corners are all in `inner` (NaN when there is none within 8 mm, or `inner` is empty).
+Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets,
+                               const Eigen::VectorXi& inner);
 
 /// What the simulator keeps in memory from a bundle.
 ///

@@ -88,6 +88,10 @@ struct Scene {
     /// that lag and come within it are first brought up to date from the last forces, so what a frame reads is
     /// exact. At least max(2 edges, approach_margin_mm) + 1 edge is used. 0: the whole region every frame.
     double update_margin_mm = 1.0;
+    /// A prescribed displacement larger than this × the local wall thickness is outside the linear model's range
+    /// (measured: a clip closing on a 0.1 mm sac wall, linear vs neo-Hookean, clip force error 10 % at about 0.4×;
+    /// bench/results/study/study.md); the simulator warns once. 0: no check.
+    double linear_limit = 0.4;
     GroupMethod clip_method = GroupMethod::EXACT;
     JawPush jaw_push = JawPush::SHAPE;
     // haptics (contact-plane method)

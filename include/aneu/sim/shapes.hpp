@@ -58,6 +58,10 @@ struct Shape {
     double exit_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& dir) const;
 };
 
+/// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5).
+Eigen::Vector3d closest_point_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                          const Eigen::Vector3d& c);
+
 /// Uniform hash grid over points (the deformed surface nodes), rebuilt each collision frame.
 class PointGrid {
 public:

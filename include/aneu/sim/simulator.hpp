@@ -57,6 +57,9 @@ struct Assessment {
     int velocity_exceedances = 0;   ///< rising edges of instrument speed above the threshold while in contact
     double peak_force_n = 0.0;      ///< largest haptic force
     double max_condition_estimate = 0.0;  ///< largest cond₁(W_CC) estimated (twice a second when the set changed)
+    /// Largest prescribed displacement / local wall thickness over the session (0: no thickness in the bundle),
+    /// with that displacement and thickness [mm]: the linear model's validity (Scene::linear_limit).
+    double max_displacement_to_thickness = 0.0, max_displacement_mm = 0.0, max_displacement_thickness_mm = 0.0;
     double peak_vessel_force_n = 0.0;  ///< largest ½ Σ|f| on the vessel over all frames
     double neck_closed_fraction = 0.0;  ///< fraction of the neck line (by length) held closed between clip jaws
     double neck_length_mm = 0.0;

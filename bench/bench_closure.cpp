@@ -1,0 +1,310 @@
+// SPDX-License-Identifier: MIT
+// Linear vs large deformation (issue #6, study part 2): a clip closing on the sac, from touching to full closure,
+// solved with the linear model the simulator uses (K of /fem) and with the neo-Hookean reference (same mesh,
+// elements, quadrature and materials; fem::solve_neo_hookean), and the linear model's error as a function of
+// closure.
+//
+// The clip: two flat blades, `--blade-width-mm` wide (along x, away from the parent artery) and `--blade-length-mm`
+// long (along z, the parent artery's axis), centred on `--centre` and closing symmetrically along y. Closure c runs
+// from 0 (blades touch the sac: gap = the outer width of the model between the blades) to 1 (gap = `--full-gap-mm`,
+// twice the sac wall: the lumen is closed). Contact is the simulator's: an outer node whose deformed position lies
+// beyond a blade face within the blade's extent is prescribed onto the face and sticks there tangentially (its x,
+// z where it entered); a node the blade pulls on (adhesive reaction) is released. Each model gets its own active
+// set, found by iterating solve → detect → solve at every closure step.
+//
+// Errors, per closure: clip force (the y force one blade applies, mean of both) |F_lin − F_nl| / |F_nl|, and the
+// clip-region displacement (outer nodes within `--region-mm` of the centre) ‖u_lin − u_nl‖ / ‖u_nl‖ (RMS over the
+// nodes). Output: one JSON line per closure on stdout, a summary line last.
+// Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
+//                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/static_solve.hpp"
+
+using namespace aneu;
+using clk = std::chrono::steady_clock;
+
+namespace {
+
+double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
+
+struct Contact {
+    int side = 1;        ///< +1: the blade at y = +gap/2, −1: at −gap/2
+    double x = 0, z = 0; ///< where it sticks
+};
+
+struct Clip {
+    Eigen::Vector3d centre;
+    double width = 0.8, length = 7, gap = 0;
+    bool within(const Eigen::Vector3d& p) const {
+        return std::abs(p.x() - centre.x()) <= 0.5 * width && std::abs(p.z() - centre.z()) <= 0.5 * length;
+    }
+};
+
+/// One model's state along the closure path.
+struct Track {
+    std::map<int, Contact> active;  // node -> contact
+    Eigen::VectorXd u;
+    double force = 0;               // mean y force of the two blades on the wall [N], > 0 squeezing
+    int rounds = 0, iterations = 0, substeps = 0, shifted = 0;
+    double min_J = 1, seconds = 0;
+};
+
+std::vector<std::pair<int, double>> prescribed_of(const Track& t, const Eigen::MatrixX3d& X, const Clip& clip) {
+    std::vector<std::pair<int, double>> p;
+    p.reserve(3 * t.active.size());
+    for (const auto& [v, c] : t.active) {
+        p.emplace_back(3 * v, c.x - X(v, 0));
+        p.emplace_back(3 * v + 1, c.side * 0.5 * clip.gap - X(v, 1));
+        p.emplace_back(3 * v + 2, c.z - X(v, 2));
+    }
+    return p;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 2) {
+        std::fprintf(stderr, "usage: %s FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2] "
+                             "[--region-mm 3] [--closures c1,c2,...]\n", argv[0]);
+        return 2;
+    }
+    Clip clip;
+    bool have_centre = false;
+    double full_gap = 0.2, region = 3.0;
+    std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
+    std::string label = "sac";
+    for (int a = 2; a + 1 < argc; a += 2) {
+        const std::string k = argv[a];
+        const char* v = argv[a + 1];
+        if (k == "--centre") {
+            have_centre = std::sscanf(v, "%lf,%lf,%lf", &clip.centre.x(), &clip.centre.y(), &clip.centre.z()) == 3;
+        } else if (k == "--blade-width-mm") {
+            clip.width = std::atof(v);
+        } else if (k == "--blade-length-mm") {
+            clip.length = std::atof(v);
+        } else if (k == "--full-gap-mm") {
+            full_gap = std::atof(v);
+        } else if (k == "--region-mm") {
+            region = std::atof(v);
+        } else if (k == "--label") {
+            label = v;
+        } else if (k == "--closures") {
+            closures.clear();
+            std::stringstream ss(v);
+            for (std::string s; std::getline(ss, s, ',');) closures.push_back(std::atof(s.c_str()));
+        } else {
+            std::fprintf(stderr, "unknown option %s\n", k.c_str());
+            return 2;
+        }
+    }
+    BundleParts parts;
+    parts.condensed_W = false;
+    parts.image = false;
+    const Bundle b = read_bundle(argv[1], parts);
+    if (!b.volume || !b.fem) {
+        std::fprintf(stderr, "%s: needs /volume and /fem\n", argv[1]);
+        return 2;
+    }
+    const VolumeData& vol = *b.volume;
+    const FemData& fem = *b.fem;
+    const Eigen::MatrixX3d& X = vol.nodes;
+    const Eigen::VectorXi& outer = vol.node_sets.at("outer");
+    if (!have_centre) {
+        // Default: the tube-with-sac of bench/run_study.sh (tube along z, sac on +x): across the neck, 0.6 mm
+        // outside the parent's outer wall, at the sac's mid-length.
+        double zmin = 1e300, zmax = -1e300, rmax = 0;
+        for (Eigen::Index k = 0; k < X.rows(); ++k) {
+            zmin = std::min(zmin, X(k, 2));
+            zmax = std::max(zmax, X(k, 2));
+        }
+        for (Eigen::Index k = 0; k < outer.size(); ++k) {
+            const Eigen::Vector3d p = X.row(outer[k]);
+            if (std::abs(p.z() - zmin) < 0.1 * (zmax - zmin)) rmax = std::max(rmax, std::hypot(p.x(), p.y()));
+        }
+        clip.centre = Eigen::Vector3d(rmax + 0.6, 0, 0.5 * (zmin + zmax));
+    }
+    // Outer width between the blades: the gap at closure 0.
+    double half = 0;
+    for (Eigen::Index k = 0; k < outer.size(); ++k) {
+        const Eigen::Vector3d p = X.row(outer[k]);
+        if (clip.within(p)) half = std::max(half, std::abs(p.y() - clip.centre.y()));
+    }
+    if (half <= 0) {
+        std::fprintf(stderr, "%s: no outer node within the blades' extent\n", argv[1]);
+        return 2;
+    }
+    // The clip closes about y = centre.y; shift coordinates so the blade faces are at ±gap/2.
+    Eigen::MatrixX3d Xc = X;
+    Xc.col(1).array() -= clip.centre.y();
+    const double gap0 = 2 * half;
+
+    auto t0 = clk::now();
+    const fem::NeoHookeanSolid solid(vol.nodes, vol.tets, vol.tet_region, fem.materials);
+    const double setup_s = secs(t0);
+    // The linear model's matrix is the neo-Hookean tangent at rest (same elements, quadrature, materials).
+    double k_diff = 0, k_max = 0;
+    {
+        const auto K0 = solid.tangent(Eigen::VectorXd::Zero(solid.dofs()));
+        for (Eigen::Index r = 0; r < fem.K.outerSize(); ++r)
+            for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(fem.K, r); it; ++it) {
+                k_diff = std::max(k_diff, std::abs(it.value() - K0.coeff(r, it.col())));
+                k_max = std::max(k_max, std::abs(it.value()));
+            }
+    }
+    std::vector<char> is_outer(static_cast<size_t>(X.rows()), 0);
+    for (Eigen::Index k = 0; k < outer.size(); ++k) is_outer[static_cast<size_t>(outer[k])] = 1;
+    std::vector<int> probe;  // the clip region
+    for (Eigen::Index k = 0; k < outer.size(); ++k)
+        if ((X.row(outer[k]).transpose() - clip.centre).norm() <= region) probe.push_back(outer[k]);
+
+    // Solve one model at the current gap, iterating the contact set; returns false if it cannot be solved.
+    auto solve = [&](Track& t, bool nonlinear) {
+        const auto ts = clk::now();
+        for (int round = 0; round < 30; ++round) {
+            const auto pres = prescribed_of(t, Xc, clip);
+            Eigen::VectorXd reaction;
+            if (nonlinear) {
+                const fem::NewtonResult r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u);
+                t.u = r.u;
+                reaction = r.reaction;
+                t.iterations += r.iterations;
+                t.substeps += r.substeps;
+                t.shifted += r.shifted;
+                t.min_J = r.min_J;
+            } else {
+                const fem::DirichletResult r = fem::solve_dirichlet(fem, pres);
+                t.u = r.u;
+                reaction = r.reaction;
+            }
+            ++t.rounds;
+            // Release nodes the blade pulls on, then add the nodes that went through a blade.
+            bool changed = false;
+            std::vector<int> release;
+            size_t k = 0;
+            double f_top = 0, f_bottom = 0;
+            for (const auto& [v, c] : t.active) {
+                const double ry = reaction[static_cast<Eigen::Index>(3 * k + 1)];  // force the blade applies, along y
+                if (c.side * ry > 1e-9) release.push_back(v);
+                (c.side > 0 ? f_top : f_bottom) += -c.side * ry;
+                ++k;
+            }
+            t.force = 0.5 * (f_top + f_bottom);
+            for (int v : release) t.active.erase(v);
+            changed = !release.empty();
+            for (Eigen::Index v = 0; v < X.rows(); ++v) {
+                if (!is_outer[static_cast<size_t>(v)] || t.active.count(static_cast<int>(v))) continue;
+                const Eigen::Vector3d p = Xc.row(v).transpose() + t.u.segment<3>(3 * v);
+                if (!clip.within(p + Eigen::Vector3d(0, clip.centre.y(), 0))) continue;
+                if (std::abs(p.y()) > 0.5 * clip.gap) {
+                    t.active[static_cast<int>(v)] = Contact{p.y() > 0 ? 1 : -1, p.x() + X(v, 0) - Xc(v, 0), p.z()};
+                    changed = true;
+                }
+            }
+            if (!changed) {
+                t.seconds += secs(ts);
+                return;
+            }
+        }
+        t.seconds += secs(ts);
+        std::fprintf(stderr, "contact set did not settle in 30 rounds\n");
+    };
+
+    Track lin, nl;
+    lin.u = nl.u = Eigen::VectorXd::Zero(solid.dofs());
+    nlohmann::json summary;
+    double cross_force = -1, cross_disp = -1;
+    double prev_c = 0, prev_ef = 0, prev_eu = 0;
+    for (double c : closures) {
+        clip.gap = gap0 - c * (gap0 - full_gap);
+        solve(lin, false);
+        try {
+            solve(nl, true);
+        } catch (const Error& e) {
+            nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", e.what()}};
+            std::printf("%s\n", j.dump().c_str());
+            std::fflush(stdout);
+            break;
+        }
+        double num = 0, den = 0, umax = 0;
+        for (int v : probe) {
+            num += (lin.u.segment<3>(3 * v) - nl.u.segment<3>(3 * v)).squaredNorm();
+            den += nl.u.segment<3>(3 * v).squaredNorm();
+            umax = std::max(umax, nl.u.segment<3>(3 * v).norm());
+        }
+        const double ef = std::abs(lin.force - nl.force) / std::abs(nl.force);
+        const double eu = std::sqrt(num / den);
+        if (cross_force < 0 && ef > 0.1) cross_force = prev_c + (c - prev_c) * (0.1 - prev_ef) / (ef - prev_ef);
+        if (cross_disp < 0 && eu > 0.1) cross_disp = prev_c + (c - prev_c) * (0.1 - prev_eu) / (eu - prev_eu);
+        prev_c = c;
+        prev_ef = ef;
+        prev_eu = eu;
+        nlohmann::json j = {{"closure", c},
+                            {"gap_mm", clip.gap},
+                            {"force_linear_N", lin.force},
+                            {"force_nonlinear_N", nl.force},
+                            {"force_error", ef},
+                            {"u_error", eu},
+                            {"u_max_mm", umax},
+                            {"contacts_linear", lin.active.size()},
+                            {"contacts_nonlinear", nl.active.size()},
+                            {"min_J", nl.min_J},
+                            {"newton_iterations", nl.iterations},
+                            {"substeps", nl.substeps},
+                            {"shifted", nl.shifted},
+                            {"rounds_linear", lin.rounds},
+                            {"rounds_nonlinear", nl.rounds},
+                            {"seconds_linear", lin.seconds},
+                            {"seconds_nonlinear", nl.seconds}};
+        // A cross-section through the clip (nodes within 0.15 mm of the plane z = centre.z): reference and both
+        // deformed positions, for the report's picture.
+        if (std::abs(c - 0.2) < 1e-9 || std::abs(c - 0.5) < 1e-9 || std::abs(c - 0.9) < 1e-9 || std::abs(c - 1.0) < 1e-9) {
+            nlohmann::json sec = nlohmann::json::array();
+            for (Eigen::Index v = 0; v < X.rows(); ++v) {
+                if (std::abs(X(v, 2) - clip.centre.z()) > 0.15) continue;
+                const Eigen::Vector3d xl = X.row(v).transpose() + lin.u.segment<3>(3 * v);
+                const Eigen::Vector3d xn = X.row(v).transpose() + nl.u.segment<3>(3 * v);
+                sec.push_back({X(v, 0), X(v, 1), xl.x(), xl.y(), xn.x(), xn.y()});
+            }
+            j["section"] = sec;
+        }
+        std::printf("%s\n", j.dump().c_str());
+        std::fflush(stdout);
+    }
+    summary = {{"summary", true},
+               {"label", label},
+               {"model", argv[1]},
+               {"nodes", X.rows()},
+               {"tets", vol.tets.rows()},
+               {"element_order", fem.element_order},
+               {"dofs", solid.dofs()},
+               {"materials", nlohmann::json::array()},
+               {"clip_centre", {clip.centre.x(), clip.centre.y(), clip.centre.z()}},
+               {"blade_width_mm", clip.width},
+               {"blade_length_mm", clip.length},
+               {"gap0_mm", gap0},
+               {"full_gap_mm", full_gap},
+               {"region_mm", region},
+               {"probe_nodes", probe.size()},
+               {"tangent_at_rest_vs_K", k_diff / k_max},
+               {"setup_s", setup_s},
+               {"closure_force_error_10pct", cross_force},
+               {"closure_u_error_10pct", cross_disp},
+               {"seconds_linear", lin.seconds},
+               {"seconds_nonlinear", nl.seconds}};
+    for (const auto& m : fem.materials) summary["materials"].push_back({{"region", m.region}, {"E_mpa", m.E_mpa}, {"nu", m.nu}});
+    std::printf("%s\n", summary.dump().c_str());
+    return 0;
+}
