@@ -136,5 +136,11 @@ closures=""
 [ $quick = 1 ] && closures="--closures 0.01,0.02,0.05,0.1,0.2,0.3"
 echo "== clip closing on the sac: linear vs neo-Hookean (h 0.5, order 2)"
 "$closure" "$work/h0.5_p2/fem.h5" $closures >"$cjsonl"
-$py bench/study_report.py "$jsonl" "$out" "$pjsonl" "$cjsonl"
+# The same clip across the parent artery (0.3 mm wall), 4 mm from the sac: squeezing the tube flat (full closure:
+# gap = twice its wall). Shows how the linear model's range scales with the wall thickness.
+cajsonl="$out/closure_artery.jsonl"
+echo "== clip closing on the parent artery: linear vs neo-Hookean (h 0.5, order 2)"
+"$closure" "$work/h0.5_p2/fem.h5" --label artery --centre 0,0,2 --blade-width-mm 4.4 --blade-length-mm 1 --full-gap-mm 0.6 \
+  $closures >"$cajsonl"
+$py bench/study_report.py "$jsonl" "$out" "$pjsonl" "$cjsonl,$cajsonl"
 echo "report: $out/study.md"

@@ -155,22 +155,38 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const SurfacePar
 
 Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low) {
     const Eigen::Index nf = s.F.rows();
+    // The radius of each centerline point is raised to the largest within ±2 mm of arc length on its branch
+    // (about one parent radius): where a path runs off the axis — at a junction, where a branch path cuts across
+    // the ostium, or where it starts off-centre at a cut end — its inscribed radius dips, and faces of plain
+    // artery wall there would look far from the vessel.
+    constexpr double WINDOW_MM = 2.0;
+    Eigen::VectorXd rad_w = c.radius;
+    for (Eigen::Index l = 0; l + 1 < c.offsets.size(); ++l) {
+        const int b = c.offsets[l], e = c.offsets[l + 1];
+        std::vector<double> arc(static_cast<size_t>(e - b), 0.0);
+        for (int i = b + 1; i < e; ++i) arc[static_cast<size_t>(i - b)] = arc[static_cast<size_t>(i - b - 1)] + (c.points.row(i) - c.points.row(i - 1)).norm();
+        for (int i = b, lo = b, hi = b; i < e; ++i) {
+            while (arc[static_cast<size_t>(i - b)] - arc[static_cast<size_t>(lo - b)] > WINDOW_MM) ++lo;
+            while (hi + 1 < e && arc[static_cast<size_t>(hi + 1 - b)] - arc[static_cast<size_t>(i - b)] <= WINDOW_MM) ++hi;
+            rad_w[i] = c.radius.segment(lo, hi - lo + 1).maxCoeff();
+        }
+    }
+    // Each face is judged against the vessel tube that fits it best: the smallest distance / radius over all
+    // centerline segments (not only the nearest one, which near a junction may belong to the other branch).
     Eigen::VectorXd ratio(nf);
     for (Eigen::Index f = 0; f < nf; ++f) {
         const Eigen::Vector3d x = centroid(s, f);
-        double best = 1e300, rad = 1.0;
+        double best = 1e300;
         for (Eigen::Index l = 0; l + 1 < c.offsets.size(); ++l)
             for (int i = c.offsets[l]; i + 1 < c.offsets[l + 1]; ++i) {
                 const Eigen::Vector3d a = c.points.row(i).transpose(), b = c.points.row(i + 1).transpose();
                 const double L2 = (b - a).squaredNorm();
                 const double t = L2 > 0 ? std::clamp((x - a).dot(b - a) / L2, 0.0, 1.0) : 0.0;
                 const double d = (x - (a + t * (b - a))).norm();
-                if (d < best) {
-                    best = d;
-                    rad = (1 - t) * c.radius[i] + t * c.radius[i + 1];
-                }
+                const double rad = std::max((1 - t) * rad_w[i] + t * rad_w[i + 1], 1e-6);
+                best = std::min(best, d / rad);
             }
-        ratio[f] = best / std::max(rad, 1e-6);
+        ratio[f] = best;
     }
     // Hysteresis: faces above `high` seed the sac; it grows over neighbours above `low`.
     Eigen::VectorXi label = Eigen::VectorXi::Zero(nf);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include <Eigen/CholmodSupport>
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
 #include "aneu/core/error.hpp"
@@ -233,7 +234,7 @@ Eigen::VectorXd NeoHookeanSolid::internal_force(const Eigen::VectorXd& u) const 
     return f;
 }
 
-Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eigen::VectorXd& u) const {
+Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eigen::VectorXd& u, bool project) const {
     if (u.size() != dofs()) throw InputError("neo-Hookean tangent: u has " + std::to_string(u.size()) + " entries, expected " + std::to_string(dofs()));
     Eigen::SparseMatrix<double, Eigen::RowMajor> K = pattern_;
     double* val = K.valuePtr();
@@ -280,6 +281,15 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
             }
             for (int a = 0; a < nn_; ++a)
                 for (int b = 0; b < a; ++b) Kb.block<3, 3>(3 * a, 3 * b) = Kb.block<3, 3>(3 * b, 3 * a).transpose();
+            if (project) {
+                // Projected Newton (Teran et al. 2005): the element's tangent with its negative eigenvalues set to
+                // zero, so the sum is positive semidefinite and every Newton step goes downhill in energy.
+                Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Kb);
+                const Eigen::VectorXd lam = es.eigenvalues().cwiseMax(0.0);
+                Kb = es.eigenvectors() * lam.asDiagonal() * es.eigenvectors().transpose();
+                for (int a = 0; a < m; ++a)
+                    for (int b = 0; b < a; ++b) Kb(a, b) = Kb(b, a);
+            }
         }
         if (bad >= 0) throw NumericalError("neo-Hookean tangent: " + inverted_message(bad, bad_J));
         for (Eigen::Index e = e0; e < e1; ++e) {
@@ -361,10 +371,16 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
     if (m > 0) llt.analyzePattern(Kff);
     NewtonResult out;
     // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp: the prescribed increments, zero in the corrector
-    // iterations), shifting a tangent that is not positive definite by τ·diag(K) until CHOLMOD accepts it.
+    // iterations). A tangent that is not positive definite is replaced by the projected one (each element's
+    // tangent without its negative eigenvalues), shifted by τ·diag if CHOLMOD still refuses it (singular).
     auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const Eigen::VectorXd* dp) {
         K = solid.tangent(u);
         Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
+        auto fill_free = [&] {
+            std::fill(Kff.valuePtr(), Kff.valuePtr() + Kff.nonZeros(), 0.0);
+            for (size_t p = 0; p < to_ff.size(); ++p)
+                if (to_ff[p] >= 0) Kff.valuePtr()[to_ff[p]] = K.valuePtr()[p];
+        };
         if (dp) du = *dp;
         Eigen::VectorXd rhs(m);
         for (Eigen::Index r = 0; r < n; ++r) {
@@ -377,9 +393,15 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
             rhs[a] = v;
         }
         if (m == 0) return du;
-        std::fill(Kff.valuePtr(), Kff.valuePtr() + Kff.nonZeros(), 0.0);
-        for (size_t p = 0; p < to_ff.size(); ++p)
-            if (to_ff[p] >= 0) Kff.valuePtr()[to_ff[p]] = K.valuePtr()[p];
+        fill_free();
+        llt.factorize(Kff);
+        if (llt.info() != Eigen::Success) {
+            // Not positive definite (buckling, strong compression): project the element tangents instead.
+            // The predictor keeps the true tangent's K_fp in its right-hand side, computed above.
+            ++out.shifted;
+            K = solid.tangent(u, true);
+            fill_free();
+        }
         Eigen::VectorXd diag(m);
         for (Eigen::Index a = 0; a < m; ++a) diag[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
         for (double tau = 0;;) {
@@ -388,7 +410,6 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
             if (tau > 1e4) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a shift of 1e4 times its diagonal");
             const double next = tau == 0 ? 1e-8 : 10 * tau;
             for (Eigen::Index a = 0; a < m; ++a) Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]] += (next - tau) * diag[a];
-            if (tau == 0) ++out.shifted;
             tau = next;
         }
         const Eigen::VectorXd x = llt.solve(rhs);

@@ -306,6 +306,31 @@ TEST(Surface, ObliqueAnisotropicPhantomInPhysicalFrame) {
     expect_surface_standard(r.lumen, c.geom, 0.4, "oblique", 14.0);
 }
 
+TEST(Surface, AutomaticLabelOfASmallSacBesideTheBifurcation) {
+    // configs/cases/oblique_bone.toml: a 5.5 mm sac, bone, noise 25 HU, a rotated 0.35×0.45×0.6 mm grid. The branch
+    // path cuts across the ostium there, off both axes; with the radius taken at the nearest centerline point
+    // alone, 6.2 % of the artery at the bifurcation was labelled aneurysm.
+    PhantomParams p;
+    p.seed = 2;
+    p.spacing_mm = {0.35, 0.45, 0.6};
+    p.fov_mm = {32.0, 24.0, 22.0};
+    p.fov_centre_mm = {-2.0, 0.0, 1.0};
+    p.oblique_deg = {12.0, -8.0, 20.0};
+    p.dome_diameter_mm = 5.5;
+    p.neck_diameter_mm = 3.2;
+    p.with_bone = true;
+    p.noise_sd_hu = 25.0;
+    const Case c = make_case(p);
+    const Segmentation s = segment_volume(c.ct, SegmentParams{});
+    SurfaceParams sp;
+    sp.remesher = "cgal";
+    const LumenResult r = lumen_from_segmentation(s.image, sp);
+    const auto [sac_found, art_bad] = labelling(r.lumen, c.geom);
+    EXPECT_GE(sac_found, SAC_FOUND);
+    EXPECT_LE(art_bad, ARTERY_MISLABELLED);
+    std::printf("oblique-bone: sac found %.3f; artery mislabelled %.4f\n", sac_found, art_bad);
+}
+
 TEST(Surface, StlFromAnotherToolOpenAndCapped) {
     const auto& d = default_case();
     const LumenResult& ref = default_lumen("cgal");
@@ -316,8 +341,7 @@ TEST(Surface, StlFromAnotherToolOpenAndCapped) {
     SurfaceParams p;
     p.remesher = "cgal";
     const LumenResult open = lumen_from_mesh((dir / "open.stl").string(), p);
-    // Open item: the centerline of the voxelised surface mislabels 5.9 % of the artery (target 5 %).
-    expect_surface_standard(open.lumen, d.c.geom, 0.4, "stl-open", MIN_ANGLE_DEG, 0.07);
+    expect_surface_standard(open.lumen, d.c.geom, 0.4, "stl-open");
     EXPECT_EQ(open.lumen.loop_end_id.size(), 3);
     // Flat caps, detected and removed.
     SurfaceData capped = ref.lumen;
@@ -325,7 +349,7 @@ TEST(Surface, StlFromAnotherToolOpenAndCapped) {
     write_mesh_file((dir / "capped.stl").string(), capped);
     const LumenResult cap = lumen_from_mesh((dir / "capped.stl").string(), p);
     EXPECT_EQ(value(cap.qa, "input_caps_removed"), 3.0);
-    expect_surface_standard(cap.lumen, d.c.geom, 0.4, "stl-capped", MIN_ANGLE_DEG, 0.07);
+    expect_surface_standard(cap.lumen, d.c.geom, 0.4, "stl-capped");
     // Open item: the wall of this surface fails its self-intersection check where the branch's cap meets
     // the parent's outer wall (the check stops it, naming the faces): the STL route's wall is not done.
     fs::remove_all(dir);

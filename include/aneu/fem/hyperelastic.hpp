@@ -33,9 +33,10 @@ public:
     double energy(const Eigen::VectorXd& u) const;
     /// Internal nodal forces ∂Ψ/∂u [N] (3#N). @throws NumericalError when an element is inverted
     Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const;
-    /// Tangent stiffness ∂²Ψ/∂u² [N/mm], both triangles, on a fixed pattern (the element graph).
+    /// Tangent stiffness ∂²Ψ/∂u² [N/mm], both triangles, on a fixed pattern (the element graph). With `project`,
+    /// each element's tangent loses its negative eigenvalues (positive semidefinite: projected Newton).
     /// @throws NumericalError when an element is inverted
-    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u) const;
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const;
     /// The tangent's sparsity pattern (values zero).
     const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const { return pattern_; }
     /// Smallest J = det F over the integration points (≤ 0: inverted).
@@ -71,7 +72,7 @@ struct NewtonResult {
     Eigen::VectorXd reaction;   ///< per prescribed DOF, in its order: the internal force there [N] (what the constraint applies)
     int iterations = 0;         ///< Newton iterations over all substeps
     int substeps = 0;           ///< substeps the prescribed increment was split into
-    int shifted = 0;            ///< iterations whose tangent was not positive definite and was shifted
+    int shifted = 0;            ///< iterations whose tangent was not positive definite (projected element tangents used)
     double residual = 0;        ///< final ‖free residual‖ / ‖internal force‖
     double min_J = 1;           ///< smallest det F at the end
 };
@@ -79,8 +80,9 @@ struct NewtonResult {
 /// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed
 /// (DOF, value), the other DOFs free, from the state `u0` (its prescribed entries are moved to the new values
 /// along a straight path, in substeps). Newton's method on the energy: CHOLMOD Cholesky of the free tangent,
-/// ordered and analysed once per call (a
-/// tangent that is not positive definite — buckling — is shifted by a multiple of its diagonal until it is),
+/// ordered and analysed once per call (a tangent that is not positive definite — buckling — is replaced by
+/// the sum of the element tangents projected onto positive semidefinite ones, shifted by a multiple of its
+/// diagonal if still singular),
 /// backtracking line search on the energy (an inverting step is never taken), and halving of the prescribed
 /// increment when a substep does not converge.
 /// @throws InputError bad DOF indices; NumericalError when no substep of the allowed size converges (names the
