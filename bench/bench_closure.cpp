@@ -16,7 +16,7 @@
 // clip-region displacement (outer nodes within `--region-mm` of the centre) ‖u_lin − u_nl‖ / ‖u_nl‖ (RMS over the
 // nodes). Output: one JSON line per closure on stdout, a summary line last.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
-//                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac]
+//                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 300]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -84,6 +84,7 @@ int main(int argc, char** argv) {
     Clip clip;
     bool have_centre = false;
     double full_gap = 0.2, region = 3.0;
+    int max_newton = 300;  // per contact round: a closure the reference cannot reach in this many stops the run
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     for (int a = 2; a + 1 < argc; a += 2) {
@@ -99,6 +100,8 @@ int main(int argc, char** argv) {
             full_gap = std::atof(v);
         } else if (k == "--region-mm") {
             region = std::atof(v);
+        } else if (k == "--max-newton") {
+            max_newton = std::atoi(v);
         } else if (k == "--label") {
             label = v;
         } else if (k == "--closures") {
@@ -177,7 +180,9 @@ int main(int argc, char** argv) {
             const auto pres = prescribed_of(t, Xc, clip);
             Eigen::VectorXd reaction;
             if (nonlinear) {
-                const fem::NewtonResult r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u);
+                fem::NewtonOptions no;
+                no.max_total_iterations = max_newton;
+                const fem::NewtonResult r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u, no);
                 t.u = r.u;
                 reaction = r.reaction;
                 t.iterations += r.iterations;

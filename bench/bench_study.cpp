@@ -16,7 +16,9 @@
 #include <iostream>
 #include <string>
 
+#include <Eigen/CholmodSupport>
 #include <Eigen/Geometry>
+#include <Eigen/SparseCore>
 #include <nlohmann/json.hpp>
 
 #include "aneu/core/bundle_io.hpp"
@@ -61,6 +63,23 @@ Eigen::Vector3d closest_bary(const Eigen::Vector3d& p, const Eigen::Vector3d& a,
     const double den = 1 / (va + vb + vc);
     const double v = vb * den, w = vc * den;
     return {1 - v - w, v, w};
+}
+
+/// Largest eigenvalue of a symmetric positive (semi)definite operator by power iteration (Rayleigh quotient after
+/// `iters` steps, from a fixed start): a lower bound that converges to it.
+template <class Apply>
+double power_max(Eigen::Index n, Apply&& apply, int iters = 60) {
+    Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(n, 1.0, 2.0);
+    x.normalize();
+    double lam = 0;
+    for (int k = 0; k < iters; ++k) {
+        const Eigen::VectorXd y = apply(x);
+        lam = x.dot(y);
+        const double ny = y.norm();
+        if (!(ny > 0)) break;
+        x = y / ny;
+    }
+    return lam;
 }
 
 struct Probe {
@@ -223,6 +242,64 @@ int main(int argc, char** argv) {
             });
         }
         out["wcc_condition"] = solver.condition_estimate();
+        // Condition numbers (2-norm, power iteration) of K on the free DOFs and of the Schur complement S on the
+        // condensed DOFs (S = W⁻¹: λmin(S) = 1/λmax(W), λmax(S) by power iteration on S x = K_MM x − K_MI K_II⁻¹ K_IM x).
+        {
+            const auto t_cond = clk::now();
+            const FemData& fem = *b.fem;
+            const Eigen::Index nd = fem.K.rows();
+            std::vector<int> role(static_cast<size_t>(nd), 0);  // 0 interior (free, not kept), 1 kept, -1 fixed
+            for (Eigen::Index k = 0; k < fem.fixed_dofs.size(); ++k) role[static_cast<size_t>(fem.fixed_dofs[k])] = -1;
+            for (Eigen::Index r = 0; r < m.dof_node.size(); ++r) role[static_cast<size_t>(3 * m.dof_node[r] + m.dof_axis[r])] = 1;
+            std::vector<int> idx_f(static_cast<size_t>(nd), -1), idx_i(static_cast<size_t>(nd), -1), idx_m(static_cast<size_t>(nd), -1);
+            Eigen::Index nf = 0, ni = 0, nm = 0;
+            for (Eigen::Index d = 0; d < nd; ++d) {
+                const int rl = role[static_cast<size_t>(d)];
+                if (rl < 0) continue;
+                idx_f[static_cast<size_t>(d)] = static_cast<int>(nf++);
+                if (rl == 0) idx_i[static_cast<size_t>(d)] = static_cast<int>(ni++);
+                else idx_m[static_cast<size_t>(d)] = static_cast<int>(nm++);
+            }
+            std::vector<Eigen::Triplet<double>> tf, ti, tim, tmm;
+            auto put = [&](Eigen::Index r, Eigen::Index c, double v) {
+                if (idx_f[static_cast<size_t>(r)] < 0 || idx_f[static_cast<size_t>(c)] < 0) return;
+                tf.emplace_back(idx_f[static_cast<size_t>(r)], idx_f[static_cast<size_t>(c)], v);
+                const int ir = idx_i[static_cast<size_t>(r)], ic = idx_i[static_cast<size_t>(c)];
+                const int mr = idx_m[static_cast<size_t>(r)], mc = idx_m[static_cast<size_t>(c)];
+                if (ir >= 0 && ic >= 0) ti.emplace_back(ir, ic, v);
+                if (ir >= 0 && mc >= 0) tim.emplace_back(ir, mc, v);
+                if (mr >= 0 && mc >= 0) tmm.emplace_back(mr, mc, v);
+            };
+            for (Eigen::Index r = 0; r < nd; ++r)
+                for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(fem.K, r); it; ++it) {
+                    if (fem.K_upper_only && it.col() < r) continue;
+                    put(r, it.col(), it.value());
+                    if (fem.K_upper_only && it.col() != r) put(it.col(), r, it.value());
+                }
+            Eigen::SparseMatrix<double> Kf(nf, nf), Ki(ni, ni), Kim(ni, nm), Kmm(nm, nm);
+            Kf.setFromTriplets(tf.begin(), tf.end());
+            Ki.setFromTriplets(ti.begin(), ti.end());
+            Kim.setFromTriplets(tim.begin(), tim.end());
+            Kmm.setFromTriplets(tmm.begin(), tmm.end());
+            Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> lf(Kf), li(Ki);
+            const double kmax = power_max(nf, [&](const Eigen::VectorXd& x) { return Eigen::VectorXd(Kf * x); });
+            const double kinv = power_max(nf, [&](const Eigen::VectorXd& x) { return Eigen::VectorXd(lf.solve(x)); });
+            const double smax = power_max(nm, [&](const Eigen::VectorXd& x) {
+                return Eigen::VectorXd(Kmm * x - Kim.transpose() * li.solve(Kim * x));
+            });
+            const double wmax = power_max(nm, [&](const Eigen::VectorXd& x) {
+                Eigen::VectorXd y(m.dof_node.size());
+                if (m.is_float()) {
+                    y = (m.Wf * x.cast<float>()).cast<double>();
+                } else {
+                    y = m.Wd * x;
+                }
+                return y;
+            });
+            out["cond_K_free"] = kmax * kinv;
+            out["cond_schur"] = smax * wmax;
+            out["cond_s"] = secs(t_cond);
+        }
         // The condensation's own diagnostics: condition of K (CHOLMOD's estimate) and W's residual check.
         for (const auto& [k, v] : read_condensed_header(case_path).diagnostics) {
             if (k == "rcond_estimate_K" || k == "residual_max_rel" || k == "total_s" || k == "peak_rss_bytes") out["condense_" + k] = v;

@@ -449,6 +449,10 @@ NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::Vector
                 u = v;
                 return true;
             }
+            if (opt.max_total_iterations > 0 && out.iterations >= opt.max_total_iterations) {
+                throw NumericalError("neo-Hookean solve: " + std::to_string(out.iterations) + " Newton iterations (the limit) reached at load fraction " +
+                                     std::to_string(s1) + ", residual " + std::to_string(out.residual));
+            }
             ++out.iterations;
             const Eigen::VectorXd du = newton_step(v, g, nullptr);
             const double slope = g.dot(du);
