@@ -16,7 +16,7 @@
 // clip-region displacement (outer nodes within `--region-mm` of the centre) ‖u_lin − u_nl‖ / ‖u_nl‖ (RMS over the
 // nodes). Output: one JSON line per closure on stdout, a summary line last.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
-//                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 300]
+//                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -84,7 +84,8 @@ int main(int argc, char** argv) {
     Clip clip;
     bool have_centre = false;
     double full_gap = 0.2, region = 3.0;
-    int max_newton = 300;  // per contact round: a closure the reference cannot reach in this many stops the run
+    int max_newton = 100;        // per contact round (a settled round takes ~10): past it the reference stops
+    double max_seconds = 900;    // for the neo-Hookean solves in all: past it the reference stops at that closure
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     for (int a = 2; a + 1 < argc; a += 2) {
@@ -100,6 +101,8 @@ int main(int argc, char** argv) {
             full_gap = std::atof(v);
         } else if (k == "--region-mm") {
             region = std::atof(v);
+        } else if (k == "--max-seconds") {
+            max_seconds = std::atof(v);
         } else if (k == "--max-newton") {
             max_newton = std::atoi(v);
         } else if (k == "--label") {
@@ -195,6 +198,8 @@ int main(int argc, char** argv) {
                 reaction = r.reaction;
             }
             ++t.rounds;
+            if (nonlinear && t.seconds + secs(ts) > max_seconds)
+                throw NumericalError("time budget of " + std::to_string(static_cast<int>(max_seconds)) + " s for the neo-Hookean solves spent");
             // Release nodes the blade pulls on, then add the nodes that went through a blade.
             bool changed = false;
             std::vector<int> release;

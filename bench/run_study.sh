@@ -8,8 +8,9 @@
 # closing across the sac's neck, linear model vs a neo-Hookean reference (aneu_bench_closure).
 # Writes bench/results/study/{study,study_phantom,closure}.jsonl, study.md and PNG plots.
 #
-#   bash bench/run_study.sh            # default sweep: h 0.6 0.5 0.4 0.3, reference h 0.25 quadratic
-#   bash bench/run_study.sh --quick    # h 0.6 0.5, reference h 0.4 quadratic (a few minutes)
+#   bash bench/run_study.sh            # default sweep: h 0.6 0.5 0.4 0.3, reference h 0.25 quadratic (~25 min)
+#   bash bench/run_study.sh --quick    # h 0.6 0.5, reference h 0.4 quadratic, closures to 0.3 (a few minutes;
+#                                      # writes bench/results/study_quick/)
 # (Coarser than 0.6 mm the 0.1 mm sac wall of this generator self-intersects at the neck and tetmesh refuses it.)
 #
 # Build first (bash scripts/build.sh). Plots need python3-matplotlib (installed here if missing and root/sudo).
@@ -25,6 +26,7 @@ quick=0
 if [ $quick = 1 ]; then hs="0.6 0.5"; href=0.4; else hs="0.6 0.5 0.4 0.3"; href=0.25; fi
 max_w_dofs=${MAX_W_DOFS:-25000}   # condense only models whose W fits comfortably in memory (float64: 2.5 GB)
 out=bench/results/study
+[ $quick = 1 ] && out=bench/results/study_quick   # the committed default results stay
 work=build/study
 mkdir -p "$out" "$work"
 for t in "$prep" "$probe" "$closure"; do [ -x "$t" ] || { echo "run_study.sh: $t missing: build first (bash scripts/build.sh)" >&2; exit 2; }; done
@@ -136,11 +138,25 @@ closures=""
 [ $quick = 1 ] && closures="--closures 0.01,0.02,0.05,0.1,0.2,0.3"
 echo "== clip closing on the sac: linear vs neo-Hookean (h 0.5, order 2)"
 "$closure" "$work/h0.5_p2/fem.h5" $closures >"$cjsonl"
-# The same clip across the parent artery (0.3 mm wall), 4 mm from the sac: squeezing the tube flat (full closure:
+# The same clip across the parent artery (0.3 mm wall) beside the sac: squeezing the tube flat (full closure:
 # gap = twice its wall). Shows how the linear model's range scales with the wall thickness.
 cajsonl="$out/closure_artery.jsonl"
 echo "== clip closing on the parent artery: linear vs neo-Hookean (h 0.5, order 2)"
 "$closure" "$work/h0.5_p2/fem.h5" --label artery --centre 0,0,2 --blade-width-mm 4.4 --blade-length-mm 1 --full-gap-mm 0.6 \
   $closures >"$cajsonl"
-$py bench/study_report.py "$jsonl" "$out" "$pjsonl" "$cjsonl,$cajsonl"
+# Stability at the extremes: the tests that assert each behaviour, run here for their figures (build/tests/).
+ext="$out/extremes.txt"
+: >"$ext"
+echo "== stability at the extremes (the tests' figures)"
+for spec in "fem:Lame.NearIncompressible*:Lame.VeryThin*" \
+            "sim:*StiffnessRangeContrast*:*CrowdedContactSets*:*LongSessionOfFactorUpdates*:*TwoClipsReleased*" \
+            "pipeline:Stages.AssembleNamesSliver*:Stages.NearDegenerateSurface*"; do
+  exe="build/tests/aneu_${spec%%:*}_tests"
+  if [ -x "$exe" ]; then
+    "$exe" --gtest_filter="${spec#*:}" 2>&1 | grep -E '^\[ RUN|^\[       OK|^\[  FAILED|^[A-Za-z]' >>"$ext" || true
+  else
+    echo "missing $exe (build the tests)" >>"$ext"
+  fi
+done
+$py bench/study_report.py "$jsonl" "$out" "$pjsonl" "$cjsonl,$cajsonl" "$ext"
 echo "report: $out/study.md"

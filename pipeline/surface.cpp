@@ -384,10 +384,16 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
                 if (!mask.data[l]) continue;
                 const auto x3 = mask.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
                 const Eigen::Vector3d x(x3[0], x3[1], x3[2]);
-                for (size_t q = 0; q < planes.size(); ++q)
-                    if (std::abs(planes[q].normal.dot(x - planes[q].point)) < 1.5 * h && (x - planes[q].point).norm() < 1.5 * planes[q].radius_mm) {
+                // An end is the voxels by the cap near its axis: the cap bounds the distance of every voxel in that
+                // thin slab alike, so one anywhere across the end would do as the path's start — off the axis, it
+                // gave the first millimetres of centerline a radius far too small.
+                for (size_t q = 0; q < planes.size(); ++q) {
+                    const Eigen::Vector3d r = x - planes[q].point;
+                    const double along = planes[q].normal.dot(r);
+                    if (std::abs(along) < 1.5 * h && (r - along * planes[q].normal).norm() < std::max(1.5 * h, 0.25 * planes[q].radius_mm)) {
                         ends[q].push_back(l);
                     }
+                }
             }
     for (size_t q = 0; q < ends.size(); ++q)
         if (ends[q].empty()) throw InputError(path + ": open end " + std::to_string(q) + " encloses no voxel (is it a real vessel end?)");
