@@ -350,8 +350,19 @@ TEST(Surface, StlFromAnotherToolOpenAndCapped) {
     const LumenResult cap = lumen_from_mesh((dir / "capped.stl").string(), p);
     EXPECT_EQ(value(cap.qa, "input_caps_removed"), 3.0);
     expect_surface_standard(cap.lumen, d.c.geom, 0.4, "stl-capped");
-    // Open item: the wall of this surface fails its self-intersection check where the branch's cap meets
-    // the parent's outer wall (the check stops it, naming the faces): the STL route's wall is not done.
+    // And its wall, to the wall standard (as Wall.ClosedThicknessAndBlend on the segmentation route).
+    WallParams wp;
+    wp.grid_spacing_mm = 0.06;
+    const WallResult w = make_wall(cap.lumen, cap.image.planes, wp);
+    EXPECT_NO_THROW(check_closed_surface(w.wall, "wall"));
+    EXPECT_TRUE(self_intersections(w.wall, 1).empty());
+    EXPECT_NEAR(value(w.qa, "thickness_artery_median_mm"), 0.4, THICK_ARTERY_TOL * 0.4);
+    EXPECT_NEAR(value(w.qa, "thickness_aneurysm_median_mm"), 0.4 / 3, THICK_SAC_TOL * 0.4 / 3);
+    EXPECT_LE(value(w.qa, "thickness_gradient_max"), 2.0 * value(w.qa, "thickness_gradient_blend_allows"));
+    EXPECT_EQ(w.wall.label_names.size(), 5u);
+    std::printf("stl-capped wall: median thickness artery %.4f, aneurysm %.4f; gradient max %.3f (blend allows %.3f)\n",
+                value(w.qa, "thickness_artery_median_mm"), value(w.qa, "thickness_aneurysm_median_mm"), value(w.qa, "thickness_gradient_max"),
+                value(w.qa, "thickness_gradient_blend_allows"));
     fs::remove_all(dir);
 }
 
