@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 
 #include "aneu/core/bundle_io.hpp"
+#include "bench_util.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 #include "aneu/fem/static_solve.hpp"
@@ -116,14 +117,7 @@ int main(int argc, char** argv) {
             return 2;
         }
     }
-    BundleParts parts;
-    parts.condensed_W = false;
-    parts.image = false;
-    const Bundle b = read_bundle(argv[1], parts);
-    if (!b.volume || !b.fem) {
-        std::fprintf(stderr, "%s: needs /volume and /fem\n", argv[1]);
-        return 2;
-    }
+    const Bundle b = bench::read_model(argv[1]);
     const VolumeData& vol = *b.volume;
     const FemData& fem = *b.fem;
     const Eigen::MatrixX3d& X = vol.nodes;

@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "aneu/core/bundle_io.hpp"
+#include "bench_util.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/solver.hpp"
@@ -106,14 +107,7 @@ int main(int argc, char** argv) {
             have_centre = std::sscanf(argv[a + 1], "%lf,%lf,%lf", &centre.x(), &centre.y(), &centre.z()) == 3;
         }
     }
-    BundleParts parts;
-    parts.condensed_W = false;
-    parts.image = false;
-    const Bundle b = read_bundle(argv[1], parts);
-    if (!b.volume || !b.fem) {
-        std::fprintf(stderr, "%s: needs /volume and /fem\n", argv[1]);
-        return 2;
-    }
+    const Bundle b = bench::read_model(argv[1]);
     const VolumeData& vol = *b.volume;
     // The outer surface: every DOF of an outer node gets a "row" (its DOF index) so that extract_surface keeps
     // the faces whose nodes are all outer.

@@ -54,9 +54,23 @@ Mat3 piola(const Mat3& F, const PointState& s, double mu, double lambda) {
     return mu * (F - FinvT) + lambda * s.logJ * FinvT;
 }
 
-std::string inverted_message(Eigen::Index e, double J) {
-    return "element " + std::to_string(e) + " is inverted (det F = " + std::to_string(J) + " at an integration point)";
-}
+/// The first inverted element a parallel loop meets, reported after the loop.
+struct FirstInverted {
+    Eigen::Index element = -1;
+    double J = 0;
+    void note(Eigen::Index e, double j) {
+#pragma omp critical(aneu_first_inverted)
+        if (element < 0) {
+            element = e;
+            J = j;
+        }
+    }
+    void raise_if_any(const char* what) const {
+        if (element >= 0)
+            throw NumericalError(std::string(what) + ": element " + std::to_string(element) + " is inverted (det F = " +
+                                 std::to_string(J) + " at an integration point)");
+    }
+};
 
 }  // namespace
 
@@ -160,6 +174,12 @@ NeoHookeanSolid::NeoHookeanSolid(const Eigen::MatrixX3d& V, const Eigen::MatrixX
         }
 }
 
+Eigen::Matrix3d NeoHookeanSolid::displacement_gradient(const Eigen::VectorXd& u, Eigen::Index e, const double* g) const {
+    Mat3 H = Mat3::Zero();
+    for (int a = 0; a < nn_; ++a) H += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+    return H;
+}
+
 double NeoHookeanSolid::energy(const Eigen::VectorXd& u) const {
     if (u.size() != dofs()) throw InputError("neo-Hookean energy: u has " + std::to_string(u.size()) + " entries, expected " + std::to_string(dofs()));
     const Eigen::Index ne = T_.rows();
@@ -170,8 +190,7 @@ double NeoHookeanSolid::energy(const Eigen::VectorXd& u) const {
         for (int q = 0; q < points_per_element_; ++q) {
             const auto k = static_cast<size_t>(e * points_per_element_ + q);
             const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
-            Mat3 H = Mat3::Zero();
-            for (int a = 0; a < nn_; ++a) H += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            const Mat3 H = displacement_gradient(u, e, g);
             double psi = 0;
             if (!energy_density(H, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)], psi)) {
                 inverted = true;
@@ -191,8 +210,7 @@ double NeoHookeanSolid::min_jacobian(const Eigen::VectorXd& u) const {
         for (int q = 0; q < points_per_element_; ++q) {
             const auto k = static_cast<size_t>(e * points_per_element_ + q);
             const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
-            Mat3 F = Mat3::Identity();
-            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
+            const Mat3 F = Mat3::Identity() + displacement_gradient(u, e, g);
             mj = std::min(mj, F.determinant());
         }
     }
@@ -204,30 +222,24 @@ Eigen::VectorXd NeoHookeanSolid::internal_force(const Eigen::VectorXd& u) const 
     const Eigen::Index ne = T_.rows();
     // Element forces in parallel, gathered in element order (reproducible sums).
     Eigen::MatrixXd fe(3 * nn_, ne);
-    Eigen::Index bad = -1;
-    double bad_J = 0;
+    FirstInverted inverted;
 #pragma omp parallel for schedule(static)
     for (Eigen::Index e = 0; e < ne; ++e) {
         fe.col(e).setZero();
         for (int q = 0; q < points_per_element_; ++q) {
             const auto k = static_cast<size_t>(e * points_per_element_ + q);
             const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
-            Mat3 F = Mat3::Identity();
-            for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
             PointState s;
+            const Mat3 F = Mat3::Identity() + displacement_gradient(u, e, g);
             if (!point_state(F, s)) {
-#pragma omp critical
-                if (bad < 0) {
-                    bad = e;
-                    bad_J = s.J;
-                }
+                inverted.note(e, s.J);
                 continue;
             }
             const Mat3 P = w_[k] * piola(F, s, mu_[static_cast<size_t>(e)], lambda_[static_cast<size_t>(e)]);
             for (int a = 0; a < nn_; ++a) fe.col(e).segment<3>(3 * a) += P * Eigen::Vector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
         }
     }
-    if (bad >= 0) throw NumericalError("neo-Hookean force: " + inverted_message(bad, bad_J));
+    inverted.raise_if_any("neo-Hookean force");
     Eigen::VectorXd f = Eigen::VectorXd::Zero(dofs());
     for (Eigen::Index e = 0; e < ne; ++e)
         for (int a = 0; a < nn_; ++a) f.segment<3>(3 * T_(e, a)) += fe.col(e).segment<3>(3 * a);
@@ -242,8 +254,7 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
     const int m = 3 * nn_;
     constexpr Eigen::Index CHUNK = 4096;
     Eigen::MatrixXd Ke(m, m * std::min(CHUNK, std::max<Eigen::Index>(ne, 1)));
-    Eigen::Index bad = -1;
-    double bad_J = 0;
+    FirstInverted inverted;
     for (Eigen::Index e0 = 0; e0 < ne; e0 += CHUNK) {
         const Eigen::Index e1 = std::min(ne, e0 + CHUNK);
 #pragma omp parallel for schedule(static)
@@ -254,15 +265,9 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
             for (int q = 0; q < points_per_element_; ++q) {
                 const auto k = static_cast<size_t>(e * points_per_element_ + q);
                 const double* g = dN_.data() + k * static_cast<size_t>(nn_) * 3;
-                Mat3 F = Mat3::Identity();
-                for (int a = 0; a < nn_; ++a) F += u.segment<3>(3 * T_(e, a)) * Eigen::RowVector3d(g[3 * a], g[3 * a + 1], g[3 * a + 2]);
                 PointState s;
-                if (!point_state(F, s)) {
-#pragma omp critical
-                    if (bad < 0) {
-                        bad = e;
-                        bad_J = s.J;
-                    }
+                if (!point_state(Mat3::Identity() + displacement_gradient(u, e, g), s)) {
+                    inverted.note(e, s.J);
                     continue;
                 }
                 // A_iJkL = μ δik δJL + (μ − λ ln J) F⁻¹_Li F⁻¹_Jk + λ F⁻¹_Ji F⁻¹_Lk, contracted with ∇₀N_a (J) and
@@ -291,7 +296,7 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
                     for (int b = 0; b < a; ++b) Kb(a, b) = Kb(b, a);
             }
         }
-        if (bad >= 0) throw NumericalError("neo-Hookean tangent: " + inverted_message(bad, bad_J));
+        inverted.raise_if_any("neo-Hookean tangent");
         for (Eigen::Index e = e0; e < e1; ++e) {
             const auto Kb = Ke.middleCols(m * (e - e0), m);
             for (int a = 0; a < nn_; ++a) {

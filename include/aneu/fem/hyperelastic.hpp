@@ -45,6 +45,8 @@ public:
 private:
     template <int NN>
     void init(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T);
+    /// ∇u = Σ_a u_a ⊗ ∇₀N_a of element e at the integration point whose ∂N/∂X rows start at g (nn_×3).
+    Eigen::Matrix3d displacement_gradient(const Eigen::VectorXd& u, Eigen::Index e, const double* g) const;
 
     Eigen::Index n_nodes_ = 0;
     int nn_ = 4;                        ///< nodes per element
