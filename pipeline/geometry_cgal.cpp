@@ -2,7 +2,10 @@
 // CGAL side of the geometry stages: isotropic remeshing (with boundary loops kept as polylines),
 // point-to-surface distance queries through an AABB tree, and the self-intersection check. One
 // SurfaceData → Surface_mesh conversion serves all three.
+#include <limits>
+
 #include <CGAL/AABB_face_graph_triangle_primitive.h>
+#include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -118,6 +121,23 @@ NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d
         r.point.row(i) << p.x(), p.y(), p.z();
     }
     return r;
+}
+
+Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points) {
+    // A triangle soup: any subset of a surface's faces (it need not be a manifold mesh).
+    std::vector<K::Triangle_3> tris;
+    tris.reserve(static_cast<size_t>(F.rows()));
+    auto pt = [&](int v) { return Point(V(v, 0), V(v, 1), V(v, 2)); };
+    for (Eigen::Index f = 0; f < F.rows(); ++f) tris.emplace_back(pt(F(f, 0)), pt(F(f, 1)), pt(F(f, 2)));
+    Eigen::VectorXd d = Eigen::VectorXd::Constant(points.rows(), std::numeric_limits<double>::infinity());
+    if (tris.empty()) return d;
+    using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<K::Triangle_3>::const_iterator>;
+    using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
+    Tree tree(tris.cbegin(), tris.cend());
+    tree.accelerate_distance_queries();
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (Eigen::Index i = 0; i < points.rows(); ++i) d[i] = std::sqrt(tree.squared_distance(Point(points(i, 0), points(i, 1), points(i, 2))));
+    return d;
 }
 
 std::vector<std::pair<int, int>> self_intersections(const SurfaceData& s, std::size_t max_pairs) {

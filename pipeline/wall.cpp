@@ -335,23 +335,34 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         q.row(static_cast<Eigen::Index>(m)) << g.origin[0] + i * h, g.origin[1] + j * h, g.origin[2] + k * h;
     }
     r.qa.emplace_back("distance_queries", static_cast<double>(band_vox.size()));
-    const NearestOnSurface near = nearest_on_surface(dist_surf, q);
+    // The lumen split at its label border (vertex weight ½): the artery part A and the sac part S. The iso-value
+    // at a voxel blends from the distances to both, x = (d_A − d_S)/(2·blend) + ½: on the lumen that is the
+    // signed distance to the border, and in space it is continuous — taking the weight at the nearest lumen point
+    // instead made a step on the outer surface at the concave neck, where that point jumps across the crease.
+    // |∇(d_A − d_S)| ≤ 2, so the iso-value's slope stays within 1.5·|t_sac − t_art|/blend.
+    std::vector<Eigen::Vector3i> fa, fs;
+    for (Eigen::Index f = 0; f < dist_surf.F.rows(); ++f) {
+        const double wf = (w_ext[dist_surf.F(f, 0)] + w_ext[dist_surf.F(f, 1)] + w_ext[dist_surf.F(f, 2)]) / 3.0;
+        (wf < 0.5 ? fa : fs).push_back(dist_surf.F.row(f).transpose());
+    }
+    auto as_matrix = [](const std::vector<Eigen::Vector3i>& v) {
+        Eigen::MatrixX3i M(static_cast<Eigen::Index>(v.size()), 3);
+        for (size_t i = 0; i < v.size(); ++i) M.row(static_cast<Eigen::Index>(i)) = v[i].transpose();
+        return M;
+    };
+    const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, as_matrix(fa), q);
+    const Eigen::VectorXd dS = distance_to_faces(dist_surf.V, as_matrix(fs), q);
     // φ = signed distance − local thickness; negative in the wall and the lumen.
     Volume<float> phi{g, std::vector<float>(g.voxel_count(), static_cast<float>(band))};
     for (size_t l = 0; l < phi.data.size(); ++l)
         if (inside[l]) phi.data[l] = static_cast<float>(-t_min);
 #pragma omp parallel for schedule(static)
     for (Eigen::Index m = 0; m < static_cast<Eigen::Index>(band_vox.size()); ++m) {
-        const int f = near.face[m];
-        const Eigen::Vector3d x = near.point.row(m).transpose();
-        const Eigen::Vector3d a = dist_surf.V.row(dist_surf.F(f, 0)), b = dist_surf.V.row(dist_surf.F(f, 1)), c = dist_surf.V.row(dist_surf.F(f, 2));
-        // Barycentric weights of the nearest point.
-        const Eigen::Vector3d n = (b - a).cross(c - a);
-        const double nn = std::max(n.squaredNorm(), 1e-300);
-        const double wa = n.dot((c - b).cross(x - b)) / nn, wb = n.dot((a - c).cross(x - c)) / nn, wc = 1.0 - wa - wb;
-        const double ws = std::clamp(wa * w_ext[dist_surf.F(f, 0)] + wb * w_ext[dist_surf.F(f, 1)] + wc * w_ext[dist_surf.F(f, 2)], 0.0, 1.0);
+        const double d = std::min(dA[m], dS[m]);
+        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA[m] - dS[m]) / (2 * p.blend_mm) + 0.5, 0.0, 1.0);
+        ws = ws * ws * (3 - 2 * ws);
         const double t = t_art + (t_sac - t_art) * ws;
-        phi.data[band_vox[static_cast<size_t>(m)]] = static_cast<float>(std::min(near.distance[m], band) - t);
+        phi.data[band_vox[static_cast<size_t>(m)]] = static_cast<float>(std::min(d, band) - t);
     }
     const double t_field = std::chrono::duration<double>(clock::now() - t0).count();
     r.qa.emplace_back("time_distance_field_s", t_field);

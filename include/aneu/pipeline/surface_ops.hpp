@@ -83,4 +83,8 @@ struct NearestOnSurface {
 };
 NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d& points);
 
+/// Distance from each point to the nearest of the triangles F (any subset of a surface's faces; +∞ when F is
+/// empty). CGAL AABB tree over the triangle soup, OpenMP over the points.
+Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points);
+
 }  // namespace aneu::pipeline
