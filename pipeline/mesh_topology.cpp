@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 
 #include <Eigen/Geometry>
 
@@ -224,6 +225,52 @@ int improve_min_angle(SurfaceData& s, double max_dihedral_deg, int passes) {
         }
         total += flips;
         if (flips == 0) break;
+    }
+    return total;
+}
+
+int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
+    const double limit = min_angle_deg * 3.14159265358979323846 / 180.0;
+    int total = 0;
+    for (int pass = 0; pass < 5; ++pass) {
+        std::map<std::pair<int, int>, int> face_of;
+        std::vector<std::set<int>> nb(static_cast<size_t>(s.V.rows()));
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) {
+                const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
+                face_of[{a, b}] = static_cast<int>(f);
+                nb[static_cast<size_t>(a)].insert(b);
+                nb[static_cast<size_t>(b)].insert(a);
+            }
+        std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1), touched(static_cast<size_t>(s.V.rows()), 0);
+        int n = 0;
+        for (const auto& [e, f] : face_of) {
+            const auto [a, b] = e;
+            if (face_of.count({b, a})) continue;  // interior edge
+            int c = -1;
+            for (int k = 0; k < 3; ++k)
+                if (s.F(f, k) != a && s.F(f, k) != b) c = s.F(f, k);
+            const Eigen::Vector3d A = s.V.row(a), B = s.V.row(b), C = s.V.row(c);
+            const Eigen::Vector3d u = A - C, w = B - C;
+            if (std::atan2(u.cross(w).norm(), u.dot(w)) >= limit) continue;
+            if (touched[static_cast<size_t>(a)] || touched[static_cast<size_t>(b)] || touched[static_cast<size_t>(c)]) continue;
+            // Link condition for a boundary edge: c is the only common neighbour of a and b.
+            int common = 0;
+            for (int x : nb[static_cast<size_t>(a)]) common += nb[static_cast<size_t>(b)].count(x) ? 1 : 0;
+            if (common != 1) continue;
+            s.V.row(a) = (0.5 * (A + B)).transpose();
+            for (Eigen::Index g = 0; g < s.F.rows(); ++g)
+                for (int k = 0; k < 3; ++k)
+                    if (s.F(g, k) == b) s.F(g, k) = a;
+            keep[static_cast<size_t>(f)] = 0;
+            for (int v : {a, b, c}) touched[static_cast<size_t>(v)] = 1;
+            for (int x : nb[static_cast<size_t>(a)]) touched[static_cast<size_t>(x)] = 1;
+            for (int x : nb[static_cast<size_t>(b)]) touched[static_cast<size_t>(x)] = 1;
+            ++n;
+        }
+        if (!n) break;
+        s = sub_surface(s, keep);
+        total += n;
     }
     return total;
 }

@@ -201,6 +201,7 @@ SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& met
     // Both meshers leave a few thin triangles, mostly along the boundary loops (measured: 11.7° Netgen,
     // 14.6° CGAL): tangential relaxation of the interior vertices, projected back onto the surface, then
     // edge flips between nearly flat neighbours.
+    collapse_short_boundary_edges(open);
     relax_tangentially(open, in, 3);
     improve_min_angle(open);
     return open;

@@ -64,6 +64,11 @@ NamedValues triangle_quality(const SurfaceData& s);
 /// those of the faces they replace. Returns the number of flips.
 int improve_min_angle(SurfaceData& s, double max_dihedral_deg = 10.0, int passes = 5);
 
+/// Collapses, to its midpoint, every boundary edge whose opposite angle is below `min_angle_deg` (a short cut-end
+/// segment a remesher left) where the link condition allows; a planar boundary loop stays in its plane.
+/// Unused vertices are dropped. Returns the number of collapses.
+int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg = 15.0);
+
 /// Signed volume enclosed by a closed surface (positive when outward-oriented).
 double enclosed_volume(const SurfaceData& s);
 
