@@ -22,10 +22,11 @@
 #include <nlohmann/json.hpp>
 
 #include "aneu/core/bundle_io.hpp"
-#include "bench_util.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/sim/model.hpp"
+#include "aneu/sim/shapes.hpp"
 #include "aneu/sim/solver.hpp"
+#include "bench_util.hpp"
 
 using namespace aneu;
 using clk = std::chrono::steady_clock;
@@ -34,36 +35,14 @@ namespace {
 
 double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
 
-/// Closest point of triangle abc to p, as barycentric weights.
+/// Closest point of triangle abc to p (sim::closest_point_on_triangle), as barycentric weights.
 Eigen::Vector3d closest_bary(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-    // Ericson, Real-Time Collision Detection, 5.1.5 (regions of the triangle).
-    const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-    if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
-    const Eigen::Vector3d bp = p - b;
-    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-    if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
-    const double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
-        const double v = d1 / (d1 - d3);
-        return {1 - v, v, 0};
-    }
-    const Eigen::Vector3d cp = p - c;
-    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-    if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
-    const double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
-        const double w = d2 / (d2 - d6);
-        return {1 - w, 0, w};
-    }
-    const double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
-        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return {0, 1 - w, w};
-    }
-    const double den = 1 / (va + vb + vc);
-    const double v = vb * den, w = vc * den;
-    return {1 - v - w, v, w};
+    const Eigen::Vector3d x = sim::closest_point_on_triangle(p, a, b, c);
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    const double nn = n.squaredNorm();
+    if (!(nn > 0)) return {1, 0, 0};
+    const double wa = n.dot((c - b).cross(x - b)) / nn, wb = n.dot((a - c).cross(x - c)) / nn;
+    return {wa, wb, 1.0 - wa - wb};
 }
 
 /// Largest eigenvalue of a symmetric positive (semi)definite operator by power iteration (Rayleigh quotient after
