@@ -275,4 +275,13 @@ int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
     return total;
 }
 
+void refuse_triangle_count(const std::string& what, double edge_mm, double area_mm2) {
+    const double per_triangle = std::sqrt(3.0) / 4.0 * edge_mm * edge_mm;
+    const double estimate = area_mm2 / per_triangle;
+    if (estimate <= MAX_REMESH_TRIANGLES) return;
+    const double smallest = std::sqrt(area_mm2 / MAX_REMESH_TRIANGLES / (std::sqrt(3.0) / 4.0));
+    throw InputError(what + " = " + shortest(edge_mm) + " mm would make about " + shortest(std::round(estimate)) + " triangles on " + shortest(area_mm2) +
+                     " mm² (at most " + shortest(MAX_REMESH_TRIANGLES) + "); expected an edge of at least " + shortest(std::ceil(smallest * 1e4) / 1e4) + " mm");
+}
+
 }  // namespace aneu::pipeline

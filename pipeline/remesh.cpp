@@ -15,6 +15,7 @@ namespace nglib {
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
+#include "aneu/pipeline/surface_checks.hpp"
 #include "isolated.hpp"
 
 namespace aneu::pipeline {
@@ -206,6 +207,49 @@ SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& met
     relax_tangentially(open, in, 3);
     improve_min_angle(open);
     return open;
+}
+
+namespace {
+
+/// Empty when `s` is an oriented 2-manifold with `n_loops` boundary loops and no self-intersection;
+/// otherwise the failed check and where.
+std::string remesh_defect(const SurfaceData& s, size_t n_loops) {
+    try {
+        const auto loops = boundary_loops(s);
+        if (loops.size() != n_loops) return std::to_string(loops.size()) + " boundary loops, the input " + std::to_string(n_loops);
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    const auto inter = self_intersections(s, 1);
+    if (!inter.empty()) {
+        const int f = inter.front().first;
+        const Eigen::Vector3d c = (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+        return "self-intersection near (" + shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) + ") mm";
+    }
+    return {};
+}
+
+}  // namespace
+
+RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s) {
+    const size_t n_loops = boundary_loops(s).size();
+    std::vector<std::string> order{method};
+#ifdef ANEU_WITH_NETGEN
+    order.push_back(method == "netgen" ? "cgal" : "netgen");
+#endif
+    std::string why;
+    for (const auto& m : order) {
+        std::string defect;
+        try {
+            SurfaceData out = remesh(s, edge_mm, m, timeout_s);
+            defect = remesh_defect(out, n_loops);
+            if (defect.empty()) return {std::move(out), m, why};
+        } catch (const Error& e) {  // the mesher failed, timed out or left a surface the clean-up cannot walk
+            defect = e.what();
+        }
+        why += (why.empty() ? "" : "; ") + m + ": " + defect;
+    }
+    throw MeshingError("remesh: check failed with every remesher: " + why);
 }
 
 }  // namespace aneu::pipeline

@@ -15,6 +15,7 @@
 #include "aneu/pipeline/geometry.hpp"
 #include "aneu/pipeline/image_filters.hpp"
 #include "aneu/pipeline/image_io.hpp"
+#include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
 
 namespace aneu::pipeline {
@@ -76,11 +77,73 @@ void label_loops(SurfaceData& s, const std::vector<EndPlane>& planes) {
     s.loop_end_id = Eigen::Map<Eigen::VectorXi>(ids.data(), static_cast<Eigen::Index>(ids.size()));
 }
 
+/// A surface from another tool: finite coordinates in mm (scaled by `scale` first).
+/// @throws InputError naming the file and what was expected (for metres, the factor to use)
+void check_input_surface(SurfaceData& s, const std::string& path, double scale) {
+    if (!s.V.allFinite()) {
+        Eigen::Index bad = 0;
+        while (s.V.row(bad).allFinite()) ++bad;
+        throw InputError(path + ": vertex " + std::to_string(bad) + " has a NaN or infinite coordinate; expected finite coordinates in mm");
+    }
+    s.V *= scale;
+    const double extent = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).norm();
+    // A vessel segment with an aneurysm spans millimetres to a few centimetres; a file in metres spans a few
+    // hundredths of a unit and one in micrometres tens of thousands.
+    if (extent < 1.0) {
+        const double factor = extent > 0 && extent < 0.5 ? 1000.0 : 0.0;
+        throw InputError(path + ": the surface spans " + shortest(extent) + " mm, implausibly small for a vessel in mm" +
+                         (factor > 0 ? "; the file looks like metres: give --input-scale 1000" : "; expected coordinates in mm"));
+    }
+    if (extent > 1000.0) {
+        throw InputError(path + ": the surface spans " + shortest(extent) + " mm, implausibly large for a vessel in mm" +
+                         (extent > 5000.0 ? "; the file looks like micrometres: give --input-scale 0.001" : "; expected coordinates in mm"));
+    }
+}
+
+/// @throws InputError when a surface from another tool intersects itself (two overlapping tubes, a fold)
+void check_no_overlap(const SurfaceData& s, const std::string& path) {
+    const auto inter = self_intersections(s, 1);
+    if (!inter.empty()) {
+        const Eigen::Vector3d c = centroid(s, inter.front().first);
+        throw InputError(path + ": the surface intersects itself near (" + shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) +
+                         ") mm (faces " + std::to_string(inter.front().first) + " and " + std::to_string(inter.front().second) +
+                         "); expected one lumen surface without overlaps");
+    }
+}
+
+/// Each boundary loop of a surface from another tool must be a vessel's cut end: nearly planar (a hole in
+/// the side of the wall is not).
+/// @throws InputError naming the loop's place and its distance from its plane
+void check_vessel_ends(const SurfaceData& s, const std::vector<std::vector<int>>& loops, const std::string& path) {
+    for (const auto& l : loops) {
+        Eigen::Vector3d c = Eigen::Vector3d::Zero(), w = Eigen::Vector3d::Zero();
+        for (int v : l) c += s.V.row(v).transpose();
+        c /= static_cast<double>(l.size());
+        for (size_t i = 0; i < l.size(); ++i) w += (s.V.row(l[i]).transpose() - c).cross(s.V.row(l[(i + 1) % l.size()]).transpose() - c);
+        const double radius = std::sqrt(0.5 * w.norm() / PI);
+        const Eigen::Vector3d nrm = w.normalized();
+        double off = 0;
+        for (int v : l) off = std::max(off, std::abs(nrm.dot(s.V.row(v).transpose() - c)));
+        // Cut ends of other tools' surfaces are planar to a small fraction of their radius.
+        if (!(off <= 0.25 * radius) || l.size() < 3) {
+            throw InputError(path + ": the boundary loop at (" + shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) + ") mm (" +
+                             std::to_string(l.size()) + " edges, equivalent radius " + shortest(radius) + " mm) is not a planar vessel end (it strays " +
+                             shortest(off) + " mm from its plane): a hole in the side of the surface? Close it, or cut the vessel there");
+        }
+    }
+}
+
 /// Remesh, label (automatic or overridden), loops, QA.
 void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporter& rep) {
+    double a_in = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) a_in += area(s, f);
+    refuse_triangle_count("surface: --edge-mm", p.edge_mm, a_in);
     smooth_surface(s, p.smoothing_iterations, p.smoothing_passband);
     rep.info("surface: remeshing " + std::to_string(s.F.rows()) + " triangles to " + shortest(p.edge_mm) + " mm edges (" + p.remesher + ")");
-    SurfaceData m = remesh(s, p.edge_mm, p.remesher, p.timeout_s);
+    RemeshOutcome rm = remesh_checked(s, p.edge_mm, p.remesher, p.timeout_s);
+    if (!rm.fallback_why.empty()) rep.warn("surface: remeshed with " + rm.method + " instead of " + p.remesher + " (" + rm.fallback_why + ")");
+    r.qa.emplace_back("remesher_fallback", rm.fallback_why.empty() ? 0.0 : 1.0);
+    SurfaceData m = std::move(rm.surface);
     // The centerline's radius becomes the maximal inscribed sphere's: the distance from each point to the
     // surface (sub-voxel; the voxel distance map only bounds it within a voxel).
     Centerline& cl = r.image.centerline;
@@ -125,7 +188,7 @@ void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporte
 }  // namespace
 
 void validate(const SurfaceParams& p) {
-    if (!(p.edge_mm > 0)) throw InputError("surface: --edge-mm must be > 0");
+    if (!(p.edge_mm > 0 && p.edge_mm < 1e3)) throw InputError("surface: --edge-mm must be > 0 mm (and finite)");
     if (p.remesher != "netgen" && p.remesher != "cgal") throw InputError("surface: --remesher = '" + p.remesher + "': expected netgen or cgal");
     if (p.smoothing_iterations < 0) throw InputError("surface: --smoothing-iterations must be >= 0");
     if (!(p.smoothing_passband > 0 && p.smoothing_passband < 2)) throw InputError("surface: --smoothing-passband must be in (0, 2)");
@@ -135,6 +198,9 @@ void validate(const SurfaceParams& p) {
     if (p.aneurysm_sphere && !((*p.aneurysm_sphere)[3] > 0)) throw InputError("surface: --aneurysm-sphere radius must be > 0");
     if (p.aneurysm_sphere && !p.aneurysm_labelmap.empty()) throw InputError("surface: give --aneurysm-sphere or --aneurysm-labelmap, not both");
     if (!(p.timeout_s > 0)) throw InputError("surface: --timeout-s must be > 0");
+    if (!(p.cap_tolerance_deg > 0 && p.cap_tolerance_deg < 45)) throw InputError("surface: --cap-tolerance-deg must be in (0, 45)");
+    if (!(p.cap_tolerance_mm > 0 && p.cap_tolerance_mm < 10)) throw InputError("surface: --cap-tolerance-mm must be in (0, 10)");
+    if (!(p.input_scale > 0 && p.input_scale < 1e7)) throw InputError("surface: --input-scale must be > 0 (1000 for a file in metres)");
 }
 
 std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p) {
@@ -150,7 +216,10 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const SurfacePar
             {"aneurysm_ratio_low", shortest(p.aneurysm_ratio_low)},
             {"aneurysm_sphere", sphere.empty() ? "none" : sphere},
             {"aneurysm_labelmap", p.aneurysm_labelmap.empty() ? "none" : p.aneurysm_labelmap},
-            {"timeout_s", shortest(p.timeout_s)}};
+            {"timeout_s", shortest(p.timeout_s)},
+            {"cap_tolerance_deg", shortest(p.cap_tolerance_deg)},
+            {"cap_tolerance_mm", shortest(p.cap_tolerance_mm)},
+            {"input_scale", shortest(p.input_scale)}};
 }
 
 Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low) {
@@ -230,7 +299,7 @@ Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double
     return label;
 }
 
-std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s) {
+std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s, double tol_deg, double tol_mm) {
     const Eigen::Index nf = s.F.rows();
     Eigen::MatrixX3d n(nf, 3);
     for (Eigen::Index f = 0; f < nf; ++f) {
@@ -238,34 +307,55 @@ std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s) {
         n.row(f) = (b - a).cross(c - a).normalized().transpose();
     }
     const auto adj = face_adjacency(s);
-    const double cos_flat = std::cos(0.5 * PI / 180.0), cos_crease = std::cos(20.0 * PI / 180.0);
+    // Grown loosely (twice the tolerances, against the seed's plane), then judged strictly against the
+    // plane fitted to the whole set: the caps of real CFD meshes are planar to a few degrees and hundredths
+    // of a millimetre, not to round-off.
+    const double cos_grow = std::cos(2 * tol_deg * PI / 180.0), cos_tol = std::cos(tol_deg * PI / 180.0);
+    const double cos_crease = std::cos(30.0 * PI / 180.0);
     std::vector<int> region(static_cast<size_t>(nf), -1);
     std::vector<std::vector<int>> caps;
-    const double scale = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).norm();
     for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
-        if (region[static_cast<size_t>(f0)] >= 0) continue;
+        if (region[static_cast<size_t>(f0)] >= 0 || !n.row(f0).allFinite()) continue;
         const Eigen::Vector3d n0 = n.row(f0).transpose(), x0 = s.V.row(s.F(f0, 0)).transpose();
         std::vector<int> piece{static_cast<int>(f0)};
         region[static_cast<size_t>(f0)] = static_cast<int>(f0);
         for (size_t i = 0; i < piece.size(); ++i)
             for (int g : adj[static_cast<size_t>(piece[i])]) {
-                if (region[static_cast<size_t>(g)] >= 0 || n.row(g).dot(n0) < cos_flat) continue;
-                bool coplanar = true;
-                for (int k = 0; k < 3; ++k) coplanar = coplanar && std::abs(n0.dot(s.V.row(s.F(g, k)).transpose() - x0)) < 1e-4 * scale;
-                if (!coplanar) continue;
+                if (region[static_cast<size_t>(g)] >= 0 || !(n.row(g).dot(n0) >= cos_grow)) continue;
+                bool near = true;
+                for (int k = 0; k < 3; ++k) near = near && std::abs(n0.dot(s.V.row(s.F(g, k)).transpose() - x0)) <= 2 * tol_mm;
+                if (!near) continue;
                 region[static_cast<size_t>(g)] = static_cast<int>(f0);
                 piece.push_back(g);
             }
         if (piece.size() < 2) continue;
-        // A cap: every face across its border makes a crease with it.
-        bool crease = true;
+        // Fitted plane: area-weighted mean normal through the area-weighted centroid.
+        Eigen::Vector3d nm = Eigen::Vector3d::Zero(), cm = Eigen::Vector3d::Zero();
         double a = 0;
         for (int f : piece) {
-            a += area(s, f);
-            for (int g : adj[static_cast<size_t>(f)])
-                if (region[static_cast<size_t>(g)] != static_cast<int>(f0) && n.row(g).dot(n0) > cos_crease) crease = false;
+            const double af = area(s, f);
+            nm += af * n.row(f).transpose();
+            cm += af * centroid(s, f);
+            a += af;
         }
-        if (crease && a > 0.05) caps.push_back(std::move(piece));
+        if (!(a > 0.05)) continue;
+        nm.normalize();
+        cm /= a;
+        bool flat = true;
+        for (int f : piece) {
+            flat = flat && n.row(f).dot(nm) >= cos_tol;
+            for (int k = 0; k < 3; ++k) flat = flat && std::abs(nm.dot(s.V.row(s.F(f, k)).transpose() - cm)) <= tol_mm;
+        }
+        if (!flat) continue;
+        // A cap meets the wall at a crease along (nearly) all of its border.
+        int border = 0, creased = 0;
+        for (int f : piece)
+            for (int g : adj[static_cast<size_t>(f)])
+                if (region[static_cast<size_t>(g)] != static_cast<int>(f0)) {
+                    ++border;
+                    if (n.row(g).dot(nm) < cos_crease) ++creased;
+                }
+        if (border > 0 && creased >= 0.9 * border) caps.push_back(std::move(piece));
     }
     return caps;
 }
@@ -302,7 +392,12 @@ LumenResult lumen_from_segmentation(const ImageData& seg, const SurfaceParams& p
     r.qa.emplace_back("isosurface_triangles", static_cast<double>(iso.F.rows()));
     SurfaceData cut = clip_at_planes(iso, seg.planes);
     r.qa.emplace_back("clipped_triangles", static_cast<double>(cut.F.rows()));
-    const auto loops = boundary_loops(cut);
+    std::vector<std::vector<int>> loops;
+    try {
+        loops = boundary_loops(cut);
+    } catch (const InputError& e) {  // the stage's own isosurface, not the input, is at fault
+        throw MeshingError(std::string("surface: check 'cut isosurface is a manifold' failed: ") + e.what());
+    }
     if (loops.size() != seg.planes.size()) {
         rep.warn("surface: the cut surface has " + std::to_string(loops.size()) + " open ends for " + std::to_string(seg.planes.size()) +
                  " end planes (a plane may not cut its vessel cleanly)");
@@ -315,18 +410,21 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
     validate(p);
     LumenResult r;
     SurfaceData s = read_mesh_file(path);
+    check_input_surface(s, path, p.input_scale);
     std::vector<std::vector<int>> loops;
     try {
         loops = boundary_loops(s);
     } catch (const InputError& e) {
         throw InputError(path + ": " + e.what());
     }
+    check_no_overlap(s, path);
     r.qa.emplace_back("input_triangles", static_cast<double>(s.F.rows()));
     r.qa.emplace_back("input_open_ends", static_cast<double>(loops.size()));
     if (loops.empty()) {
-        const auto caps = detect_flat_caps(s);
+        const auto caps = detect_flat_caps(s, p.cap_tolerance_deg, p.cap_tolerance_mm);
         if (caps.empty()) {
-            throw InputError(path + ": the surface is closed and has no flat end cap to remove (a lumen surface needs open ends or flat caps)");
+            throw InputError(path + ": the surface is closed and has no flat end cap to remove (none planar within --cap-tolerance-deg " + shortest(p.cap_tolerance_deg) +
+                             " and --cap-tolerance-mm " + shortest(p.cap_tolerance_mm) + "); a lumen surface needs open ends or flat caps");
         }
         std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1);
         for (const auto& c : caps)
@@ -337,6 +435,7 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
         rep.info("surface: removed " + std::to_string(caps.size()) + " flat end caps from " + path);
     }
     if (loops.size() < 2) throw InputError(path + ": the surface has " + std::to_string(loops.size()) + " open end(s); a vessel needs at least 2");
+    check_vessel_ends(s, loops, path);
     // Orient outward: the capped surface must enclose a positive volume.
     {
         SurfaceData capped = s;

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <numeric>
 
+#include <vtkAppendPolyData.h>
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
 #include <vtkCleanPolyData.h>
@@ -164,6 +165,58 @@ SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_i
     return s;
 }
 
+SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>& blocks, double level) {
+    vtkNew<vtkAppendPolyData> all;
+    std::vector<vtkSmartPointer<vtkPolyData>> pieces;
+    for (const FieldBlock& b : blocks) {
+        if (b.size[0] < 2 || b.size[1] < 2 || b.size[2] < 2) continue;
+        float lo = b.values.front(), hi = lo;
+        for (float v : b.values) {
+            lo = std::min(lo, v);
+            hi = std::max(hi, v);
+        }
+        if (!(lo < level && hi > level) && lo != level && hi != level) continue;  // no crossing in this block
+        // Global index space (origin 0, spacing 1, the block's extent): a vertex on a shared edge is computed
+        // from the same two samples at the same integer coordinates in both blocks, so it comes out identical.
+        vtkNew<vtkImageData> img;
+        img->SetExtent(static_cast<int>(b.first[0]), static_cast<int>(b.first[0] + b.size[0] - 1), static_cast<int>(b.first[1]),
+                       static_cast<int>(b.first[1] + b.size[1] - 1), static_cast<int>(b.first[2]), static_cast<int>(b.first[2] + b.size[2] - 1));
+        img->SetOrigin(0, 0, 0);
+        img->SetSpacing(1, 1, 1);
+        vtkNew<vtkFloatArray> sc;
+        sc->SetNumberOfComponents(1);
+        sc->SetArray(const_cast<float*>(b.values.data()), static_cast<vtkIdType>(b.values.size()), 1);  // borrowed
+        img->GetPointData()->SetScalars(sc);
+        vtkNew<vtkFlyingEdges3D> fe;
+        fe->SetInputData(img);
+        fe->SetValue(0, level);
+        fe->ComputeNormalsOff();
+        fe->ComputeGradientsOff();
+        fe->ComputeScalarsOff();
+        fe->Update();
+        if (fe->GetOutput()->GetNumberOfPolys() == 0) continue;
+        vtkSmartPointer<vtkPolyData> piece = vtkSmartPointer<vtkPolyData>::New();
+        piece->ShallowCopy(fe->GetOutput());
+        pieces.push_back(piece);
+        all->AddInputData(piece);
+    }
+    if (pieces.empty()) throw MeshingError("isosurface: no surface at level " + shortest(level) + " in " + std::to_string(blocks.size()) + " blocks");
+    vtkNew<vtkCleanPolyData> merge;  // exact merge (tolerance 0) of the vertices blocks share
+    merge->SetInputConnection(all->GetOutputPort());
+    merge->SetTolerance(0.0);
+    merge->Update();
+    vtkSmartPointer<vtkPolyData> poly = merge->GetOutput();
+    poly = largest_piece(poly);
+    SurfaceData s = from_vtk(poly);
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i) {
+        const auto p = g.point(s.V(i, 0), s.V(i, 1), s.V(i, 2));
+        s.V.row(i) << p[0], p[1], p[2];
+    }
+    // Flying edges orients consistently; outward (towards field > level) is a positive enclosed volume.
+    if (enclosed_volume(s) < 0) s.F.col(1).swap(s.F.col(2));
+    return s;
+}
+
 SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach) {
     auto poly = to_vtk(s);
     // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
@@ -298,9 +351,12 @@ SurfaceData read_mesh_file(const std::string& path) {
     tri->SetInputData(poly);
     tri->PassVertsOff();
     tri->PassLinesOff();
-    vtkNew<vtkCleanPolyData> clean;  // STL stores every triangle's corners separately: merge them
+    // STL stores every triangle's corners separately, and other tools write the copies of one vertex with
+    // rounding differences: weld vertices within 1e-6 of the bounding-box diagonal (0.05 µm on a 50 mm
+    // vessel, far below any edge).
+    vtkNew<vtkCleanPolyData> clean;
     clean->SetInputConnection(tri->GetOutputPort());
-    clean->SetTolerance(0.0);
+    clean->SetTolerance(1e-6);
     clean->Update();
     SurfaceData s = from_vtk(clean->GetOutput());
     if (s.F.rows() == 0) throw InputError(path + ": the file holds no triangles");

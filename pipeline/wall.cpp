@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: MIT
-// `wall`: the closed vessel-wall surface around a lumen surface. A signed distance field to the lumen on
-// a regular grid (distances by CGAL AABB queries, OpenMP; inside/outside by scan-line parity against the
-// capped lumen), an iso-value that varies smoothly from the artery to the sac thickness by the nearest
-// surface label, the outer isosurface (VTK flying edges) cut at the end planes and remeshed, annular caps
-// joining the inner and outer loops, then checks (closed, manifold, oriented, no self-intersection).
+// `wall`: the closed vessel-wall surface around a lumen surface. A signed distance field to the lumen in
+// the blocks of a regular grid that meet a narrow band around it (distances by CGAL AABB queries, OpenMP;
+// inside/outside by scan-line parity against the capped lumen), an iso-value that varies smoothly from the
+// artery to the sac thickness with the distances to the artery and sac parts of the lumen, the outer
+// isosurface (VTK flying edges per block) cut at the end planes and remeshed, annular caps joining the inner
+// and outer loops, then checks (closed, manifold, oriented, no self-intersection).
 //
 // The lumen is extended straight beyond each end plane before the field is computed, so the offset
 // surface meets each plane at right angles and the cut gives an outer loop at the wall thickness.
@@ -116,46 +117,130 @@ SurfaceData extend_lumen(const SurfaceData& s, const std::vector<EndPlane>& plan
     return e;
 }
 
-/// Inside flags of a closed surface on a grid, by scan-line parity along x (rows offset by an irrational
-/// fraction of a voxel so that no ray meets an edge or a vertex exactly).
-std::vector<std::uint8_t> inside_by_parity(const SurfaceData& s, const ImageGrid& g) {
-    const std::int64_t nx = g.size[0], ny = g.size[1], nz = g.size[2];
-    const double h = g.spacing[0];
-    const double ey = 1.4142135e-4 * h, ez = 1.7320508e-4 * h;
-    std::vector<std::vector<float>> hits(static_cast<size_t>(ny * nz));
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
-        const double ylo = std::min({a.y(), b.y(), c.y()}), yhi = std::max({a.y(), b.y(), c.y()});
-        const double zlo = std::min({a.z(), b.z(), c.z()}), zhi = std::max({a.z(), b.z(), c.z()});
-        const auto j0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((ylo - g.origin[1] - ey) / h)));
-        const auto j1 = std::min<std::int64_t>(ny - 1, static_cast<std::int64_t>(std::floor((yhi - g.origin[1] - ey) / h)));
-        const auto k0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((zlo - g.origin[2] - ez) / h)));
-        const auto k1 = std::min<std::int64_t>(nz - 1, static_cast<std::int64_t>(std::floor((zhi - g.origin[2] - ez) / h)));
-        const Eigen::Vector3d n = (b - a).cross(c - a);
-        if (std::abs(n.x()) < 1e-300) continue;  // parallel to the rays
-        for (std::int64_t k = k0; k <= k1; ++k)
-            for (std::int64_t j = j0; j <= j1; ++j) {
-                const double y = g.origin[1] + static_cast<double>(j) * h + ey, z = g.origin[2] + static_cast<double>(k) * h + ez;
-                // Point-in-triangle in the yz projection by edge signs.
-                auto edge = [&](const Eigen::Vector3d& p, const Eigen::Vector3d& q) { return (q.y() - p.y()) * (z - p.z()) - (q.z() - p.z()) * (y - p.y()); };
-                const double s0 = edge(a, b), s1 = edge(b, c), s2 = edge(c, a);
-                if (!((s0 > 0 && s1 > 0 && s2 > 0) || (s0 < 0 && s1 < 0 && s2 < 0))) continue;
-                const double x = a.x() - (n.y() * (y - a.y()) + n.z() * (z - a.z())) / n.x();
-                hits[static_cast<size_t>(j + ny * k)].push_back(static_cast<float>(x));
-            }
-    }
-    std::vector<std::uint8_t> in(g.voxel_count(), 0);
-    for (std::int64_t k = 0; k < nz; ++k)
-        for (std::int64_t j = 0; j < ny; ++j) {
-            auto& row = hits[static_cast<size_t>(j + ny * k)];
-            std::sort(row.begin(), row.end());
-            for (size_t q = 0; q + 1 < row.size(); q += 2) {
-                const auto i0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((row[q] - g.origin[0]) / h)));
-                const auto i1 = std::min<std::int64_t>(nx - 1, static_cast<std::int64_t>(std::floor((row[q + 1] - g.origin[0]) / h)));
-                for (std::int64_t i = i0; i <= i1; ++i) in[g.linear(i, j, k)] = 1;
-            }
+/// Inside/outside of a closed surface at the voxels of a grid, by scan-line parity along x (rows offset by an
+/// irrational fraction of a voxel so that no ray meets an edge or a vertex exactly): per row, the sorted x of
+/// its crossings; a voxel is inside when an odd number of crossings lie before it. Memory: the crossings.
+class ParityRows {
+public:
+    ParityRows(const SurfaceData& s, const ImageGrid& g) : m_g(g), m_rows(static_cast<size_t>(g.size[1] * g.size[2])) {
+        const std::int64_t ny = g.size[1], nz = g.size[2];
+        const double h = g.spacing[0];
+        const double ey = 1.4142135e-4 * h, ez = 1.7320508e-4 * h;
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+            const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+            const double ylo = std::min({a.y(), b.y(), c.y()}), yhi = std::max({a.y(), b.y(), c.y()});
+            const double zlo = std::min({a.z(), b.z(), c.z()}), zhi = std::max({a.z(), b.z(), c.z()});
+            const auto j0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((ylo - g.origin[1] - ey) / h)));
+            const auto j1 = std::min<std::int64_t>(ny - 1, static_cast<std::int64_t>(std::floor((yhi - g.origin[1] - ey) / h)));
+            const auto k0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::ceil((zlo - g.origin[2] - ez) / h)));
+            const auto k1 = std::min<std::int64_t>(nz - 1, static_cast<std::int64_t>(std::floor((zhi - g.origin[2] - ez) / h)));
+            const Eigen::Vector3d n = (b - a).cross(c - a);
+            if (std::abs(n.x()) < 1e-300) continue;  // parallel to the rays
+            for (std::int64_t k = k0; k <= k1; ++k)
+                for (std::int64_t j = j0; j <= j1; ++j) {
+                    const double y = g.origin[1] + static_cast<double>(j) * h + ey, z = g.origin[2] + static_cast<double>(k) * h + ez;
+                    // Point-in-triangle in the yz projection by edge signs.
+                    auto edge = [&](const Eigen::Vector3d& p, const Eigen::Vector3d& q) { return (q.y() - p.y()) * (z - p.z()) - (q.z() - p.z()) * (y - p.y()); };
+                    const double s0 = edge(a, b), s1 = edge(b, c), s2 = edge(c, a);
+                    if (!((s0 > 0 && s1 > 0 && s2 > 0) || (s0 < 0 && s1 < 0 && s2 < 0))) continue;
+                    m_rows[static_cast<size_t>(j + ny * k)].push_back(a.x() - (n.y() * (y - a.y()) + n.z() * (z - a.z())) / n.x());
+                }
         }
-    return in;
+        for (auto& row : m_rows) std::sort(row.begin(), row.end());
+    }
+    bool inside(std::int64_t i, std::int64_t j, std::int64_t k) const {
+        const auto& row = m_rows[static_cast<size_t>(j + m_g.size[1] * k)];
+        const double x = m_g.origin[0] + static_cast<double>(i) * m_g.spacing[0];
+        return (std::upper_bound(row.begin(), row.end(), x) - row.begin()) % 2 == 1;
+    }
+
+private:
+    const ImageGrid& m_g;
+    std::vector<std::vector<double>> m_rows;
+};
+
+constexpr std::int64_t BLOCK = 16;                 ///< cells per block edge of the narrow-band field
+constexpr std::int64_t BLOCKS_PER_BATCH = 4096;    ///< blocks whose distance queries are made together (memory bound)
+constexpr double MAX_BAND_SAMPLES = 6e8;          ///< 2.4 GB of float samples
+constexpr float QUERY_MARK = -1e30F;               ///< a sample outside the lumen that needs a distance query
+constexpr float QUERY_MARK_INSIDE = -2e30F;        ///< ... inside the lumen
+
+/// The blocks of the virtual grid `g` that meet the box of some face grown by `band` (sorted keys
+/// bx + nbx·(by + nby·bz)), and for each the faces' boxes in it (to mark the samples that need a distance).
+struct BandBlocks {
+    std::array<std::int64_t, 3> nb{};
+    std::vector<std::int64_t> keys;
+    std::vector<std::vector<std::array<std::int64_t, 6>>> boxes;  ///< per block: global voxel boxes i0,j0,k0,i1,j1,k1
+};
+BandBlocks band_blocks(const SurfaceData& s, const ImageGrid& g, double band) {
+    BandBlocks bb;
+    for (size_t d = 0; d < 3; ++d) bb.nb[d] = std::max<std::int64_t>(1, (g.size[d] - 1 + BLOCK - 1) / BLOCK);
+    const double h = g.spacing[0];
+    std::vector<std::array<std::int64_t, 6>> face_box(static_cast<size_t>(s.F.rows()));
+    std::vector<std::int64_t> keys;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        Eigen::Vector3d a = s.V.row(s.F(f, 0)).transpose(), b = a;
+        for (int k = 1; k < 3; ++k) {
+            a = a.cwiseMin(s.V.row(s.F(f, k)).transpose());
+            b = b.cwiseMax(s.V.row(s.F(f, k)).transpose());
+        }
+        auto& bx = face_box[static_cast<size_t>(f)];
+        for (size_t d = 0; d < 3; ++d) {
+            bx[d] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((a[static_cast<Eigen::Index>(d)] - band - g.origin[d]) / h)));
+            bx[d + 3] = std::min<std::int64_t>(g.size[d] - 1, static_cast<std::int64_t>(std::ceil((b[static_cast<Eigen::Index>(d)] + band - g.origin[d]) / h)));
+        }
+        // A sample on a block border belongs to both blocks: voxel i lies in blocks (i−1)/B … i/B.
+        for (std::int64_t bz = std::max<std::int64_t>(0, (bx[2] - 1) / BLOCK); bz <= std::min(bb.nb[2] - 1, bx[5] / BLOCK); ++bz)
+            for (std::int64_t by = std::max<std::int64_t>(0, (bx[1] - 1) / BLOCK); by <= std::min(bb.nb[1] - 1, bx[4] / BLOCK); ++by)
+                for (std::int64_t bxi = std::max<std::int64_t>(0, (bx[0] - 1) / BLOCK); bxi <= std::min(bb.nb[0] - 1, bx[3] / BLOCK); ++bxi)
+                    keys.push_back(bxi + bb.nb[0] * (by + bb.nb[1] * bz));
+    }
+    std::sort(keys.begin(), keys.end());
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    bb.keys = std::move(keys);
+    bb.boxes.resize(bb.keys.size());
+    for (const auto& bx : face_box)
+        for (std::int64_t bz = std::max<std::int64_t>(0, (bx[2] - 1) / BLOCK); bz <= std::min(bb.nb[2] - 1, bx[5] / BLOCK); ++bz)
+            for (std::int64_t by = std::max<std::int64_t>(0, (bx[1] - 1) / BLOCK); by <= std::min(bb.nb[1] - 1, bx[4] / BLOCK); ++by)
+                for (std::int64_t bxi = std::max<std::int64_t>(0, (bx[0] - 1) / BLOCK); bxi <= std::min(bb.nb[0] - 1, bx[3] / BLOCK); ++bxi) {
+                    const std::int64_t key = bxi + bb.nb[0] * (by + bb.nb[1] * bz);
+                    const auto it = std::lower_bound(bb.keys.begin(), bb.keys.end(), key);
+                    bb.boxes[static_cast<size_t>(it - bb.keys.begin())].push_back(bx);
+                }
+    return bb;
+}
+
+/// Samples of block `b`: within a face box of the band QUERY_MARK (outside the lumen) or QUERY_MARK_INSIDE;
+/// elsewhere `inside_value` inside the lumen and `far_value` outside.
+void fill_block(FieldBlock& fb, const BandBlocks& bb, size_t b, const ImageGrid& g, const ParityRows& rows, double inside_value, double far_value) {
+    const std::int64_t key = bb.keys[b];
+    const std::array<std::int64_t, 3> bi{key % bb.nb[0], (key / bb.nb[0]) % bb.nb[1], key / (bb.nb[0] * bb.nb[1])};
+    for (size_t d = 0; d < 3; ++d) {
+        fb.first[d] = bi[d] * BLOCK;
+        fb.size[d] = std::min(BLOCK + 1, g.size[d] - fb.first[d]);
+    }
+    const std::int64_t sx = fb.size[0], sy = fb.size[1], sz = fb.size[2];
+    std::vector<std::uint8_t> mark(static_cast<size_t>(sx * sy * sz), 0);
+    for (const auto& bx : bb.boxes[b]) {
+        const std::int64_t i0 = std::max(bx[0], fb.first[0]) - fb.first[0], i1 = std::min(bx[3], fb.first[0] + sx - 1) - fb.first[0];
+        const std::int64_t j0 = std::max(bx[1], fb.first[1]) - fb.first[1], j1 = std::min(bx[4], fb.first[1] + sy - 1) - fb.first[1];
+        const std::int64_t k0 = std::max(bx[2], fb.first[2]) - fb.first[2], k1 = std::min(bx[5], fb.first[2] + sz - 1) - fb.first[2];
+        for (std::int64_t k = k0; k <= k1; ++k)
+            for (std::int64_t j = j0; j <= j1; ++j)
+                for (std::int64_t i = i0; i <= i1; ++i) mark[static_cast<size_t>(i + sx * (j + sy * k))] = 1;
+    }
+    fb.values.assign(mark.size(), static_cast<float>(far_value));
+    for (std::int64_t k = 0; k < sz; ++k)
+        for (std::int64_t j = 0; j < sy; ++j)
+            for (std::int64_t i = 0; i < sx; ++i) {
+                const size_t l = static_cast<size_t>(i + sx * (j + sy * k));
+                const bool in = rows.inside(fb.first[0] + i, fb.first[1] + j, fb.first[2] + k);
+                if (mark[l]) {
+                    fb.values[l] = in ? QUERY_MARK_INSIDE : QUERY_MARK;
+                } else if (in) {
+                    fb.values[l] = static_cast<float>(inside_value);
+                }
+            }
 }
 
 /// Annulus between an inner and an outer loop lying in one plane, oriented along the plane's normal.
@@ -241,7 +326,7 @@ void validate(const WallParams& p) {
     if (!(p.artery_thickness_mm > 0)) throw InputError("wall: --artery-thickness-mm must be > 0");
     if (!(p.aneurysm_thickness_mm >= 0)) throw InputError("wall: --aneurysm-thickness-mm must be >= 0 (0 = one third of the artery's)");
     if (!(p.blend_mm > 0)) throw InputError("wall: --blend-mm must be > 0");
-    if (!(p.grid_spacing_mm >= 0)) throw InputError("wall: --grid-spacing-mm must be >= 0 (0 = min thickness / 3)");
+    if (!(p.grid_spacing_mm >= 0)) throw InputError("wall: --grid-spacing-mm must be >= 0 (0 = the thinner of the thinnest wall and half the outer edge)");
     if (!(p.edge_mm >= 0)) throw InputError("wall: --edge-mm must be >= 0 (0 = the lumen's mean edge)");
     if (p.remesher != "cgal" && p.remesher != "netgen") throw InputError("wall: --remesher = '" + p.remesher + "': expected cgal or netgen");
     if (!(p.timeout_s > 0)) throw InputError("wall: --timeout-s must be > 0");
@@ -251,7 +336,7 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const WallParams
     return {{"artery_thickness_mm", shortest(p.artery_thickness_mm)},
             {"aneurysm_thickness_mm", p.aneurysm_thickness_mm > 0 ? shortest(p.aneurysm_thickness_mm) : "artery / 3"},
             {"blend_mm", shortest(p.blend_mm)},
-            {"grid_spacing_mm", p.grid_spacing_mm > 0 ? shortest(p.grid_spacing_mm) : "min thickness / 3"},
+            {"grid_spacing_mm", p.grid_spacing_mm > 0 ? shortest(p.grid_spacing_mm) : "min(thinnest wall, outer edge / 2)"},
             {"edge_mm", p.edge_mm > 0 ? shortest(p.edge_mm) : "lumen mean edge"},
             {"remesher", p.remesher},
             {"timeout_s", shortest(p.timeout_s)}};
@@ -265,12 +350,15 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     if (lumen.loop_end_id.size() == 0) throw InputError("wall: the lumen surface has no labelled boundary loops (run `aneuprep surface`)");
     const double t_art = p.artery_thickness_mm, t_sac = p.aneurysm_thickness_mm > 0 ? p.aneurysm_thickness_mm : t_art / 3.0;
     const double t_max = std::max(t_art, t_sac), t_min = std::min(t_art, t_sac);
-    const double h = p.grid_spacing_mm > 0 ? p.grid_spacing_mm : t_min / 3.0;
     double edge = p.edge_mm;
     if (!(edge > 0)) {
         for (const auto& [k, v] : triangle_quality(lumen))
             if (k == "edge_mean_mm") edge = v;
     }
+    // The field is a signed distance on both sides of the lumen and the remeshed outer surface is projected
+    // onto the exact offset afterwards, so the grid only has to resolve the offset's shape: half the outer
+    // edge, and no coarser than the thinnest wall.
+    const double h = p.grid_spacing_mm > 0 ? p.grid_spacing_mm : std::min(t_min, 0.5 * edge);
     r.qa.emplace_back("thickness_artery_target_mm", t_art);
     r.qa.emplace_back("thickness_aneurysm_target_mm", t_sac);
     r.qa.emplace_back("grid_spacing_mm", h);
@@ -282,7 +370,9 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     const SurfaceData dist_surf = extend_lumen(lumen, planes, ext, false, &w_ext);
     const SurfaceData sign_surf = extend_lumen(lumen, planes, ext, true, nullptr);
 
-    // Grid around the extended lumen.
+    // A virtual grid around the extended lumen: never allocated. The field lives only in blocks of BLOCK³
+    // cells that meet the narrow band around the lumen, so memory and time follow the surface's area, not
+    // its bounding box (a dense box grid at a third of the sac's wall took 8 GB on a 78×34×23 mm tree).
     const double margin = t_max + 3 * h;
     const Eigen::Vector3d lo = dist_surf.V.colwise().minCoeff().transpose().array() - margin;
     const Eigen::Vector3d hi = dist_surf.V.colwise().maxCoeff().transpose().array() + margin;
@@ -292,49 +382,21 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         g.origin[static_cast<size_t>(d)] = lo[d];
         g.spacing[static_cast<size_t>(d)] = h;
     }
-    const double nvox = static_cast<double>(g.voxel_count());
-    r.qa.emplace_back("grid_voxels", nvox);
-    if (nvox > 1.5e9) {
-        throw InputError("wall: the distance grid would have " + shortest(nvox) + " voxels at " + shortest(h) +
-                         " mm spacing; raise --grid-spacing-mm or thin the case's extent");
-    }
-    rep.info("wall: distance field on " + std::to_string(g.size[0]) + "×" + std::to_string(g.size[1]) + "×" + std::to_string(g.size[2]) +
-             " voxels of " + shortest(h) + " mm");
-    const std::vector<std::uint8_t> inside = inside_by_parity(sign_surf, g);
-
-    // Band: outside voxels within t_max + 2h of some lumen face's bounding box.
+    r.qa.emplace_back("grid_voxels", static_cast<double>(g.voxel_count()));
     const double band = t_max + 2 * h;
-    std::vector<std::uint8_t> in_band(g.voxel_count(), 0);
-    for (Eigen::Index f = 0; f < dist_surf.F.rows(); ++f) {
-        Eigen::Vector3d a = dist_surf.V.row(dist_surf.F(f, 0)).transpose(), b = a;
-        for (int k = 1; k < 3; ++k) {
-            a = a.cwiseMin(dist_surf.V.row(dist_surf.F(f, k)).transpose());
-            b = b.cwiseMax(dist_surf.V.row(dist_surf.F(f, k)).transpose());
-        }
-        std::array<std::int64_t, 3> i0{}, i1{};
-        for (size_t d = 0; d < 3; ++d) {
-            i0[d] = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((a[static_cast<Eigen::Index>(d)] - band - g.origin[d]) / h)));
-            i1[d] = std::min<std::int64_t>(g.size[d] - 1, static_cast<std::int64_t>(std::ceil((b[static_cast<Eigen::Index>(d)] + band - g.origin[d]) / h)));
-        }
-        for (std::int64_t k = i0[2]; k <= i1[2]; ++k)
-            for (std::int64_t j = i0[1]; j <= i1[1]; ++j)
-                for (std::int64_t i = i0[0]; i <= i1[0]; ++i) {
-                    const size_t l = g.linear(i, j, k);
-                    if (!inside[l]) in_band[l] = 1;
-                }
+    const BandBlocks bb = band_blocks(dist_surf, g, band);
+    const double samples = static_cast<double>(bb.keys.size()) * static_cast<double>(BLOCK + 1) * static_cast<double>(BLOCK + 1) * static_cast<double>(BLOCK + 1);
+    r.qa.emplace_back("band_blocks", static_cast<double>(bb.keys.size()));
+    r.qa.emplace_back("band_samples", samples);
+    if (samples > MAX_BAND_SAMPLES) {
+        throw InputError("wall: the distance field's narrow band would hold " + shortest(samples) + " samples at " + shortest(h) + " mm spacing (at most " +
+                         shortest(MAX_BAND_SAMPLES) + "); raise --grid-spacing-mm or the wall thicknesses");
     }
-    std::vector<size_t> band_vox;
-    for (size_t l = 0; l < in_band.size(); ++l)
-        if (in_band[l]) band_vox.push_back(l);
-    Eigen::MatrixX3d q(static_cast<Eigen::Index>(band_vox.size()), 3);
-    for (size_t m = 0; m < band_vox.size(); ++m) {
-        const size_t l = band_vox[m];
-        const auto i = static_cast<double>(l % static_cast<size_t>(g.size[0]));
-        const auto j = static_cast<double>((l / static_cast<size_t>(g.size[0])) % static_cast<size_t>(g.size[1]));
-        const auto k = static_cast<double>(l / static_cast<size_t>(g.size[0] * g.size[1]));
-        q.row(static_cast<Eigen::Index>(m)) << g.origin[0] + i * h, g.origin[1] + j * h, g.origin[2] + k * h;
-    }
-    r.qa.emplace_back("distance_queries", static_cast<double>(band_vox.size()));
+    rep.info("wall: distance field in " + std::to_string(bb.keys.size()) + " blocks of " + std::to_string(BLOCK) + "³ voxels of " + shortest(h) +
+             " mm (narrow band of " + shortest(band) + " mm; the box would be " + std::to_string(g.size[0]) + "×" + std::to_string(g.size[1]) + "×" +
+             std::to_string(g.size[2]) + ")");
+    const ParityRows rows(sign_surf, g);
+
     // The lumen split at its label border (vertex weight ½): the artery part A and the sac part S. The iso-value
     // at a voxel blends from the distances to both, x = (d_A − d_S)/(2·blend) + ½: on the lumen that is the
     // signed distance to the border, and in space it is continuous — taking the weight at the nearest lumen point
@@ -350,35 +412,118 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         for (size_t i = 0; i < v.size(); ++i) M.row(static_cast<Eigen::Index>(i)) = v[i].transpose();
         return M;
     };
-    const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, as_matrix(fa), q);
-    const Eigen::VectorXd dS = distance_to_faces(dist_surf.V, as_matrix(fs), q);
-    // φ = signed distance − local thickness; negative in the wall and the lumen.
-    Volume<float> phi{g, std::vector<float>(g.voxel_count(), static_cast<float>(band))};
-    for (size_t l = 0; l < phi.data.size(); ++l)
-        if (inside[l]) phi.data[l] = static_cast<float>(-t_min);
-#pragma omp parallel for schedule(static)
-    for (Eigen::Index m = 0; m < static_cast<Eigen::Index>(band_vox.size()); ++m) {
-        const double d = std::min(dA[m], dS[m]);
-        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA[m] - dS[m]) / (2 * p.blend_mm) + 0.5, 0.0, 1.0);
+    const Eigen::MatrixX3i FA = as_matrix(fa), FS = as_matrix(fs);
+    auto local_thickness = [&](double dA, double dS) {
+        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA - dS) / (2 * p.blend_mm) + 0.5, 0.0, 1.0);
         ws = ws * ws * (3 - 2 * ws);
-        const double t = t_art + (t_sac - t_art) * ws;
-        phi.data[band_vox[static_cast<size_t>(m)]] = static_cast<float>(std::min(d, band) - t);
+        return t_art + (t_sac - t_art) * ws;
+    };
+    // φ = signed distance − local thickness; negative in the wall and the lumen. Per block: inside the lumen
+    // −t_min, in the band (outside, within `band` of a face's box) the blended distance, elsewhere `band`.
+    std::vector<FieldBlock> blocks(bb.keys.size());
+    double queries = 0;
+    const auto nbk = static_cast<std::int64_t>(bb.keys.size());
+    for (std::int64_t b0 = 0; b0 < nbk; b0 += BLOCKS_PER_BATCH) {
+        const std::int64_t b1 = std::min(nbk, b0 + BLOCKS_PER_BATCH);
+        std::vector<std::pair<std::int64_t, std::int64_t>> where;  // (block, local sample) of each query
+#pragma omp parallel for schedule(dynamic)
+        for (std::int64_t b = b0; b < b1; ++b) fill_block(blocks[static_cast<size_t>(b)], bb, static_cast<size_t>(b), g, rows, -t_min, band);
+        for (std::int64_t b = b0; b < b1; ++b) {
+            const auto& fb = blocks[static_cast<size_t>(b)];
+            for (size_t l = 0; l < fb.values.size(); ++l)
+                if (fb.values[l] == QUERY_MARK || fb.values[l] == QUERY_MARK_INSIDE) where.emplace_back(b, static_cast<std::int64_t>(l));
+        }
+        Eigen::MatrixX3d q(static_cast<Eigen::Index>(where.size()), 3);
+        for (size_t m = 0; m < where.size(); ++m) {
+            const auto& fb = blocks[static_cast<size_t>(where[m].first)];
+            const auto l = where[m].second;
+            const std::int64_t i = l % fb.size[0], j = (l / fb.size[0]) % fb.size[1], k = l / (fb.size[0] * fb.size[1]);
+            q.row(static_cast<Eigen::Index>(m)) << g.origin[0] + static_cast<double>(fb.first[0] + i) * h, g.origin[1] + static_cast<double>(fb.first[1] + j) * h,
+                g.origin[2] + static_cast<double>(fb.first[2] + k) * h;
+        }
+        queries += static_cast<double>(where.size());
+        const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, q);
+        const Eigen::VectorXd dS = distance_to_faces(dist_surf.V, FS, q);
+#pragma omp parallel for schedule(static)
+        for (Eigen::Index m = 0; m < static_cast<Eigen::Index>(where.size()); ++m) {
+            const auto& [b, l] = where[static_cast<size_t>(m)];
+            float& v = blocks[static_cast<size_t>(b)].values[static_cast<size_t>(l)];
+            const double sign = v == QUERY_MARK_INSIDE ? -1.0 : 1.0;
+            v = static_cast<float>(sign * std::min(std::min(dA[m], dS[m]), band) - local_thickness(dA[m], dS[m]));
+        }
     }
+    r.qa.emplace_back("distance_queries", queries);
     const double t_field = std::chrono::duration<double>(clock::now() - t0).count();
     r.qa.emplace_back("time_distance_field_s", t_field);
 
     // Outer surface: isosurface φ = 0 (outward = towards φ > 0), cut at the planes, remeshed.
-    SurfaceData outer = isosurface(phi, 0.0, false, true);
+    auto lap = [&, last = clock::now()](const std::string& what) mutable {
+        const auto now = clock::now();
+        r.qa.emplace_back("time_" + what + "_s", std::chrono::duration<double>(now - last).count());
+        last = now;
+    };
+    SurfaceData outer = isosurface_blocks(g, blocks, 0.0);
+    blocks.clear();
+    blocks.shrink_to_fit();
+    lap("isosurface");
     r.qa.emplace_back("outer_isosurface_triangles", static_cast<double>(outer.F.rows()));
     // Not decimated before remeshing: VTK's quadric and DecimatePro decimations were both measured to leave
     // non-manifold edges on this surface; CGAL remeshes the fine isosurface directly.
     outer = clip_at_planes(outer, planes);
-    const auto outer_loops = boundary_loops(outer);
+    std::vector<std::vector<int>> outer_loops;
+    try {
+        outer_loops = boundary_loops(outer);
+    } catch (const InputError& e) {  // the stage's own surface, not the input, is at fault
+        throw MeshingError(std::string("wall: check 'cut outer surface is a manifold' failed: ") + e.what());
+    }
     if (outer_loops.size() != static_cast<size_t>(lumen.loop_end_id.size())) {
         throw MeshingError("wall: check 'outer ends' failed: the cut outer surface has " + std::to_string(outer_loops.size()) + " open ends, the lumen " +
                            std::to_string(lumen.loop_end_id.size()) + " (are two vessels closer than the wall thickness near an end?)");
     }
-    outer = remesh(outer, edge, p.remesher, p.timeout_s);
+    {
+        RemeshOutcome rm = remesh_checked(outer, edge, p.remesher, p.timeout_s);
+        if (!rm.fallback_why.empty()) rep.warn("wall: outer surface remeshed with " + rm.method + " instead of " + p.remesher + " (" + rm.fallback_why + ")");
+        r.qa.emplace_back("remesher_fallback", rm.fallback_why.empty() ? 0.0 : 1.0);
+        outer = std::move(rm.surface);
+    }
+    lap("remesh");
+    // Onto the exact offset: Newton steps along the distance gradient on φ(x) = d(x) − t(x) with exact
+    // distances, so the wall's thickness does not depend on the grid; cut-end vertices stay in their planes
+    // (the lumen runs straight through them, so the gradient lies in the plane there).
+    {
+        const auto loops = boundary_loops(outer);
+        std::vector<int> plane_of(static_cast<size_t>(outer.V.rows()), -1);
+        for (const auto& l : loops) {
+            Eigen::Vector3d c = Eigen::Vector3d::Zero();
+            for (int v : l) c += outer.V.row(v).transpose();
+            c /= static_cast<double>(l.size());
+            int best = 0;
+            for (size_t q = 1; q < planes.size(); ++q)
+                if (std::abs(planes[q].normal.dot(c - planes[q].point)) + 1e-3 * (c - planes[q].point).norm() <
+                    std::abs(planes[static_cast<size_t>(best)].normal.dot(c - planes[static_cast<size_t>(best)].point)) + 1e-3 * (c - planes[static_cast<size_t>(best)].point).norm())
+                    best = static_cast<int>(q);
+            for (int v : l) plane_of[static_cast<size_t>(v)] = best;
+        }
+        double moved = 0;
+        for (int it = 0; it < 3; ++it) {
+            const NearestOnSurface near = nearest_on_surface(dist_surf, outer.V);
+            const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, outer.V), dS = distance_to_faces(dist_surf.V, FS, outer.V);
+            for (Eigen::Index v = 0; v < outer.V.rows(); ++v) {
+                const Eigen::Vector3d x = outer.V.row(v).transpose(), dir = x - near.point.row(v).transpose();
+                if (!(dir.norm() > 1e-9)) continue;
+                const double phi = near.distance[v] - local_thickness(dA[v], dS[v]);
+                Eigen::Vector3d step = -phi * dir.normalized();
+                if (plane_of[static_cast<size_t>(v)] >= 0) {
+                    const Eigen::Vector3d& n = planes[static_cast<size_t>(plane_of[static_cast<size_t>(v)])].normal;
+                    step -= n.dot(step) * n;
+                }
+                outer.V.row(v) += step.transpose();
+                if (it == 0) moved = std::max(moved, step.norm());
+            }
+        }
+        r.qa.emplace_back("projection_largest_move_mm", moved);
+    }
+    lap("projection");
     const auto loops_out = boundary_loops(outer);
 
     // Assemble: inner (lumen, reversed), outer, annular caps.
@@ -453,6 +598,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
                            shortest(c.x()) + ", " + shortest(c.y()) + ", " + shortest(c.z()) + ") mm (thin wall against a tight curvature?)");
     }
 
+    lap("checks");
     // Regions by the nearest lumen face; thickness: outer vertex → lumen, inner vertex → outer surface.
     Eigen::MatrixX3d cents(wall.F.rows(), 3);
     for (Eigen::Index f = 0; f < wall.F.rows(); ++f) cents.row(f) = (wall.V.row(wall.F(f, 0)) + wall.V.row(wall.F(f, 1)) + wall.V.row(wall.F(f, 2))) / 3.0;

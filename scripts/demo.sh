@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
-bash scripts/build.sh
+bash scripts/build.sh aneuprep aneusim   # the test command builds the rest with the same flags
 out=build/demo
 mkdir -p "$out"
 prep=build/tools/aneuprep

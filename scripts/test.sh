@@ -5,6 +5,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
-bash scripts/build.sh -DANEU_WERROR=ON -DANEU_BUILD_TESTS=ON
+bash scripts/build.sh
 cd build
 ctest -j"$(nproc)" --output-on-failure --timeout 900

@@ -132,7 +132,12 @@ void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, 
         c->add_option("--aneurysm-ratio-low", p->aneurysm_ratio_low, "sac growth: connected faces above this x local radius")->capture_default_str();
         c->add_option("--aneurysm-sphere", *sphere, "override: faces inside x,y,z,r [mm] are the sac")->delimiter(',')->expected(4);
         c->add_option("--aneurysm-labelmap", p->aneurysm_labelmap, "override: image whose non-zero voxels are the sac (e.g. painted in 3D Slicer)");
-        c->add_option("--timeout-s", p->timeout_s, "kill Netgen after this")->capture_default_str();
+        c->add_option("--timeout-s", p->timeout_s, "kill Netgen after this many seconds, then remesh with CGAL")->capture_default_str();
+        c->add_option("--cap-tolerance-deg", p->cap_tolerance_deg, "surface input: a flat end cap's faces turn at most this from its fitted plane")
+            ->capture_default_str();
+        c->add_option("--cap-tolerance-mm", p->cap_tolerance_mm, "surface input: a flat end cap's vertices lie at most this from its fitted plane")
+            ->capture_default_str();
+        c->add_option("--input-scale", p->input_scale, "surface input: multiply coordinates by this (1000 for a file in metres)")->capture_default_str();
         c->add_option("--snapshot", *png, "render the labelled surface to this PNG (needs X: xvfb-run -a)");
     }
     {
@@ -152,10 +157,10 @@ void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, 
         c->add_option("--aneurysm-thickness-mm", p->aneurysm_thickness_mm, "wall thickness of the sac (0 = one third of the artery's)")
             ->capture_default_str();
         c->add_option("--blend-mm", p->blend_mm, "width of the thickness transition across the neck")->capture_default_str();
-        c->add_option("--grid-spacing-mm", p->grid_spacing_mm, "distance-field grid spacing (0 = min thickness / 3)")->capture_default_str();
+        c->add_option("--grid-spacing-mm", p->grid_spacing_mm, "distance-field grid spacing (0 = the thinner of the thinnest wall and half the outer edge)")->capture_default_str();
         c->add_option("--edge-mm", p->edge_mm, "target edge of the outer surface (0 = the lumen's mean edge)")->capture_default_str();
         c->add_option("--remesher", p->remesher, "cgal or netgen, for the outer surface")->check(CLI::IsMember({"netgen", "cgal"}))->capture_default_str();
-        c->add_option("--timeout-s", p->timeout_s, "kill Netgen after this")->capture_default_str();
+        c->add_option("--timeout-s", p->timeout_s, "kill Netgen after this many seconds, then remesh with CGAL")->capture_default_str();
         c->add_option("--snapshot", *png, "render the wall coloured by thickness to this PNG (needs X: xvfb-run -a)");
     }
 }

@@ -80,7 +80,10 @@ struct SurfaceParams {
     double aneurysm_ratio_low = 1.4;      ///< ... and the sac grows over connected faces above this
     std::optional<std::array<double, 4>> aneurysm_sphere;  ///< override: faces whose centroid is inside are the sac
     std::string aneurysm_labelmap;        ///< override: image whose non-zero voxels are the sac
-    double timeout_s = 300.0;             ///< Netgen runs in a child process, killed after this
+    double timeout_s = 30.0;              ///< Netgen runs in a child process, killed after this; then CGAL runs
+    double cap_tolerance_deg = 5.0;       ///< surface input: a cap's faces turn at most this from its plane
+    double cap_tolerance_mm = 0.1;        ///< surface input: a cap's vertices lie at most this from its plane
+    double input_scale = 1.0;             ///< surface input: coordinates are multiplied by this (1000 for a file in metres)
 };
 void validate(const SurfaceParams& p);
 std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p);
@@ -101,8 +104,11 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
 /// Labels every face artery (0) or aneurysm (1): hysteresis on (distance to the centerline) / (local radius).
 Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double ratio_high, double ratio_low);
 
-/// Flat caps of a closed surface: sets of coplanar faces bounded by a crease (dihedral angle > 20°).
-std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s);
+/// Flat caps of a closed surface (the inlet/outlet caps of a CFD lumen mesh): connected sets of faces whose
+/// normals lie within `tol_deg` of their area-weighted mean and whose vertices lie within `tol_mm` of the
+/// plane fitted to them, bounded by a crease against the wall (at least 90 % of the border edges turn by
+/// more than 30°).
+std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s, double tol_deg = 5.0, double tol_mm = 0.1);
 
 void surface_file(const std::string& in, const std::string& out, const SurfaceParams& p, StageRecord stage,
                   const std::string& snapshot_png = "", Reporter& rep = null_reporter());
@@ -113,10 +119,10 @@ struct WallParams {
     double artery_thickness_mm = 0.4;
     double aneurysm_thickness_mm = 0.0;  ///< 0 = one third of the artery's (as published)
     double blend_mm = 1.0;               ///< the thickness changes across the neck at most 1.5·Δt/blend per mm (over ±blend about the label border)
-    double grid_spacing_mm = 0.0;        ///< distance-field grid; 0 = min thickness / 3
+    double grid_spacing_mm = 0.0;        ///< narrow-band distance-field grid; 0 = min(thinnest wall, outer edge / 2)
     double edge_mm = 0.0;                ///< target edge of the outer surface; 0 = the lumen's mean edge
     std::string remesher = "cgal";       ///< cgal or netgen, for the outer surface
-    double timeout_s = 300.0;
+    double timeout_s = 30.0;             ///< a Netgen remesh is killed after this; then CGAL runs
 };
 void validate(const WallParams& p);
 std::vector<std::pair<std::string, std::string>> parameter_list(const WallParams& p);

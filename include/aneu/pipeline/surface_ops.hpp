@@ -21,6 +21,21 @@ namespace aneu::pipeline {
 /// of the region where field < level. Only the largest connected piece is kept if `largest_only`.
 SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_inside, bool largest_only = true);
 
+/// One block of a sparse (narrow-band) scalar field on a virtual grid: the samples with global indices
+/// first[d] ... first[d] + size[d] − 1, x fastest. Adjacent blocks share their border samples.
+struct FieldBlock {
+    std::array<std::int64_t, 3> first{};
+    std::array<std::int64_t, 3> size{};
+    std::vector<float> values;
+};
+/// Isosurface of a field given only in blocks on the grid `g` (which is never allocated): flying edges per
+/// block in the grid's global index space, merged where blocks meet (shared samples give the same vertex
+/// exactly). The field must not cross `level` in a cell that no block holds. Orientation: normals point
+/// out of the region where field < level, taken from the enclosed volume (the result must be closed);
+/// the largest connected piece is kept. Memory follows the blocks, not the grid's box.
+/// @throws MeshingError no surface at `level`
+SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>& blocks, double level);
+
 /// Cuts the surface at end planes: for each plane, the pieces beyond it that cross it within `reach` ×
 /// (radius + 1 mm) of its point are removed (another vessel passing beyond the plane elsewhere is kept); the
 /// cut is exact (linear scalar = signed distance to the plane) and its vertices are snapped into the plane.
@@ -79,6 +94,25 @@ double enclosed_volume(const SurfaceData& s);
 /// plane. Labels/regions are not carried (the caller labels the result).
 /// @throws MeshingError the mesher failed; InputError unknown method
 SurfaceData remesh(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s = 300.0);
+
+/// What `remesh_checked` did: the remesher whose result was kept, and why the asked one was not.
+struct RemeshOutcome {
+    SurfaceData surface;
+    std::string method;        ///< the remesher whose result is `surface`
+    std::string fallback_why;  ///< empty when the asked remesher's result was kept
+};
+/// `remesh` with the asked method, then checks the result: an oriented 2-manifold with as many boundary
+/// loops as the input and no self-intersection. If the mesher fails, times out or its result fails a check,
+/// the other remesher runs (its result checked alike), and the outcome says so.
+/// @throws MeshingError naming the check and the place when both remeshers fail
+RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s);
+
+/// Largest triangle count a remesh may be asked for (an equilateral mesh of the whole surface): beyond it the
+/// surface, the wall and the tetrahedra would not fit in this tool's memory budget.
+constexpr double MAX_REMESH_TRIANGLES = 4e6;
+/// Refuses, before any work, a target edge that would give more than MAX_REMESH_TRIANGLES on `area_mm2`.
+/// @throws InputError naming `what` (the option), the estimate and the smallest edge allowed
+void refuse_triangle_count(const std::string& what, double edge_mm, double area_mm2);
 
 /// Distances from points to a triangle surface (CGAL AABB tree): distance, nearest face, nearest point.
 struct NearestOnSurface {
