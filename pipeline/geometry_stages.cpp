@@ -95,7 +95,7 @@ void surface_file(const std::string& in, const std::string& out, const SurfacePa
     LumenResult r;
     if (has_ext(in, ".h5")) {
         b = read_bundle(in);
-        if (!b.image) throw InputError(in + ": no /image (run `aneuprep segment` first, or give a surface mesh .stl/.vtp/.obj/.ply)");
+        if (!b.image) throw InputError(in + ": no /image (run `aneuprep segment` first, or give a surface mesh .stl/.vtp/.vtk/.obj/.ply)");
         r = lumen_from_segmentation(*b.image, p, rep);
     } else {
         b.meta.case_id = stem(out);

@@ -7,6 +7,9 @@
 #include <itkConnectedComponentImageFilter.h>
 #include <itkConnectedThresholdImageFilter.h>
 #include <itkGradientAnisotropicDiffusionImageFilter.h>
+#include <itkHessianToObjectnessMeasureImageFilter.h>
+#include <itkMultiScaleHessianBasedMeasureImageFilter.h>
+#include <itkSymmetricSecondRankTensor.h>
 #include <itkOtsuThresholdCalculator.h>
 #include <itkRelabelComponentImageFilter.h>
 #include <itkScalarImageToHistogramGenerator.h>
@@ -105,6 +108,29 @@ double otsu_threshold(const Volume<float>& v, const std::vector<std::uint8_t>& r
     calc->SetInput(gen->GetOutput());
     update(calc, "Otsu threshold");
     return calc->GetThreshold();
+}
+
+Volume<float> vesselness(const Volume<float>& v, double sigma_min_mm, double sigma_max_mm, int steps) {
+    using Hessian = itk::SymmetricSecondRankTensor<double, 3>;
+    using HessianImage = itk::Image<Hessian, 3>;
+    auto objectness = itk::HessianToObjectnessMeasureImageFilter<HessianImage, Img<float>>::New();
+    objectness->SetObjectDimension(1);  // tubes
+    objectness->SetBrightObject(true);
+    objectness->SetScaleObjectnessMeasure(false);
+    objectness->SetAlpha(0.5);
+    objectness->SetBeta(0.5);
+    objectness->SetGamma(50.0);  // HU: structures of lower Hessian contrast (noise, soft tissue texture) score low
+    auto multi = itk::MultiScaleHessianBasedMeasureImageFilter<Img<float>, HessianImage, Img<float>>::New();
+    multi->SetInput(to_itk(v));
+    multi->SetHessianToMeasureFilter(objectness);
+    multi->SetSigmaMinimum(sigma_min_mm);
+    multi->SetSigmaMaximum(sigma_max_mm);
+    multi->SetNumberOfSigmaSteps(static_cast<unsigned>(std::max(1, steps)));
+    multi->SetSigmaStepMethodToLogarithmic();
+    multi->SetGenerateScalesOutput(false);
+    multi->SetGenerateHessianOutput(false);
+    update(multi, "vesselness");
+    return from_itk<float>(multi->GetOutput());
 }
 
 }  // namespace aneu::pipeline

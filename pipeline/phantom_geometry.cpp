@@ -27,8 +27,6 @@ constexpr double PARENT_EXTENSION_MM = 20.0;
 /// Where the branch leaves the parent (arc angle) and its length.
 constexpr double BRANCH_ANGLE_DEG = -35.0;
 constexpr double BRANCH_LENGTH_MM = 25.0;
-/// Gap between the sac and the bone-like ellipsoid.
-constexpr double BONE_GAP_MM = 1.5;
 
 Eigen::Matrix3d rotation_xyz(const std::array<double, 3>& deg) {
     const Eigen::Matrix3d rx = Eigen::AngleAxisd(deg[0] * DEG, Eigen::Vector3d::UnitX()).toRotationMatrix();
@@ -142,6 +140,7 @@ void validate(const PhantomParams& p) {
     if (!(p.supersampling >= 1 && p.supersampling <= 16)) {
         fail("supersampling = " + std::to_string(p.supersampling) + ": must be in [1, 16]");
     }
+    if (!(p.bone_gap_mm >= 0.0 && p.bone_gap_mm <= 20.0)) fail("bone_gap_mm = " + shortest(p.bone_gap_mm) + ": must be in [0, 20]");
     for (double hu : {p.lumen_hu, p.tissue_hu, p.bone_hu}) {
         if (!(hu >= -1024.0 && hu <= 3071.0)) fail("intensities must be in [-1024, 3071] HU, got " + shortest(hu));
     }
@@ -164,6 +163,7 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const PhantomPar
             {"lumen_hu", shortest(p.lumen_hu)},
             {"tissue_hu", shortest(p.tissue_hu)},
             {"bone_hu", shortest(p.bone_hu)},
+            {"bone_gap_mm", shortest(p.bone_gap_mm)},
             {"psf_sigma_mm", shortest(p.psf_sigma_mm)},
             {"noise_sd_hu", shortest(p.noise_sd_hu)},
             {"supersampling", std::to_string(p.supersampling)}};
@@ -218,7 +218,7 @@ PhantomGeometry make_phantom_geometry(const PhantomParams& p) {
         e.radii = Eigen::Vector3d(2.5, 2.0, 3.5);
         const Eigen::Vector3d u = Eigen::Vector3d(-6.8, 1.0, -1.5).normalized();
         const double extent = 1.0 / u.cwiseQuotient(e.radii).norm();  // ellipsoid's reach along u
-        e.centre = sac_centre + (Rs + BONE_GAP_MM + extent) * u;
+        e.centre = sac_centre + (Rs + p.bone_gap_mm + extent) * u;
         g.bone = e;
     }
     return g;

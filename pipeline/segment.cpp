@@ -378,8 +378,22 @@ CenterlineResult centerline_from_ends(const Volume<std::uint8_t>& mask, const Vo
     return res;
 }
 
+namespace {
+/// @throws InputError when a voxel is NaN or infinite, naming how many and the first one's index
+void check_finite(const Volume<float>& v, const std::string& what) {
+    size_t bad = 0, first = 0;
+    for (size_t l = 0; l < v.data.size(); ++l)
+        if (!std::isfinite(v.data[l]) && bad++ == 0) first = l;
+    if (bad == 0) return;
+    const auto nx = static_cast<size_t>(v.grid.size[0]), ny = static_cast<size_t>(v.grid.size[1]);
+    throw InputError(what + ": " + std::to_string(bad) + " voxel(s) are NaN or infinite, the first at index (" + std::to_string(first % nx) + ", " +
+                     std::to_string((first / nx) % ny) + ", " + std::to_string(first / (nx * ny)) + "); expected finite intensities (HU)");
+}
+}  // namespace
+
 Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, Reporter& rep) {
     validate(p);
+    check_finite(ct_in, "segment: the image");
     Segmentation out;
     std::vector<std::uint8_t> roi;
     Volume<float> ct = p.roi_mm ? crop(ct_in, *p.roi_mm, roi) : ct_in;
@@ -413,30 +427,88 @@ Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, 
         seeds.push_back({i, j, k});
     }
 
+    // Automatic intensities from the vessels themselves: Frangi's vesselness picks the voxels along bright
+    // tubes; their median intensity is the vessel plateau. Bone is brighter than contrast in every head CTA
+    // and air darker than tissue, so a histogram split of the whole ROI (Otsu) lands between air and tissue
+    // or between vessels and bone (measured on a real CTA: 479 HU against a 420 HU lumen). Voxels much
+    // brighter than the vessels (bone) are kept out of the lumen by an automatic upper bound.
+    std::optional<double> upper = p.upper_hu;
+    Volume<float> tube;
+    double t0 = 0;
+    if (!p.threshold_hu) {
+        const double smax = std::max({g.spacing[0], g.spacing[1], g.spacing[2]});
+        tube = vesselness(sm, std::max(0.5, smax), std::max(2.0, 2 * smax), 4);
+        std::vector<float> tv;
+        for (size_t l = 0; l < n; ++l)
+            if (roi[l] && sm.data[l] > background) tv.push_back(tube.data[l]);
+        const double vmax = tv.empty() ? 0.0 : percentile(tv, 0.999);
+        std::vector<float> vessel_vals;
+        for (size_t l = 0; l < n; ++l)
+            if (roi[l] && sm.data[l] > background && vmax > 0 && tube.data[l] >= 0.5 * vmax) vessel_vals.push_back(sm.data[l]);
+        if (vessel_vals.size() >= 10) {
+            const double plateau_v = percentile(vessel_vals, 0.5);
+            t0 = 0.5 * (background + plateau_v);
+            out.qa.emplace_back("vessel_plateau_hu", plateau_v);
+            out.qa.emplace_back("vessel_voxels", static_cast<double>(vessel_vals.size()));
+            const double bone_above = plateau_v + 1.5 * (plateau_v - background);
+            if (!upper && roi_max > bone_above) {
+                upper = bone_above;
+                out.qa.emplace_back("auto_upper_hu", bone_above);
+                rep.info("segment: voxels up to " + shortest(roi_max) + " HU, brighter than the vessels' " + shortest(plateau_v) +
+                         " HU (bone): the lumen is limited to " + shortest(bone_above) + " HU");
+            }
+        } else {
+            t0 = otsu_threshold(sm, roi);  // no tubular structure found: the histogram split
+            out.qa.emplace_back("otsu_hu", t0);
+        }
+    }
+    // Bone: above the upper bound, grown by one voxel (its partial-volume rim has vessel-like intensities
+    // and would join a vessel that touches it).
+    std::vector<std::uint8_t> near_bone(n, 0);
+    if (upper && !p.upper_hu) {
+        const std::int64_t nx = g.size[0], ny = g.size[1], nz = g.size[2];
+        for (std::int64_t k = 0; k < nz; ++k)
+            for (std::int64_t j = 0; j < ny; ++j)
+                for (std::int64_t i = 0; i < nx; ++i) {
+                    if (!(sm.data[g.linear(i, j, k)] > *upper)) continue;
+                    for (std::int64_t c = std::max<std::int64_t>(0, k - 1); c <= std::min(nz - 1, k + 1); ++c)
+                        for (std::int64_t b = std::max<std::int64_t>(0, j - 1); b <= std::min(ny - 1, j + 1); ++b)
+                            for (std::int64_t a = std::max<std::int64_t>(0, i - 1); a <= std::min(nx - 1, i + 1); ++a) near_bone[g.linear(a, b, c)] = 1;
+                }
+        out.qa.emplace_back("bone_voxels_excluded", static_cast<double>(std::count(near_bone.begin(), near_bone.end(), 1)));
+    }
     // The lumen component at a threshold: seed-connected or the automatic choice.
     auto components_at = [&](double t) {
         Volume<std::uint8_t> m{g, std::vector<std::uint8_t>(n, 0)};
-        for (size_t l = 0; l < n; ++l) m.data[l] = sm.data[l] >= t && (!p.upper_hu || sm.data[l] <= *p.upper_hu);
+        for (size_t l = 0; l < n; ++l) m.data[l] = sm.data[l] >= t && (!upper || sm.data[l] <= *upper) && !near_bone[l];
         return connected_components(m);
     };
     // Automatic vessel choice: among components leaving the ROI at two or more ends (a vessel passes
-    // through; bone and calcifications mostly do not), the largest; otherwise the largest.
+    // through; bone and calcifications mostly do not), the most tubular (largest sum of vesselness; the
+    // largest when there is none); otherwise the first of them.
     auto auto_component = [&](const Components& cc) {
-        for (size_t c = 0; c < cc.sizes.size(); ++c) {
-            Volume<std::uint8_t> m{g, std::vector<std::uint8_t>(n, 0)};
-            for (size_t l = 0; l < n; ++l) m.data[l] = cc.labels.data[l] == static_cast<int>(c + 1);
-            if (border_crossings(m, roi, p.min_end_area_mm2).size() >= 2) return static_cast<int>(c + 1);
-            if (c >= 8) break;
+        std::vector<double> mass(cc.sizes.size(), 0.0);
+        for (size_t c = 0; c < cc.sizes.size(); ++c) mass[c] = static_cast<double>(cc.sizes[c]);
+        if (!tube.data.empty()) {
+            std::fill(mass.begin(), mass.end(), 0.0);
+            for (size_t l = 0; l < n; ++l)
+                if (cc.labels.data[l] > 0) mass[static_cast<size_t>(cc.labels.data[l] - 1)] += tube.data[l];
         }
-        return 1;
+        std::vector<size_t> order(mass.size());
+        for (size_t c = 0; c < order.size(); ++c) order[c] = c;
+        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return mass[a] > mass[b]; });
+        for (size_t q = 0; q < order.size() && q < 8; ++q) {
+            Volume<std::uint8_t> m{g, std::vector<std::uint8_t>(n, 0)};
+            for (size_t l = 0; l < n; ++l) m.data[l] = cc.labels.data[l] == static_cast<int>(order[q] + 1);
+            if (border_crossings(m, roi, p.min_end_area_mm2).size() >= 2) return static_cast<int>(order[q] + 1);
+        }
+        return order.empty() ? 1 : static_cast<int>(order.front() + 1);
     };
     double threshold;
     if (p.threshold_hu) {
         threshold = *p.threshold_hu;
     } else {
-        // Half maximum: midway between the background and the lumen plateau of the chosen vessel (robust to
-        // bone, which an Otsu threshold of the whole ROI would follow).
-        const double t0 = otsu_threshold(sm, roi);
+        // Half maximum: midway between the background and the lumen plateau of the chosen vessel.
         const Components cc = components_at(t0);
         if (cc.sizes.empty()) throw InputError("segment: no voxel above the automatic threshold " + shortest(t0) + " HU");
         int label = 0;
@@ -456,7 +528,7 @@ Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, 
             if (cc.labels.data[l] == label) vals.push_back(sm.data[l]);
         const double plateau = percentile(vals, 0.9);
         threshold = 0.5 * (background + plateau);
-        out.qa.emplace_back("otsu_hu", t0);
+        out.qa.emplace_back("initial_threshold_hu", t0);
         out.qa.emplace_back("lumen_plateau_hu", plateau);
     }
     out.qa.emplace_back("threshold_hu", threshold);
@@ -466,9 +538,9 @@ Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, 
     }
     for (size_t q = 0; q < seeds.size(); ++q) {
         const float v = sm.data[g.linear(seeds[q][0], seeds[q][1], seeds[q][2])];
-        if (v < threshold || (p.upper_hu && v > *p.upper_hu)) {
+        if (v < threshold || (upper && v > *upper)) {
             throw InputError("segment: --seed " + vec3(p.seeds_mm[q]) + " mm is not in the lumen: its smoothed intensity " + shortest(v) +
-                             " HU is outside the lumen range [" + shortest(threshold) + ", " + (p.upper_hu ? shortest(*p.upper_hu) : "inf") +
+                             " HU is outside the lumen range [" + shortest(threshold) + ", " + (upper ? shortest(*upper) : "inf") +
                              "] HU");
         }
     }
@@ -548,7 +620,9 @@ Segmentation segment_volume(const Volume<float>& ct_in, const SegmentParams& p, 
 
 Segmentation segment(const std::string& image_path, const SegmentParams& p, Reporter& rep) {
     validate(p);
-    return segment_volume(read_image<float>(image_path), p, rep);
+    const Volume<float> ct = read_image<float>(image_path);
+    check_finite(ct, image_path);
+    return segment_volume(ct, p, rep);
 }
 
 }  // namespace aneu::pipeline

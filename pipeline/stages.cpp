@@ -50,6 +50,8 @@ void validate(const CondenseStageParams& p) {
         const auto& b = *p.region_box;
         if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("condense: region box needs min < max on every axis");
     }
+    if (!(p.region_margin_mm >= 0 && p.region_margin_mm < 1e3)) throw InputError("condense: --region-margin-mm must be >= 0");
+    if (p.region_margin_mm > 0 && p.region_label.empty()) throw InputError("condense: --region-margin-mm needs --region-label");
 }
 std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p) {
     const auto& n = p.numeric;
@@ -64,7 +66,8 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseSt
             {"residual_columns", std::to_string(n.residual_columns)},
             {"region_sphere_mm", sphere},
             {"region_box_mm", box},
-            {"region_label", p.region_label}};
+            {"region_label", p.region_label},
+            {"region_margin_mm", shortest(p.region_margin_mm)}};
 }
 
 std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
@@ -79,6 +82,21 @@ std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
         for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
             if (v.tet_region[t] == r)
                 for (Eigen::Index a = 0; a < v.tets.cols(); ++a) in_label[static_cast<size_t>(v.tets(t, a))] = 1;
+        if (p.region_margin_mm > 0) {  // grow by the margin (straight-line distance to the region's nodes)
+            std::vector<Eigen::Vector3d> core;
+            for (Eigen::Index n = 0; n < v.nodes.rows(); ++n)
+                if (in_label[static_cast<size_t>(n)]) core.push_back(v.nodes.row(n).transpose());
+            const double m2 = p.region_margin_mm * p.region_margin_mm;
+            const Eigen::VectorXi& outer = v.node_sets.at("outer");
+            for (Eigen::Index k = 0; k < outer.size(); ++k) {
+                const Eigen::Vector3d x = v.nodes.row(outer[k]).transpose();
+                for (const auto& c : core)
+                    if ((x - c).squaredNorm() <= m2) {
+                        in_label[static_cast<size_t>(outer[k])] = 1;
+                        break;
+                    }
+            }
+        }
     }
     std::vector<int> kept;
     const Eigen::VectorXi& outer = v.node_sets.at("outer");

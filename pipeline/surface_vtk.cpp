@@ -24,6 +24,7 @@
 #include <vtkPoints.h>
 #include <vtkPolyData.h>
 #include <vtkPolyDataConnectivityFilter.h>
+#include <vtkPolyDataReader.h>
 #include <vtkPolyDataToImageStencil.h>
 #include <vtkSTLReader.h>
 #include <vtkSTLWriter.h>
@@ -217,7 +218,37 @@ SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>&
     return s;
 }
 
-SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach) {
+SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& region, const EndPlane& plane) {
+    auto poly = to_vtk(s);
+    vtkNew<vtkDoubleArray> sc;
+    sc->SetNumberOfValues(s.V.rows());
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i)
+        sc->SetValue(i, region[static_cast<size_t>(i)] ? plane.normal.dot(s.V.row(i).transpose() - plane.point) : -1.0);
+    poly->GetPointData()->SetScalars(sc);
+    vtkNew<vtkClipPolyData> clip;
+    clip->SetInputData(poly);
+    clip->SetValue(0.0);
+    clip->InsideOutOn();  // keep scalar <= 0
+    vtkNew<vtkTriangleFilter> tri;
+    tri->SetInputConnection(clip->GetOutputPort());
+    vtkNew<vtkCleanPolyData> clean;  // merge the points the clip duplicated at the cut
+    clean->SetInputConnection(tri->GetOutputPort());
+    clean->SetTolerance(0.0);
+    clean->Update();
+    SurfaceData out = from_vtk(largest_piece(clean->GetOutput()));
+    for (Eigen::Index i = 0; i < out.V.rows(); ++i) {
+        const Eigen::Vector3d x = out.V.row(i).transpose();
+        const double d = plane.normal.dot(x - plane.point);
+        if (std::abs(d) < 1e-6) out.V.row(i) = (x - d * plane.normal).transpose();
+    }
+    return out;
+}
+
+namespace {
+double disc_radius(const EndPlane& p, double reach, double margin_mm) { return margin_mm >= 0 ? 1.5 * p.radius_mm + margin_mm : reach * (p.radius_mm + 1.0); }
+}  // namespace
+
+SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm) {
     auto poly = to_vtk(s);
     // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
     // the vertices beyond the plane that reach it through an edge crossing the plane within `reach` ×
@@ -231,7 +262,7 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
         }
     std::vector<double> scalar(static_cast<size_t>(nv), -1.0);
     for (const auto& p : planes) {
-        const double R = reach * (p.radius_mm + 1.0);
+        const double R = disc_radius(p, reach, margin_mm);
         std::vector<double> d(static_cast<size_t>(nv));
         for (Eigen::Index i = 0; i < nv; ++i) d[static_cast<size_t>(i)] = p.normal.dot(s.V.row(i).transpose() - p.point);
         std::vector<int> comp(static_cast<size_t>(nv), -1);
@@ -293,7 +324,7 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
         Eigen::Vector3d x = out.V.row(i).transpose();
         for (const auto& p : planes) {
             const double d = p.normal.dot(x - p.point);
-            if (std::abs(d) < 1e-6 && (x - p.point).norm() < reach * (p.radius_mm + 1.0)) x -= d * p.normal;
+            if (std::abs(d) < 1e-6 && (x - p.point).norm() < disc_radius(p, reach, margin_mm)) x -= d * p.normal;
         }
         out.V.row(i) = x.transpose();
     }
@@ -328,7 +359,7 @@ void smooth_surface(SurfaceData& s, int iterations, double passband) {
 
 SurfaceData read_mesh_file(const std::string& path) {
     std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path + ": no such file (expected a surface mesh: .stl, .vtp, .obj, .ply)");
+    if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path + ": no such file (expected a surface mesh: .stl, .vtp, .vtk, .obj, .ply)");
     vtkSmartPointer<vtkPolyData> poly;
     auto run = [&](auto reader) {
         reader->SetFileName(path.c_str());
@@ -343,8 +374,14 @@ SurfaceData read_mesh_file(const std::string& path) {
         run(vtkSmartPointer<vtkOBJReader>::New());
     } else if (ends_with(path, ".ply")) {
         run(vtkSmartPointer<vtkPLYReader>::New());
+    } else if (ends_with(path, ".vtk")) {  // legacy VTK polydata (VMTK, AneuriskWeb)
+        auto reader = vtkSmartPointer<vtkPolyDataReader>::New();
+        reader->SetFileName(path.c_str());
+        if (!reader->IsFilePolyData()) throw InputError(path + ": not a legacy VTK POLYDATA file (expected a surface mesh)");
+        reader->Update();
+        poly = reader->GetOutput();
     } else {
-        throw InputError(path + ": unsupported surface format (expected .stl, .vtp, .obj or .ply)");
+        throw InputError(path + ": unsupported surface format (expected .stl, .vtp, .vtk, .obj or .ply)");
     }
     if (!poly || poly->GetNumberOfCells() == 0) throw InputError(path + ": cannot read a surface from the file (no cells)");
     vtkNew<vtkTriangleFilter> tri;

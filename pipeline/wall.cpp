@@ -469,7 +469,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     r.qa.emplace_back("outer_isosurface_triangles", static_cast<double>(outer.F.rows()));
     // Not decimated before remeshing: VTK's quadric and DecimatePro decimations were both measured to leave
     // non-manifold edges on this surface; CGAL remeshes the fine isosurface directly.
-    outer = clip_at_planes(outer, planes);
+    outer = clip_at_planes(outer, planes, 3.0, t_max + 2 * h);
     std::vector<std::vector<int>> outer_loops;
     try {
         outer_loops = boundary_loops(outer);

@@ -22,6 +22,9 @@ PACKAGES=(
   calculix-ccx chromium
   # the batch test finds the running stage with pgrep (procps is not in minimal Debian images)
   procps
+  # the real-data corpus test reads each case's QA (inspect --json) with python3; the bad-input test writes
+  # a float volume with perl (perl-base is essential, but say what is used)
+  python3 perl
 )
 
 if [ "$(id -u)" -eq 0 ]; then

@@ -75,7 +75,7 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
     } else {
         if (!fs::exists(c.source)) throw InputError("case config '" + config + "': [run] source '" + c.source + "': no such file or directory");
         const std::string e = lower_ext(c.source);
-        if (e == ".stl" || e == ".vtp" || e == ".obj" || e == ".ply") {
+        if (e == ".stl" || e == ".vtp" || e == ".vtk" || e == ".obj" || e == ".ply") {
             lumen_surface = c.source;
         } else {
             c.steps.push_back({"segment", c.source, file("segment.h5"), file("segment.h5")});

@@ -107,6 +107,8 @@ void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::
         c->add_option("--region-sphere", *sphere, "working region x,y,z,radius [mm]")->delimiter(',')->expected(4);
         c->add_option("--region-box", *box, "working region xmin,ymin,zmin,xmax,ymax,zmax [mm]")->delimiter(',')->expected(6);
         c->add_option("--region-label", p->region_label, "only nodes of this tissue region (artery, aneurysm)");
+        c->add_option("--region-margin-mm", p->region_margin_mm, "with --region-label: also nodes within this distance of the region")
+            ->capture_default_str();
     }
 }
 

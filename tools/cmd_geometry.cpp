@@ -120,7 +120,7 @@ void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, 
                 pipeline::validate(*p);
                 return pipeline::parameter_list(*p);
             });
-        c->get_option("input")->description("segment stage file (.h5), or a lumen surface from another tool (.stl, .vtp, .obj, .ply)");
+        c->get_option("input")->description("segment stage file (.h5), or a lumen surface from another tool (.stl, .vtp, .vtk, .obj, .ply)");
         c->add_option("--edge-mm", p->edge_mm, "target edge length")->capture_default_str();
         c->add_option("--remesher", p->remesher, "netgen (published method) or cgal (isotropic remeshing)")
             ->check(CLI::IsMember({"netgen", "cgal"}))
@@ -138,6 +138,8 @@ void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, 
         c->add_option("--cap-tolerance-mm", p->cap_tolerance_mm, "surface input: a flat end cap's vertices lie at most this from its fitted plane")
             ->capture_default_str();
         c->add_option("--input-scale", p->input_scale, "surface input: multiply coordinates by this (1000 for a file in metres)")->capture_default_str();
+        c->add_option("--end-clearance-mm", p->end_clearance_mm, "move end planes inward until other vessels are this far from the cut")
+            ->capture_default_str();
         c->add_option("--snapshot", *png, "render the labelled surface to this PNG (needs X: xvfb-run -a)");
     }
     {

@@ -51,6 +51,7 @@ void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, st
     c->add_option("--lumen-hu", p.lumen_hu, "contrast-filled lumen [HU]")->capture_default_str();
     c->add_option("--tissue-hu", p.tissue_hu, "soft tissue [HU]")->capture_default_str();
     c->add_option("--bone-hu", p.bone_hu, "bone [HU]")->capture_default_str();
+    c->add_option("--bone-gap-mm", p.bone_gap_mm, "gap between the sac and the bone (0 = touching)")->capture_default_str();
     c->add_option("--psf-sigma-mm", p.psf_sigma_mm, "point-spread function sigma [mm]")->capture_default_str();
     c->add_option("--noise-sd-hu", p.noise_sd_hu, "Gaussian noise standard deviation [HU]")->capture_default_str();
     c->add_option("--supersampling", p.supersampling, "sub-samples per voxel edge (partial volume)")->capture_default_str();

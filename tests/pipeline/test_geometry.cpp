@@ -451,3 +451,24 @@ TEST(ImageFilters, InsideDistanceOfACylinder) {
     EXPECT_NEAR(d.data[m.grid.linear(20, 20, 10)], 2.0, 1e-5);
     EXPECT_EQ(d.data[m.grid.linear(0, 0, 10)], 0.0f);
 }
+
+// Bone brighter than the contrast, at several distances from the sac (touching included): the automatic
+// threshold comes from the vessels (vesselness), not from a histogram split the bone would pull up.
+TEST(Segment, BoneBrighterThanLumenAtSeveralPlacements) {
+    for (double gap : {1.5, 0.8, 0.3, 0.0}) {
+        PhantomParams p;
+        p.with_bone = true;
+        p.bone_gap_mm = gap;
+        p.bone_hu = 1400.0;
+        p.lumen_hu = 350.0;
+        p.noise_sd_hu = 15.0;
+        p.seed = 11;
+        const Case c = make_case(p);
+        const Segmentation s = segment_volume(c.ct, SegmentParams{});
+        const double dc = dice(s.image, c.truth);
+        std::printf("bone %.1f mm from the sac (1400 HU, lumen 350 HU): Dice %.4f, threshold %.1f HU, upper %.1f HU\n", gap, dc,
+                    value(s.qa, "threshold_hu"), value(s.qa, "auto_upper_hu"));
+        EXPECT_GE(dc, 0.95) << "bone gap " << gap << " mm";
+        EXPECT_LT(value(s.qa, "threshold_hu"), p.lumen_hu) << "bone gap " << gap << " mm";
+    }
+}

@@ -84,6 +84,7 @@ struct SurfaceParams {
     double cap_tolerance_deg = 5.0;       ///< surface input: a cap's faces turn at most this from its plane
     double cap_tolerance_mm = 0.1;        ///< surface input: a cap's vertices lie at most this from its plane
     double input_scale = 1.0;             ///< surface input: coordinates are multiplied by this (1000 for a file in metres)
+    double end_clearance_mm = 1.0;        ///< end planes move inward until other vessels are this far from the cut (≥ 2 × the wall)
 };
 void validate(const SurfaceParams& p);
 std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p);

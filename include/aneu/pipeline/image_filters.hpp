@@ -37,6 +37,12 @@ Volume<std::uint8_t> fill_holes(const Volume<std::uint8_t>& m);
 /// measures to the object's own contour voxels instead, which is not the radius this needs.
 Volume<float> inside_distance_mm(const Volume<std::uint8_t>& m);
 
+/// Bright-tube measure per voxel (Frangi's vesselness through ITK's HessianToObjectnessMeasure, object
+/// dimension 1, α = β = 0.5, γ = 50 HU), the maximum over `steps` scales from `sigma_min_mm` to
+/// `sigma_max_mm` (logarithmic, scale-normalised Hessians). High along vessels; low on bone plates, blobs
+/// and flat tissue.
+Volume<float> vesselness(const Volume<float>& v, double sigma_min_mm, double sigma_max_mm, int steps);
+
 /// Otsu's threshold of the values of `v` where `roi` is non-zero (all voxels if `roi` is empty).
 double otsu_threshold(const Volume<float>& v, const std::vector<std::uint8_t>& roi);
 

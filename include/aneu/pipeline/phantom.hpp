@@ -36,6 +36,7 @@ struct PhantomParams {
     double lumen_hu = 400.0;
     double tissue_hu = 40.0;
     double bone_hu = 1200.0;
+    double bone_gap_mm = 1.5;          ///< gap between the sac and the bone (0 = touching)
     double psf_sigma_mm = 0.3;         ///< Gaussian point-spread function (FWHM = 2.355 sigma)
     double noise_sd_hu = 10.0;         ///< additive Gaussian noise
     int supersampling = 4;             ///< sub-samples per voxel edge for partial volume and the truth mask

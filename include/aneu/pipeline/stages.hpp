@@ -49,6 +49,7 @@ struct CondenseStageParams {
     std::optional<std::array<double, 4>> region_sphere;  ///< x, y, z, radius [mm]
     std::optional<std::array<double, 6>> region_box;     ///< xmin, ymin, zmin, xmax, ymax, zmax [mm]
     std::string region_label;                            ///< only nodes of tets of this region ("" = all)
+    double region_margin_mm = 0.0;                       ///< ... and nodes within this distance of them (the neck's surroundings)
 };
 void validate(const CondenseStageParams& p);
 std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p);

@@ -40,7 +40,13 @@ SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>&
 /// (radius + 1 mm) of its point are removed (another vessel passing beyond the plane elsewhere is kept); the
 /// cut is exact (linear scalar = signed distance to the plane) and its vertices are snapped into the plane.
 /// Of what remains, the largest connected piece is kept. Boundary loops lie in the planes.
-SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach = 3.0);
+/// With `margin_mm` ≥ 0 the disc's radius is 1.5 × radius + `margin_mm` instead (the wall's outer surface:
+/// a wider disc would also cut the wall of a parent vessel that passes beyond a short branch's plane).
+SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach = 3.0, double margin_mm = -1.0);
+
+/// Cuts `s` at one plane, only where `region` (per vertex) is set: the region's part beyond the plane is removed
+/// (exact cut, new loop snapped into the plane); the rest of the surface is untouched. The largest piece is kept.
+SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& region, const EndPlane& plane);
 
 /// Non-shrinking smoothing (VTK windowed sinc, Taubin); boundary vertices do not move.
 void smooth_surface(SurfaceData& s, int iterations, double passband);
