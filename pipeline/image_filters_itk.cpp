@@ -66,10 +66,10 @@ Volume<std::uint8_t> connected_threshold(const Volume<float>& v, float lower, fl
     return from_itk<std::uint8_t>(f->GetOutput());
 }
 
-Components connected_components(const Volume<std::uint8_t>& m) {
+Components connected_components(const Volume<std::uint8_t>& m, bool full_connectivity) {
     auto cc = itk::ConnectedComponentImageFilter<Img<std::uint8_t>, Img<std::int32_t>>::New();
     cc->SetInput(to_itk(m));
-    cc->SetFullyConnected(true);
+    cc->SetFullyConnected(full_connectivity);
     auto rl = itk::RelabelComponentImageFilter<Img<std::int32_t>, Img<std::int32_t>>::New();
     rl->SetInput(cc->GetOutput());
     update(rl, "connected components");

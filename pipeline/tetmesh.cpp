@@ -231,6 +231,7 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
     const Eigen::Index nt = v.tets.rows();
     double min_dih = 180, max_dih = 0, max_re = 0, sum_re = 0;
     int slivers = 0;
+    Eigen::Index worst = 0;
     static constexpr int FACES[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
     for (Eigen::Index t = 0; t < nt; ++t) {
         Eigen::Vector3d x[4];
@@ -244,6 +245,7 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
                 tmin = std::min(tmin, ang);
                 max_dih = std::max(max_dih, ang);
             }
+        if (tmin < min_dih) worst = t;
         min_dih = std::min(min_dih, tmin);
         slivers += tmin < 5.0;
         const Eigen::Vector3d a = x[1] - x[0], b = x[2] - x[0], c = x[3] - x[0];
@@ -263,6 +265,20 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
                                                   {"max_radius_edge", max_re},
                                                   {"mean_radius_edge", nt ? sum_re / static_cast<double>(nt) : 0.0},
                                                   {"slivers_below_5deg", static_cast<double>(slivers)}};
+    if (nt > 0) {  // where the flattest tetrahedron is, and how many of its nodes lie on the caps, inner and outer wall
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        for (int a = 0; a < 4; ++a) c += v.nodes.row(v.tets(worst, a)).transpose() / 4.0;
+        q.emplace_back("worst_tet_x_mm", c.x());
+        q.emplace_back("worst_tet_y_mm", c.y());
+        q.emplace_back("worst_tet_z_mm", c.z());
+        for (const char* set : {"fixed", "inner", "outer"}) {
+            const auto it = v.node_sets.find(set);
+            if (it == v.node_sets.end()) continue;
+            int on = 0;
+            for (int a = 0; a < 4; ++a) on += (it->second.array() == v.tets(worst, a)).any();
+            q.emplace_back(std::string("worst_tet_nodes_") + set, on);
+        }
+    }
     // Layers through the wall: edge-graph distance from the inner nodes, read at the outer nodes.
     const auto in_it = v.node_sets.find("inner"), out_it = v.node_sets.find("outer");
     if (in_it != v.node_sets.end() && out_it != v.node_sets.end() && in_it->second.size() && out_it->second.size()) {

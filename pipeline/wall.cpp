@@ -13,6 +13,7 @@
 #include <cmath>
 #include <map>
 #include <queue>
+#include <set>
 
 #include <Eigen/Geometry>
 
@@ -31,7 +32,7 @@ constexpr double PI = 3.14159265358979323846;
 
 /// Per-vertex sac weight in [0,1]: smoothstep of the geodesic (edge-graph) signed distance to the label
 /// border over `blend` mm (0 on the artery far from the neck, 1 on the sac).
-Eigen::VectorXd sac_weight(const SurfaceData& s, double blend) {
+Eigen::VectorXd sac_weight(const SurfaceData& s, double blend, double* sac_depth = nullptr) {
     const Eigen::Index nv = s.V.rows();
     std::vector<char> art(static_cast<size_t>(nv), 0), sac(static_cast<size_t>(nv), 0);
     std::vector<std::vector<std::pair<int, double>>> adj(static_cast<size_t>(nv));
@@ -61,6 +62,12 @@ Eigen::VectorXd sac_weight(const SurfaceData& s, double blend) {
                 d[static_cast<size_t>(w)] = c + L;
                 q.push({c + L, w});
             }
+    }
+    if (sac_depth) {  // the largest distance of a sac vertex from the label border
+        *sac_depth = 0;
+        for (Eigen::Index v = 0; v < nv; ++v)
+            if (sac[static_cast<size_t>(v)] && !art[static_cast<size_t>(v)] && std::isfinite(d[static_cast<size_t>(v)]))
+                *sac_depth = std::max(*sac_depth, d[static_cast<size_t>(v)]);
     }
     Eigen::VectorXd w(nv);
     for (Eigen::Index v = 0; v < nv; ++v) {
@@ -243,53 +250,52 @@ void fill_block(FieldBlock& fb, const BandBlocks& bb, size_t b, const ImageGrid&
             }
 }
 
-/// Annulus between an inner and an outer loop lying in one plane, oriented along the plane's normal.
+/// Annulus between an inner and an outer loop lying in one plane, oriented along the plane's normal. Both
+/// loops run counter-clockwise about the normal (signed area), the outer starts at the vertex nearest the
+/// inner's first, and the strip advances on whichever loop is behind in arc-length fraction. Real ends are not
+/// round (an elliptic or dented cross-section): matching by angle about the centroid there made 2 mm
+/// triangles across the cap with 6° angles, and flat tetrahedra on them.
 void zip_annulus(const Eigen::MatrixX3d& V, std::vector<int> in, std::vector<int> out, const Eigen::Vector3d& n, std::vector<Eigen::Vector3i>& faces) {
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (int v : in) c += V.row(v).transpose();
-    c /= static_cast<double>(in.size());
-    const Eigen::Vector3d u = n.unitOrthogonal(), w = n.cross(u);
-    auto ang = [&](int v) {
-        const Eigen::Vector3d d = V.row(v).transpose() - c;
-        return std::atan2(d.dot(w), d.dot(u));
+    auto signed_area = [&](const std::vector<int>& l) {
+        Eigen::Vector3d a = Eigen::Vector3d::Zero();
+        for (size_t i = 0; i < l.size(); ++i) a += V.row(l[i]).transpose().cross(V.row(l[(i + 1) % l.size()]).transpose());
+        return 0.5 * a.dot(n);
     };
-    // Both loops counter-clockwise about n; the inner starts at its smallest angle, the outer at the vertex
-    // nearest that angle, so the two sweeps run side by side.
-    auto ccw = [&](std::vector<int>& l) {
-        double turn = 0;
-        for (size_t i = 0; i < l.size(); ++i) {
-            double d = ang(l[(i + 1) % l.size()]) - ang(l[i]);
-            if (d > PI) d -= 2 * PI;
-            if (d < -PI) d += 2 * PI;
-            turn += d;
+    if (signed_area(in) < 0) std::reverse(in.begin(), in.end());
+    if (signed_area(out) < 0) std::reverse(out.begin(), out.end());
+    {
+        size_t best = 0;
+        double bd = 1e300;
+        for (size_t o = 0; o < out.size(); ++o) {
+            const double d = (V.row(out[o]) - V.row(in[0])).squaredNorm();
+            if (d < bd) {
+                bd = d;
+                best = o;
+            }
         }
-        if (turn < 0) std::reverse(l.begin(), l.end());
+        std::rotate(out.begin(), out.begin() + static_cast<std::ptrdiff_t>(best), out.end());
+    }
+    auto fractions = [&](const std::vector<int>& l) {  // arc-length fraction at each vertex, and 1 at the end
+        std::vector<double> s(l.size() + 1, 0.0);
+        for (size_t i = 1; i <= l.size(); ++i) s[i] = s[i - 1] + (V.row(l[i % l.size()]) - V.row(l[i - 1])).norm();
+        for (double& x : s) x /= s.back();
+        return s;
     };
-    auto wrap = [](double d) {
-        while (d > PI) d -= 2 * PI;
-        while (d <= -PI) d += 2 * PI;
-        return d;
-    };
-    ccw(in);
-    ccw(out);
-    std::rotate(in.begin(), std::min_element(in.begin(), in.end(), [&](int a, int b) { return ang(a) < ang(b); }), in.end());
-    const double a0 = ang(in[0]);
-    std::rotate(out.begin(), std::min_element(out.begin(), out.end(), [&](int a, int b) { return std::abs(wrap(ang(a) - a0)) < std::abs(wrap(ang(b) - a0)); }),
-                out.end());
-    // Unwrapped angles a[0..n] (a[n] = a[0] + 2π), the outer's measured from a0.
-    auto unwrap = [&](const std::vector<int>& l, double start) {
-        std::vector<double> a(l.size() + 1);
-        a[0] = start;
-        for (size_t i = 1; i < l.size(); ++i) a[i] = a[i - 1] + wrap(ang(l[i]) - ang(l[i - 1]));
-        a[l.size()] = a[0] + 2 * PI;
-        return a;
-    };
-    const std::vector<double> ai = unwrap(in, a0), ao = unwrap(out, a0 + wrap(ang(out[0]) - a0));
+    const std::vector<double> ai = fractions(in), ao = fractions(out);
     size_t i = 0, o = 0;
     const size_t ni = in.size(), no = out.size();
     std::vector<Eigen::Vector3i> strip;
     while (i < ni || o < no) {
-        const bool adv_in = o >= no || (i < ni && ai[i + 1] <= ao[o + 1]);
+        // Advance the loop whose next vertex comes first; on a tie, the one giving the shorter diagonal.
+        bool adv_in;
+        if (o >= no) {
+            adv_in = true;
+        } else if (i >= ni) {
+            adv_in = false;
+        } else {
+            const double di = (V.row(in[(i + 1) % ni]) - V.row(out[o % no])).norm(), dout = (V.row(out[(o + 1) % no]) - V.row(in[i % ni])).norm();
+            adv_in = ai[i + 1] < ao[o + 1] - 1e-9 || (std::abs(ai[i + 1] - ao[o + 1]) <= 1e-9 && di <= dout);
+        }
         if (adv_in) {
             strip.emplace_back(in[i % ni], in[(i + 1) % ni], out[o % no]);
             ++i;
@@ -364,7 +370,17 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     r.qa.emplace_back("grid_spacing_mm", h);
 
     // The lumen extended past its ends (distance surface: open; sign surface: closed).
-    Eigen::VectorXd w = sac_weight(lumen, p.blend_mm);
+    // The blend spans ±blend/2 about the label border; a sac shallower than twice that (a 2 mm bleb) would
+    // never reach its own thickness, so the blend narrows to half the sac's depth there (said in the log).
+    double sac_depth = 0, blend = p.blend_mm;
+    (void)sac_weight(lumen, blend, &sac_depth);
+    if (sac_depth > 0 && blend > 0.5 * sac_depth) {
+        blend = 0.5 * sac_depth;
+        rep.info("wall: the sac is " + shortest(sac_depth) + " mm deep from its border; thickness blend narrowed from " + shortest(p.blend_mm) + " to " +
+                 shortest(blend) + " mm");
+    }
+    r.qa.emplace_back("blend_used_mm", blend);
+    Eigen::VectorXd w = sac_weight(lumen, blend);
     const double ext = 2 * t_max + 4 * h;
     Eigen::VectorXd w_ext = w;
     const SurfaceData dist_surf = extend_lumen(lumen, planes, ext, false, &w_ext);
@@ -414,7 +430,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     };
     const Eigen::MatrixX3i FA = as_matrix(fa), FS = as_matrix(fs);
     auto local_thickness = [&](double dA, double dS) {
-        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA - dS) / (2 * p.blend_mm) + 0.5, 0.0, 1.0);
+        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA - dS) / (2 * blend) + 0.5, 0.0, 1.0);
         ws = ws * ws * (3 - 2 * ws);
         return t_art + (t_sac - t_art) * ws;
     };
@@ -490,39 +506,128 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     // Onto the exact offset: Newton steps along the distance gradient on φ(x) = d(x) − t(x) with exact
     // distances, so the wall's thickness does not depend on the grid; cut-end vertices stay in their planes
     // (the lumen runs straight through them, so the gradient lies in the plane there).
-    {
-        const auto loops = boundary_loops(outer);
-        std::vector<int> plane_of(static_cast<size_t>(outer.V.rows()), -1);
-        for (const auto& l : loops) {
-            Eigen::Vector3d c = Eigen::Vector3d::Zero();
-            for (int v : l) c += outer.V.row(v).transpose();
-            c /= static_cast<double>(l.size());
-            int best = 0;
-            for (size_t q = 1; q < planes.size(); ++q)
-                if (std::abs(planes[q].normal.dot(c - planes[q].point)) + 1e-3 * (c - planes[q].point).norm() <
-                    std::abs(planes[static_cast<size_t>(best)].normal.dot(c - planes[static_cast<size_t>(best)].point)) + 1e-3 * (c - planes[static_cast<size_t>(best)].point).norm())
-                    best = static_cast<int>(q);
-            for (int v : l) plane_of[static_cast<size_t>(v)] = best;
-        }
+    std::vector<int> plane_of(static_cast<size_t>(outer.V.rows()), -1);
+    for (const auto& l : boundary_loops(outer)) {
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        for (int v : l) c += outer.V.row(v).transpose();
+        c /= static_cast<double>(l.size());
+        int best = 0;
+        for (size_t q = 1; q < planes.size(); ++q)
+            if (std::abs(planes[q].normal.dot(c - planes[q].point)) + 1e-3 * (c - planes[q].point).norm() <
+                std::abs(planes[static_cast<size_t>(best)].normal.dot(c - planes[static_cast<size_t>(best)].point)) + 1e-3 * (c - planes[static_cast<size_t>(best)].point).norm())
+                best = static_cast<int>(q);
+        for (int v : l) plane_of[static_cast<size_t>(v)] = best;
+    }
+    auto project = [&](const std::vector<Eigen::Index>& which) {
+        Eigen::MatrixX3d X(static_cast<Eigen::Index>(which.size()), 3);
+        for (size_t m = 0; m < which.size(); ++m) X.row(static_cast<Eigen::Index>(m)) = outer.V.row(which[m]);
         double moved = 0;
         for (int it = 0; it < 3; ++it) {
-            const NearestOnSurface near = nearest_on_surface(dist_surf, outer.V);
-            const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, outer.V), dS = distance_to_faces(dist_surf.V, FS, outer.V);
-            for (Eigen::Index v = 0; v < outer.V.rows(); ++v) {
-                const Eigen::Vector3d x = outer.V.row(v).transpose(), dir = x - near.point.row(v).transpose();
+            const NearestOnSurface near = nearest_on_surface(dist_surf, X);
+            const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, X), dS = distance_to_faces(dist_surf.V, FS, X);
+            for (Eigen::Index m = 0; m < X.rows(); ++m) {
+                const Eigen::Vector3d x = X.row(m).transpose(), dir = x - near.point.row(m).transpose();
                 if (!(dir.norm() > 1e-9)) continue;
-                const double phi = near.distance[v] - local_thickness(dA[v], dS[v]);
+                const double phi = near.distance[m] - local_thickness(dA[m], dS[m]);
                 Eigen::Vector3d step = -phi * dir.normalized();
-                if (plane_of[static_cast<size_t>(v)] >= 0) {
-                    const Eigen::Vector3d& n = planes[static_cast<size_t>(plane_of[static_cast<size_t>(v)])].normal;
-                    step -= n.dot(step) * n;
-                }
-                outer.V.row(v) += step.transpose();
+                const int pq = plane_of[static_cast<size_t>(which[static_cast<size_t>(m)])];
+                if (pq >= 0) step -= planes[static_cast<size_t>(pq)].normal.dot(step) * planes[static_cast<size_t>(pq)].normal;
+                X.row(m) += step.transpose();
                 if (it == 0) moved = std::max(moved, step.norm());
             }
         }
-        r.qa.emplace_back("projection_largest_move_mm", moved);
+        for (size_t m = 0; m < which.size(); ++m) outer.V.row(which[m]) = X.row(static_cast<Eigen::Index>(m));
+        return moved;
+    };
+    {
+        std::vector<Eigen::Index> all(static_cast<size_t>(outer.V.rows()));
+        for (size_t v = 0; v < all.size(); ++v) all[v] = static_cast<Eigen::Index>(v);
+        r.qa.emplace_back("projection_largest_move_mm", project(all));
     }
+    // Where two vessels run closer than twice the wall, the offset has a sharp crease between them and an outer
+    // surface remeshed at the lumen's edge length cuts across it, through the inner wall (a real Circle of
+    // Willis): split the longest edge of every outer face that meets the lumen, project the new vertices onto the
+    // offset, and repeat while such faces are left and their number falls (at most 8 rounds).
+    int refined = 0, last_bad = 0;
+    for (int round = 0; round < 8; ++round) {
+        SurfaceData both;
+        both.V.resize(lumen.V.rows() + outer.V.rows(), 3);
+        both.V << lumen.V, outer.V;
+        both.F.resize(lumen.F.rows() + outer.F.rows(), 3);
+        both.F << lumen.F, (outer.F.array() + static_cast<int>(lumen.V.rows())).matrix();
+        both.face_label = Eigen::VectorXi::Zero(both.F.rows());
+        const auto pairs = self_intersections(both, 1000000);
+        std::set<int> bad;
+        const int nl = static_cast<int>(lumen.F.rows());
+        for (const auto& [fa2, fb2] : pairs)
+            if ((fa2 < nl) != (fb2 < nl)) bad.insert(std::max(fa2, fb2) - nl);  // outer against inner only
+        if (bad.empty() || (round > 0 && static_cast<int>(bad.size()) >= last_bad)) break;  // done, or not converging
+        last_bad = static_cast<int>(bad.size());
+        rep.debug("wall: refinement round " + std::to_string(round) + ": " + std::to_string(bad.size()) + " outer faces meet the lumen");
+        refined += static_cast<int>(bad.size());
+        std::map<std::pair<int, int>, int> mid;  // edge → its new midpoint vertex
+        std::vector<Eigen::Vector3i> F2;
+        std::vector<Eigen::Index> fresh;
+        for (int f : bad) {
+            int k_long = 0;
+            double L = -1;
+            for (int k = 0; k < 3; ++k) {
+                const double lk = (outer.V.row(outer.F(f, k)) - outer.V.row(outer.F(f, (k + 1) % 3))).norm();
+                if (lk > L) {
+                    L = lk;
+                    k_long = k;
+                }
+            }
+            const int a = outer.F(f, k_long), b = outer.F(f, (k_long + 1) % 3);
+            const std::pair<int, int> e{std::min(a, b), std::max(a, b)};
+            if (mid.count(e)) continue;
+            const Eigen::Index m = outer.V.rows();
+            outer.V.conservativeResize(m + 1, 3);
+            outer.V.row(m) = 0.5 * (outer.V.row(a) + outer.V.row(b));
+            const int pa = plane_of[static_cast<size_t>(a)], pb = plane_of[static_cast<size_t>(b)];
+            plane_of.push_back(pa >= 0 && pa == pb ? pa : -1);
+            mid[e] = static_cast<int>(m);
+            fresh.push_back(m);
+        }
+        // Every face with split edges is divided conformingly (1, 2 or 3 of its edges).
+        for (Eigen::Index f = 0; f < outer.F.rows(); ++f) {
+            int v[3], mm[3], n_split = 0;
+            for (int k = 0; k < 3; ++k) {
+                v[k] = outer.F(f, k);
+                const int b = outer.F(f, (k + 1) % 3);
+                const auto it = mid.find({std::min(v[k], b), std::max(v[k], b)});
+                mm[k] = it == mid.end() ? -1 : it->second;  // midpoint of edge v[k] → v[k+1]
+                n_split += mm[k] >= 0;
+            }
+            if (n_split == 0) {
+                F2.emplace_back(v[0], v[1], v[2]);
+            } else if (n_split == 3) {
+                F2.emplace_back(v[0], mm[0], mm[2]);
+                F2.emplace_back(mm[0], v[1], mm[1]);
+                F2.emplace_back(mm[2], mm[1], v[2]);
+                F2.emplace_back(mm[0], mm[1], mm[2]);
+            } else {
+                // Rotate so that edge 0 is split and, with two splits, edge 1 too.
+                int r0 = 0;
+                for (int k = 0; k < 3; ++k)
+                    if (mm[k] >= 0 && (n_split == 1 || mm[(k + 1) % 3] >= 0)) r0 = k;
+                const int a = v[r0], b = v[(r0 + 1) % 3], c = v[(r0 + 2) % 3], m0 = mm[r0], m1 = mm[(r0 + 1) % 3];
+                if (n_split == 1) {
+                    F2.emplace_back(a, m0, c);
+                    F2.emplace_back(m0, b, c);
+                } else {
+                    F2.emplace_back(m0, b, m1);
+                    F2.emplace_back(a, m0, m1);
+                    F2.emplace_back(a, m1, c);
+                }
+            }
+        }
+        outer.F.resize(static_cast<Eigen::Index>(F2.size()), 3);
+        for (size_t f = 0; f < F2.size(); ++f) outer.F.row(static_cast<Eigen::Index>(f)) = F2[f].transpose();
+        project(fresh);
+    }
+    r.qa.emplace_back("outer_faces_refined", static_cast<double>(refined));
+
     lap("projection");
     const auto loops_out = boundary_loops(outer);
 
@@ -629,8 +734,22 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
             if (L > 0) grad = std::max(grad, std::abs(to_inner.distance[a] - to_inner.distance[b]) / L);
         }
     r.qa.emplace_back("thickness_gradient_max", grad);
-    r.qa.emplace_back("thickness_gradient_blend_allows", 1.5 * std::abs(t_art - t_sac) / p.blend_mm);
+    r.qa.emplace_back("thickness_gradient_blend_allows", 1.5 * std::abs(t_art - t_sac) / blend);
     for (auto& qv : triangle_quality(wall)) r.qa.emplace_back("wall_" + qv.first, qv.second);
+    {  // smallest triangle angle on the inner, outer and cap faces (thin triangles there make flat tetrahedra)
+        double amin[3] = {180, 180, 180};
+        for (Eigen::Index f = 0; f < wall.F.rows(); ++f) {
+            const int part = wall.face_label[f] == 0 ? 0 : wall.face_label[f] == 1 ? 1 : 2;
+            for (int k = 0; k < 3; ++k) {
+                const Eigen::Vector3d a = wall.V.row(wall.F(f, k)), b = wall.V.row(wall.F(f, (k + 1) % 3)), c = wall.V.row(wall.F(f, (k + 2) % 3));
+                const double cosang = (b - a).normalized().dot((c - a).normalized());
+                amin[part] = std::min(amin[part], std::acos(std::clamp(cosang, -1.0, 1.0)) * 180.0 / PI);
+            }
+        }
+        r.qa.emplace_back("min_angle_inner_deg", amin[0]);
+        r.qa.emplace_back("min_angle_outer_deg", amin[1]);
+        r.qa.emplace_back("min_angle_caps_deg", amin[2]);
+    }
     r.qa.emplace_back("enclosed_volume_mm3", enclosed_volume(wall));
     r.qa.emplace_back("time_total_s", std::chrono::duration<double>(clock::now() - t0).count());
     r.wall = std::move(wall);

@@ -44,7 +44,8 @@ ma, ms = qa("wall", "thickness_artery_median_mm"), qa("wall", "thickness_aneurys
 need(abs(ma - ta) <= 0.1 * ta, "artery thickness median %.4f vs %.4f" % (ma, ta))
 if ms is not None:
     need(abs(ms - ts) <= 0.1 * ts, "sac thickness median %.4f vs %.4f" % (ms, ts))
-dmin = qa("tetmesh", "min_dihedral_deg")
+quality = next(e.get("attributes", {}) for e in d["entries"] if e["path"] == "/volume/quality")
+dmin = float(quality["min_dihedral_deg"])
 need(dmin >= 5.0, "min dihedral %.2f deg < 5" % dmin)
 times = {s: stages[s].get("wall_time_s", float("nan")) for s in stages}
 line = "%s\tsac_mm2=%.1f\tthick_artery=%.4f\tthick_sac=%s\tmin_dihedral=%.2f\tends_moved=%d\tfallback=%d/%d\t%s" % (

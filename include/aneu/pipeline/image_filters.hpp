@@ -21,12 +21,13 @@ Volume<float> anisotropic_diffusion(const Volume<float>& v, int iterations, doub
 /// Voxels with lower <= value <= upper connected (26-neighbourhood, ITK "full connectivity") to any seed.
 Volume<std::uint8_t> connected_threshold(const Volume<float>& v, float lower, float upper, const std::vector<Index3>& seeds);
 
-/// Connected components of the non-zero voxels (26-neighbourhood), relabelled 1..n by decreasing size.
+/// Connected components of the non-zero voxels (26-neighbourhood, or 6 with `full_connectivity` false),
+/// relabelled 1..n by decreasing size.
 struct Components {
     Volume<std::int32_t> labels;
     std::vector<std::int64_t> sizes;  ///< voxels of component 1..n at [0..n-1]
 };
-Components connected_components(const Volume<std::uint8_t>& m);
+Components connected_components(const Volume<std::uint8_t>& m, bool full_connectivity = true);
 
 /// Fills cavities of a binary mask (background regions not connected to the image border).
 Volume<std::uint8_t> fill_holes(const Volume<std::uint8_t>& m);
