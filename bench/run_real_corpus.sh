@@ -23,7 +23,7 @@ md=$res/corpus.md
   echo "| case | result | sac (mm²) | thickness artery / sac (mm) | min dihedral (°) | end planes moved | remesher fallback (surface/wall) | time per stage (s) | total (s) | peak memory (MB) |"
   echo "|---|---|---|---|---|---|---|---|---|---|"
 } > "$md"
-for cfg in configs/real/*.toml; do
+for cfg in configs/real/*.toml configs/real/pending/*.toml; do
   id=$(basename "$cfg" .toml)
   start=$(date +%s.%N)
   /usr/bin/time -f "%M" -o "$w/$id.mem" bash tests/cli/test_real_corpus.sh "$prep" "$cfg" "$w" "$tsv" > "$w/$id.log" 2>&1
@@ -32,7 +32,7 @@ for cfg in configs/real/*.toml; do
   mem=$(( $(tail -1 "$w/$id.mem" | tr -cd '0-9') / 1024 ))
   line=$(grep "^$id" "$tsv" | tail -1)
   if [ -z "$line" ]; then
-    echo "| $id | FAILED: $(grep -m1 -E 'error|FAIL' "$w/$id.log" | cut -c1-200 | tr '|' '/') | | | | | | | $total | $mem |" >> "$md"
+    echo "| $id | FAILED: $(grep -m1 -E 'error:|FAIL' "$w/$id.log" | cut -c1-200 | tr '|' '/') | | | | | | | $total | $mem |" >> "$md"
     continue
   fi
   python3 - "$line" "$rc" "$total" "$mem" >> "$md" <<'PY'

@@ -3,6 +3,8 @@
 #include <cstdlib>
 
 #include <vtkActor.h>
+#include <algorithm>
+
 #include <vtkCamera.h>
 #include <vtkCellArray.h>
 #include <vtkCellData.h>
@@ -199,6 +201,22 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
     Eigen::Vector3d view = es.eigenvectors().col(0), up = es.eigenvectors().col(1);
     if (view.dot(Eigen::Vector3d(0.3, -1.0, 0.2)) < 0) view = -view;  // prefer looking from anterior (−y), as radiologists do
+    // ... unless the aneurysm sac is on the other side: the picture is there to show it.
+    for (const auto& layer : scene.layers) {
+        const SurfaceData& sf = layer.surface;
+        const auto it = std::find(sf.label_names.begin(), sf.label_names.end(), "aneurysm");
+        if (it == sf.label_names.end() || sf.face_label.size() != sf.F.rows()) continue;
+        const int sac = static_cast<int>(it - sf.label_names.begin());
+        Eigen::Vector3d c = Eigen::Vector3d::Zero();
+        int n = 0;
+        for (Eigen::Index f = 0; f < sf.F.rows(); ++f)
+            if (sf.face_label[f] == sac) {
+                c += (sf.V.row(sf.F(f, 0)) + sf.V.row(sf.F(f, 1)) + sf.V.row(sf.F(f, 2))).transpose() / 3.0;
+                ++n;
+            }
+        if (n > 0 && (c / n - mean).dot(view) < 0) view = -view;
+        break;
+    }
     if (up.z() < 0) up = -up;
     const Eigen::Vector3d dir = (view + 0.25 * up.cross(view) + 0.25 * up).normalized();
     vtkCamera* cam = ren->GetActiveCamera();

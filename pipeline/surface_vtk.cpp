@@ -108,6 +108,24 @@ double sample(const Volume<float>& v, double i, double j, double k) {
     return r;
 }
 
+/// Flying edges of `values` (borrowed, x fastest) on `img`'s extent at `level`, without normals, gradients or scalars.
+vtkSmartPointer<vtkPolyData> flying_edges(vtkImageData* img, const std::vector<float>& values, double level) {
+    vtkNew<vtkFloatArray> sc;
+    sc->SetNumberOfComponents(1);
+    sc->SetArray(const_cast<float*>(values.data()), static_cast<vtkIdType>(values.size()), 1);  // borrowed, not freed
+    img->GetPointData()->SetScalars(sc);
+    vtkNew<vtkFlyingEdges3D> fe;
+    fe->SetInputData(img);
+    fe->SetValue(0, level);
+    fe->ComputeNormalsOff();
+    fe->ComputeGradientsOff();
+    fe->ComputeScalarsOff();
+    fe->Update();
+    vtkSmartPointer<vtkPolyData> out = vtkSmartPointer<vtkPolyData>::New();
+    out->ShallowCopy(fe->GetOutput());
+    return out;
+}
+
 bool ends_with(const std::string& s, const std::string& suffix) {
     if (s.size() < suffix.size()) return false;
     return std::equal(suffix.rbegin(), suffix.rend(), s.rbegin(),
@@ -126,18 +144,7 @@ SurfaceData isosurface(const Volume<float>& field, double level, bool above_is_i
     img->SetDimensions(static_cast<int>(g.size[0]), static_cast<int>(g.size[1]), static_cast<int>(g.size[2]));
     img->SetOrigin(0, 0, 0);
     img->SetSpacing(1, 1, 1);
-    vtkNew<vtkFloatArray> sc;
-    sc->SetNumberOfComponents(1);
-    sc->SetArray(const_cast<float*>(field.data.data()), static_cast<vtkIdType>(field.data.size()), 1);  // borrowed, not freed
-    img->GetPointData()->SetScalars(sc);
-    vtkNew<vtkFlyingEdges3D> fe;
-    fe->SetInputData(img);
-    fe->SetValue(0, level);
-    fe->ComputeNormalsOff();
-    fe->ComputeGradientsOff();
-    fe->ComputeScalarsOff();
-    fe->Update();
-    vtkSmartPointer<vtkPolyData> poly = fe->GetOutput();
+    vtkSmartPointer<vtkPolyData> poly = flying_edges(img, field.data, level);
     if (poly->GetNumberOfPolys() == 0) throw InputError("isosurface: no surface at level " + shortest(level));
     if (largest_only) poly = largest_piece(poly);
     SurfaceData s = from_vtk(poly);
@@ -184,20 +191,8 @@ SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>&
                        static_cast<int>(b.first[1] + b.size[1] - 1), static_cast<int>(b.first[2]), static_cast<int>(b.first[2] + b.size[2] - 1));
         img->SetOrigin(0, 0, 0);
         img->SetSpacing(1, 1, 1);
-        vtkNew<vtkFloatArray> sc;
-        sc->SetNumberOfComponents(1);
-        sc->SetArray(const_cast<float*>(b.values.data()), static_cast<vtkIdType>(b.values.size()), 1);  // borrowed
-        img->GetPointData()->SetScalars(sc);
-        vtkNew<vtkFlyingEdges3D> fe;
-        fe->SetInputData(img);
-        fe->SetValue(0, level);
-        fe->ComputeNormalsOff();
-        fe->ComputeGradientsOff();
-        fe->ComputeScalarsOff();
-        fe->Update();
-        if (fe->GetOutput()->GetNumberOfPolys() == 0) continue;
-        vtkSmartPointer<vtkPolyData> piece = vtkSmartPointer<vtkPolyData>::New();
-        piece->ShallowCopy(fe->GetOutput());
+        vtkSmartPointer<vtkPolyData> piece = flying_edges(img, b.values, level);
+        if (piece->GetNumberOfPolys() == 0) continue;
         pieces.push_back(piece);
         all->AddInputData(piece);
     }

@@ -4,7 +4,8 @@
 # One case of the real-data corpus (configs/real/*.toml, data in sample_data/real/) through `aneuprep run` with
 # the corpus settings and no per-case tuning, then its standards, read from the stages' QA in the bundle:
 #   - every stage ran (exit 0) and the bundle exists;
-#   - surface: an aneurysm sac was labelled (area > 0) when the source is an aneurysm model (AneuRisk);
+#   - surface: an aneurysm sac was labelled (area > 0) when the source is an aneurysm model (AneuRisk), and where the
+#     case has its AneuRisk neck polygon (sample_data/real/necks/), the label is at that neck (real_sac_check.py);
 #   - wall: closed, manifold, free of self-intersections (the stage checks these and stops otherwise; the
 #     QA's self_intersections must be 0), thickness medians within ±10 % of the targets per region;
 #   - tetmesh: no dihedral angle below 5°;
@@ -60,5 +61,12 @@ if fails:
     sys.exit(1)
 EOF
 rc=$?
+# The sac against the AneuRisk neck polygon (ground truth), where the case has one.
+cid=$(echo "$id" | cut -d_ -f1)
+neck=$root/sample_data/real/necks/${cid}_automatedneck.vtk
+if [ -f "$neck" ]; then
+  "$prep" export "$out/surface.h5" --format vtp --surface lumen -o "$out/lumen.vtp" -q &&
+    python3 "$root/tests/cli/real_sac_check.py" "$out/lumen.vtp" "$neck" || rc=1
+fi
 rm -f "$out/case.h5" "$out/fem.h5"
 exit $rc
