@@ -20,8 +20,8 @@ md=$res/corpus.md
   echo "sample_data/real/README.md. Standards: sac labelled (AneuRisk cases), wall closed, manifold and free of"
   echo "self-intersections, thickness medians within 10 % of 0.4 / 0.133 mm, min dihedral angle >= 5°."
   echo
-  echo "| case | result | sac (mm²) | thickness artery / sac (mm) | min dihedral (°) | end planes moved | remesher fallback (surface/wall) | time per stage (s) | total (s) | peak memory (MB) |"
-  echo "|---|---|---|---|---|---|---|---|---|---|"
+  echo "| case | result | sac (mm²) | sac against the true neck | thickness artery / sac (mm) | min dihedral (°) | end planes moved | remesher fallback (surface/wall) | time per stage (s) | total (s) | peak memory (MB) |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
 } > "$md"
 for cfg in configs/real/*.toml configs/real/pending/*.toml; do
   id=$(basename "$cfg" .toml)
@@ -32,17 +32,18 @@ for cfg in configs/real/*.toml configs/real/pending/*.toml; do
   mem=$(( $(tail -1 "$w/$id.mem" | tr -cd '0-9') / 1024 ))
   line=$(grep "^$id" "$tsv" | tail -1)
   if [ -z "$line" ]; then
-    echo "| $id | FAILED: $(grep -m1 -E 'error:|FAIL' "$w/$id.log" | cut -c1-200 | tr '|' '/') | | | | | | | $total | $mem |" >> "$md"
+    echo "| $id | FAILED: $(grep -m1 -E 'aneuprep [a-z]+: error:|^FAIL' "$w/$id.log" | cut -c1-200 | tr '|' '/') | | | | | | | | $total | $mem |" >> "$md"
     continue
   fi
-  python3 - "$line" "$rc" "$total" "$mem" >> "$md" <<'PY'
+  neck=$(grep -m1 -oE "sac (NOT )?found: .*" "$w/$id.log" | sed 's/: labelled [0-9.]* mm², /: /' || true)
+  python3 - "$line" "$rc" "$total" "$mem" "${neck:--}" >> "$md" <<'PY'
 import sys
 f = sys.argv[1].split("\t")
 kv = dict(x.split("=", 1) for x in f[1:7])
 times = f[7] if len(f) > 7 else ""
 fail = f[8] if len(f) > 8 else ""
-print("| %s | %s | %s | %s / %s | %s | %s | %s | %s | %.0f | %s |" % (f[0], "ok" if sys.argv[2] == "0" else fail.replace("|", "/"), kv["sac_mm2"],
-      kv["thick_artery"], kv["thick_sac"], kv["min_dihedral"], kv["ends_moved"], kv["fallback"], times.replace("=", " "), float(sys.argv[3]), sys.argv[4]))
+print("| %s | %s | %s | %s | %s / %s | %s | %s | %s | %s | %.0f | %s |" % (f[0], "ok" if sys.argv[2] == "0" else (fail or "FAIL").replace("|", "/"), kv["sac_mm2"],
+      sys.argv[5], kv["thick_artery"], kv["thick_sac"], kv["min_dihedral"], kv["ends_moved"], kv["fallback"], times.replace("=", " "), float(sys.argv[3]), sys.argv[4]))
 PY
   d=$w/real/$id
   if command -v xvfb-run >/dev/null; then

@@ -50,6 +50,8 @@ void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::
         c->add_option("--max-volume-mm3", p->max_volume_mm3, "max tet volume (0 = from the surface's edge length)")->capture_default_str();
         c->add_option("--radius-edge-max", p->radius_edge_max, "TetGen radius-edge bound")->capture_default_str();
         c->add_option("--min-dihedral-deg", p->min_dihedral_deg, "TetGen dihedral bound")->capture_default_str();
+        c->add_option("--opt-max-dihedral-deg", p->opt_max_dihedral_deg, "TetGen's optimiser flips and smooths tetrahedra with a larger dihedral angle")
+            ->capture_default_str();
         c->add_option("--timeout-s", p->timeout_s, "kill the mesher after this")->capture_default_str();
     }
     {

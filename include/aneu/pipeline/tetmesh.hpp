@@ -17,6 +17,7 @@ struct TetMeshParams {
     double max_volume_mm3 = 0.0;       ///< upper bound on tet volume; 0 = that of a regular tet with the surface's mean edge
     double radius_edge_max = 1.5;      ///< TetGen quality bound: circumradius / shortest edge
     double min_dihedral_deg = 10.0;    ///< TetGen quality bound on dihedral angles
+    double opt_max_dihedral_deg = 140.0;  ///< TetGen's optimiser (level 9, flips + smoothing + insertion) works on tetrahedra whose largest dihedral angle exceeds this
     double timeout_s = 300.0;          ///< the mesher runs in a child process, killed after this
 };
 /// @throws InputError naming the field
