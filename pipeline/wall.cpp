@@ -493,8 +493,25 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         throw MeshingError(std::string("wall: check 'cut outer surface is a manifold' failed: ") + e.what());
     }
     if (outer_loops.size() != static_cast<size_t>(lumen.loop_end_id.size())) {
+        // Where: the end planes that got no outer loop or more than one (each loop counted at its nearest plane).
+        std::vector<int> count(planes.size(), 0);
+        for (const auto& l : outer_loops) {
+            Eigen::Vector3d c = Eigen::Vector3d::Zero();
+            for (int v : l) c += outer.V.row(v).transpose();
+            c /= static_cast<double>(l.size());
+            size_t best = 0;
+            for (size_t q = 1; q < planes.size(); ++q)
+                if ((c - planes[q].point).norm() < (c - planes[best].point).norm()) best = q;
+            if (!planes.empty()) ++count[best];
+        }
+        std::string where;
+        for (size_t q = 0; q < planes.size(); ++q)
+            if (count[q] != 1)
+                where += std::string(where.empty() ? "" : "; ") + "end " + std::to_string(planes[q].id) + " at (" + shortest(planes[q].point.x()) + ", " +
+                         shortest(planes[q].point.y()) + ", " + shortest(planes[q].point.z()) + ") mm has " + std::to_string(count[q]) + " outer loop(s)";
         throw MeshingError("wall: check 'outer ends' failed: the cut outer surface has " + std::to_string(outer_loops.size()) + " open ends, the lumen " +
-                           std::to_string(lumen.loop_end_id.size()) + " (are two vessels closer than the wall thickness near an end?)");
+                           std::to_string(lumen.loop_end_id.size()) + (where.empty() ? "" : ": " + where) +
+                           " (are two vessels, or a branch and its parent, closer than the wall thickness near that end?)");
     }
     {
         RemeshOutcome rm = remesh_checked(outer, edge, p.remesher, p.timeout_s);
