@@ -28,7 +28,7 @@ for cfg in configs/real/*.toml configs/real/pending/*.toml; do
   start=$(date +%s.%N)
   /usr/bin/time -f "%M" -o "$w/$id.mem" bash tests/cli/test_real_corpus.sh "$prep" "$cfg" "$w" "$tsv" > "$w/$id.log" 2>&1
   rc=$?
-  total=$(echo "$(date +%s.%N) - $start" | bc)
+  total=$(awk -v a="$start" -v b="$(date +%s.%N)" 'BEGIN { printf "%.1f", b - a }')
   mem=$(( $(tail -1 "$w/$id.mem" | tr -cd '0-9') / 1024 ))
   line=$(grep "^$id" "$tsv" | tail -1)
   if [ -z "$line" ]; then

@@ -213,12 +213,14 @@ SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>&
     return s;
 }
 
-SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& region, const EndPlane& plane) {
+namespace {
+/// The part of `s` where the per-vertex `scalar` is <= 0, cut exactly where it crosses 0 (VTK clip, the cut's
+/// duplicated points merged); the largest connected piece.
+SurfaceData clip_nonpositive(const SurfaceData& s, const std::vector<double>& scalar) {
     auto poly = to_vtk(s);
     vtkNew<vtkDoubleArray> sc;
     sc->SetNumberOfValues(s.V.rows());
-    for (Eigen::Index i = 0; i < s.V.rows(); ++i)
-        sc->SetValue(i, region[static_cast<size_t>(i)] ? plane.normal.dot(s.V.row(i).transpose() - plane.point) : -1.0);
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i) sc->SetValue(i, scalar[static_cast<size_t>(i)]);
     poly->GetPointData()->SetScalars(sc);
     vtkNew<vtkClipPolyData> clip;
     clip->SetInputData(poly);
@@ -230,7 +232,15 @@ SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& 
     clean->SetInputConnection(tri->GetOutputPort());
     clean->SetTolerance(0.0);
     clean->Update();
-    SurfaceData out = from_vtk(largest_piece(clean->GetOutput()));
+    return from_vtk(largest_piece(clean->GetOutput()));
+}
+}  // namespace
+
+SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& region, const EndPlane& plane) {
+    std::vector<double> scalar(static_cast<size_t>(s.V.rows()));
+    for (Eigen::Index i = 0; i < s.V.rows(); ++i)
+        scalar[static_cast<size_t>(i)] = region[static_cast<size_t>(i)] ? plane.normal.dot(s.V.row(i).transpose() - plane.point) : -1.0;
+    SurfaceData out = clip_nonpositive(s, scalar);
     for (Eigen::Index i = 0; i < out.V.rows(); ++i) {
         const Eigen::Vector3d x = out.V.row(i).transpose();
         const double d = plane.normal.dot(x - plane.point);
@@ -244,7 +254,6 @@ double disc_radius(const EndPlane& p, double reach, double margin_mm) { return m
 }  // namespace
 
 SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm) {
-    auto poly = to_vtk(s);
     // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
     // the vertices beyond the plane that reach it through an edge crossing the plane within `reach` ×
     // (radius + 1 mm) of its point. Another vessel passing beyond the plane elsewhere is kept.
@@ -296,24 +305,7 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
             if (near_cut) scalar[static_cast<size_t>(v)] = std::max(scalar[static_cast<size_t>(v)], d[static_cast<size_t>(v)]);
         }
     }
-    vtkNew<vtkDoubleArray> sc;
-    sc->SetNumberOfValues(nv);
-    for (Eigen::Index i = 0; i < nv; ++i) sc->SetValue(i, scalar[static_cast<size_t>(i)]);
-    poly->GetPointData()->SetScalars(sc);
-    vtkNew<vtkClipPolyData> clip;
-    clip->SetInputData(poly);
-    clip->SetValue(0.0);
-    clip->InsideOutOn();  // keep scalar <= 0
-    clip->Update();
-    vtkNew<vtkTriangleFilter> tri;
-    tri->SetInputConnection(clip->GetOutputPort());
-    tri->Update();
-    vtkNew<vtkCleanPolyData> clean;  // merge the points the clip duplicated at the cut
-    clean->SetInputConnection(tri->GetOutputPort());
-    clean->SetTolerance(0.0);
-    clean->Update();
-    auto piece = largest_piece(clean->GetOutput());
-    SurfaceData out = from_vtk(piece);
+    SurfaceData out = clip_nonpositive(s, scalar);
     // Snap the cut's vertices exactly into their planes.
     for (Eigen::Index i = 0; i < out.V.rows(); ++i) {
         Eigen::Vector3d x = out.V.row(i).transpose();

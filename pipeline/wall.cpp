@@ -30,9 +30,9 @@ namespace {
 
 constexpr double PI = 3.14159265358979323846;
 
-/// Per-vertex sac weight in [0,1]: smoothstep of the geodesic (edge-graph) signed distance to the label
-/// border over `blend` mm (0 on the artery far from the neck, 1 on the sac).
-Eigen::VectorXd sac_weight(const SurfaceData& s, double blend, double* sac_depth = nullptr) {
+/// Per-vertex signed geodesic (edge-graph) distance to the artery/sac label border [mm]: positive on the sac,
+/// negative on the artery, ±1e9 where no border is reachable.
+Eigen::VectorXd border_distance(const SurfaceData& s) {
     const Eigen::Index nv = s.V.rows();
     std::vector<char> art(static_cast<size_t>(nv), 0), sac(static_cast<size_t>(nv), 0);
     std::vector<std::vector<std::pair<int, double>>> adj(static_cast<size_t>(nv));
@@ -63,17 +63,20 @@ Eigen::VectorXd sac_weight(const SurfaceData& s, double blend, double* sac_depth
                 q.push({c + L, w});
             }
     }
-    if (sac_depth) {  // the largest distance of a sac vertex from the label border
-        *sac_depth = 0;
-        for (Eigen::Index v = 0; v < nv; ++v)
-            if (sac[static_cast<size_t>(v)] && !art[static_cast<size_t>(v)] && std::isfinite(d[static_cast<size_t>(v)]))
-                *sac_depth = std::max(*sac_depth, d[static_cast<size_t>(v)]);
-    }
-    Eigen::VectorXd w(nv);
+    Eigen::VectorXd sd(nv);
     for (Eigen::Index v = 0; v < nv; ++v) {
         const bool on_sac = sac[static_cast<size_t>(v)] && !art[static_cast<size_t>(v)];
-        const double sd = std::isfinite(d[static_cast<size_t>(v)]) ? (on_sac ? 1 : -1) * d[static_cast<size_t>(v)] : (on_sac ? 1e9 : -1e9);
-        const double x = std::clamp(sd / blend + 0.5, 0.0, 1.0);
+        sd[v] = std::isfinite(d[static_cast<size_t>(v)]) ? (on_sac ? 1 : -1) * d[static_cast<size_t>(v)] : (on_sac ? 1e9 : -1e9);
+    }
+    return sd;
+}
+
+/// Per-vertex sac weight in [0,1]: smoothstep of the signed border distance over `blend` mm (0 on the artery
+/// far from the neck, 1 on the sac from blend/2 inside the border).
+Eigen::VectorXd sac_weight(const Eigen::VectorXd& border_mm, double blend) {
+    Eigen::VectorXd w(border_mm.size());
+    for (Eigen::Index v = 0; v < w.size(); ++v) {
+        const double x = std::clamp(border_mm[v] / blend + 0.5, 0.0, 1.0);
         w[v] = x * x * (3 - 2 * x);
     }
     return w;
@@ -372,15 +375,17 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     // The lumen extended past its ends (distance surface: open; sign surface: closed).
     // The blend spans ±blend/2 about the label border; a sac shallower than twice that (a 2 mm bleb) would
     // never reach its own thickness, so the blend narrows to half the sac's depth there (said in the log).
+    const Eigen::VectorXd border_mm = border_distance(lumen);
     double sac_depth = 0, blend = p.blend_mm;
-    (void)sac_weight(lumen, blend, &sac_depth);
+    for (Eigen::Index v = 0; v < border_mm.size(); ++v)
+        if (border_mm[v] > 0 && border_mm[v] < 1e9) sac_depth = std::max(sac_depth, border_mm[v]);
     if (sac_depth > 0 && blend > 0.5 * sac_depth) {
         blend = 0.5 * sac_depth;
         rep.info("wall: the sac is " + shortest(sac_depth) + " mm deep from its border; thickness blend narrowed from " + shortest(p.blend_mm) + " to " +
                  shortest(blend) + " mm");
     }
     r.qa.emplace_back("blend_used_mm", blend);
-    Eigen::VectorXd w = sac_weight(lumen, blend);
+    Eigen::VectorXd w = sac_weight(border_mm, blend);
     const double ext = 2 * t_max + 4 * h;
     Eigen::VectorXd w_ext = w;
     const SurfaceData dist_surf = extend_lumen(lumen, planes, ext, false, &w_ext);

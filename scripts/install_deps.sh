@@ -25,6 +25,8 @@ PACKAGES=(
   # the real-data corpus test reads each case's QA (inspect --json) with python3; the bad-input test writes
   # a float volume with perl (perl-base is essential, but say what is used)
   python3 perl
+  # the benchmarks measure peak memory with GNU time (/usr/bin/time; not in minimal Debian images)
+  time
 )
 
 if [ "$(id -u)" -eq 0 ]; then
