@@ -615,17 +615,82 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
     r.qa.emplace_back("input_open_ends", static_cast<double>(loops.size()));
     if (loops.empty()) {
         const auto caps = detect_flat_caps(s, p.cap_tolerance_deg, p.cap_tolerance_mm);
-        if (caps.empty()) {
-            throw InputError(path + ": the surface is closed and has no flat end cap to remove (none planar within --cap-tolerance-deg " + shortest(p.cap_tolerance_deg) +
-                             " and --cap-tolerance-mm " + shortest(p.cap_tolerance_mm) + "); a lumen surface needs open ends or flat caps");
+        if (!caps.empty()) {
+            std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1);
+            for (const auto& c : caps)
+                for (int f : c) keep[static_cast<size_t>(f)] = 0;
+            s = sub_surface(s, keep);
+            loops = boundary_loops(s);
+            r.qa.emplace_back("input_caps_removed", static_cast<double>(caps.size()));
+            rep.info("surface: removed " + std::to_string(caps.size()) + " flat end caps from " + path);
+        } else {
+            // Rounded ends (a segmentation's closed surface): cut where each vessel is tubular again. Voxels of
+            // half the target edge, at most MAX_ROUNDED_END_VOXELS in the box.
+            constexpr double MAX_ROUNDED_END_VOXELS = 8e6;
+            const Eigen::Vector3d box = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).transpose();
+            const double h = std::max(0.5 * p.edge_mm, std::cbrt((box.x() + 1) * (box.y() + 1) * (box.z() + 1) / MAX_ROUNDED_END_VOXELS));
+            const RoundedEnds ends = find_rounded_ends(s, h);
+            if (ends.planes.size() < 2) {
+                throw InputError(path + ": the surface is closed and has no flat end cap to remove (none planar within --cap-tolerance-deg " +
+                                 shortest(p.cap_tolerance_deg) + " and --cap-tolerance-mm " + shortest(p.cap_tolerance_mm) + ") and " +
+                                 std::to_string(ends.planes.size()) + " rounded end(s) where a vessel becomes tubular; a lumen surface needs open ends, flat caps or 2 rounded vessel ends");
+            }
+            // Each plane cuts off only its own tip: the part beyond the plane that is connected to the tip (a
+            // disc would also cut a neighbouring vessel that passes beyond the plane).
+            SurfaceData cut = s;
+            for (size_t q = 0; q < ends.planes.size(); ++q) {
+                const EndPlane& pl = ends.planes[q];
+                Eigen::Index tip = 0;
+                (cut.V.rowwise() - ends.tips[q].transpose()).rowwise().squaredNorm().minCoeff(&tip);
+                std::vector<char> beyond(static_cast<size_t>(cut.V.rows()), 0);
+                std::vector<std::vector<int>> adj(static_cast<size_t>(cut.V.rows()));
+                for (Eigen::Index f = 0; f < cut.F.rows(); ++f)
+                    for (int k = 0; k < 3; ++k) {
+                        adj[static_cast<size_t>(cut.F(f, k))].push_back(cut.F(f, (k + 1) % 3));
+                        adj[static_cast<size_t>(cut.F(f, (k + 1) % 3))].push_back(cut.F(f, k));
+                    }
+                auto ahead = [&](int v) { return pl.normal.dot(cut.V.row(v).transpose() - pl.point) > 0; };
+                if (!ahead(static_cast<int>(tip))) throw MeshingError("surface: check 'rounded end tip beyond its cut' failed at " + vec3(ends.tips[q]));
+                std::vector<int> stack{static_cast<int>(tip)};
+                beyond[static_cast<size_t>(tip)] = 1;
+                while (!stack.empty()) {
+                    const int u = stack.back();
+                    stack.pop_back();
+                    for (int w : adj[static_cast<size_t>(u)])
+                        if (!beyond[static_cast<size_t>(w)] && ahead(w)) {
+                            beyond[static_cast<size_t>(w)] = 1;
+                            stack.push_back(w);
+                        }
+                }
+                // The vertices next to the tip's part keep their exact distance (the cut runs through their edges).
+                std::vector<char> region = beyond;
+                for (size_t v = 0; v < beyond.size(); ++v)
+                    if (beyond[v])
+                        for (int w : adj[v]) region[static_cast<size_t>(w)] = 1;
+                cut = clip_region_at_plane(cut, region, pl);
+            }
+            std::vector<std::vector<int>> cut_loops;
+            try {
+                cut_loops = boundary_loops(cut);
+            } catch (const InputError& e) {
+                throw MeshingError(std::string("surface: check 'rounded ends cut to a manifold' failed: ") + e.what());
+            }
+            if (cut_loops.size() != ends.planes.size()) {
+                throw MeshingError("surface: check 'one open end per rounded end cut' failed: " + std::to_string(cut_loops.size()) + " open ends for " +
+                                   std::to_string(ends.planes.size()) + " cuts of " + path);
+            }
+            s = std::move(cut);
+            loops = std::move(cut_loops);
+            r.qa.emplace_back("input_rounded_ends_cut", static_cast<double>(ends.planes.size()));
+            r.qa.emplace_back("input_rounded_tips_kept", static_cast<double>(ends.kept_tips.size()));
+            const auto r2 = [](const Eigen::Vector3d& x) { return vec3((x * 100).array().round().matrix() / 100); };
+            std::string where;
+            for (const auto& e : ends.planes) where += " " + r2(e.point) + " r " + shortest(std::round(e.radius_mm * 100) / 100) + " mm;";
+            std::string kept;
+            for (const auto& t : ends.kept_tips) kept += " " + r2(t);
+            rep.info("surface: cut " + std::to_string(ends.planes.size()) + " rounded ends of " + path + " where the vessel is tubular:" + where +
+                     " kept whole (not tubular near the tip, e.g. the sac):" + (kept.empty() ? " none" : kept));
         }
-        std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1);
-        for (const auto& c : caps)
-            for (int f : c) keep[static_cast<size_t>(f)] = 0;
-        s = sub_surface(s, keep);
-        loops = boundary_loops(s);
-        r.qa.emplace_back("input_caps_removed", static_cast<double>(caps.size()));
-        rep.info("surface: removed " + std::to_string(caps.size()) + " flat end caps from " + path);
     }
     if (loops.size() < 2) throw InputError(path + ": the surface has " + std::to_string(loops.size()) + " open end(s); a vessel needs at least 2");
     check_vessel_ends(s, loops, path);

@@ -3,8 +3,8 @@
 """Writes the surface files of sample_data/real/ from the AneuRisk lumen models as published (legacy VTK ASCII
 in grupomoccai/AneuSI, CC BY-NC 3.0), in the formats other tools write: legacy VTK as published, VTP with
 zlib-compressed binary arrays (SimVascular/VMTK/ParaView), binary STL in metres with flat-fan caps on the
-open ends (a CFD lumen mesh), and ASCII OBJ. The geometry is not changed (coordinates are written as float32,
-the published files have 6-7 significant digits); only the capped STL adds one vertex per end.
+open ends (a CFD lumen mesh), binary STL in mm closed with rounded ends (a segmentation's surface), and ASCII OBJ. The geometry is not changed (coordinates are written as float32,
+the published files have 6-7 significant digits); only the capped STL adds one vertex per end and the rounded one a dome per end.
 
 usage: make_corpus.py SOURCE_DIR OUT_DIR
 SOURCE_DIR holds CXXXX_model.vtk and CXXXX_test.vtk as in the repository (see README.md for the commit).
@@ -96,9 +96,43 @@ def cap_fans(P, F):
     return P, F
 
 
-def write_stl(path, P, F, scale):
+def round_ends(P, F, rings=6):
+    """Closes each open end with a hemispherical dome of the loop's equal-area radius (rings of the loop scaled
+    towards the apex): the rounded blind ends of a closed surface made from a segmentation, where the segmented
+    vessel stopped. The published lumen is not moved; only the domes are added."""
+    P, F = list(P), list(F)
+    for loop in boundary_loops(F):
+        n = len(loop)
+        c = [sum(P[v][d] for v in loop) / n for d in range(3)]
+        w = [0.0, 0.0, 0.0]
+        for k in range(n):
+            a = [P[loop[k]][d] - c[d] for d in range(3)]
+            b = [P[loop[(k + 1) % n]][d] - c[d] for d in range(3)]
+            w = [w[0] + a[1] * b[2] - a[2] * b[1], w[1] + a[2] * b[0] - a[0] * b[2], w[2] + a[0] * b[1] - a[1] * b[0]]
+        lw = math.sqrt(sum(x * x for x in w))
+        nrm = [-x / lw for x in w]  # out of the vessel (the wall's faces run along the loop)
+        r = math.sqrt(0.5 * lw / math.pi)
+        prev = list(loop)
+        for k in range(1, rings):
+            t = 0.5 * math.pi * k / rings
+            ring = []
+            for v in loop:
+                P.append(tuple(c[d] + math.cos(t) * (P[v][d] - c[d]) + math.sin(t) * r * nrm[d] for d in range(3)))
+                ring.append(len(P) - 1)
+            for i in range(n):
+                a0, b0, a1, b1 = prev[i], prev[(i + 1) % n], ring[i], ring[(i + 1) % n]
+                F += [[b0, a0, a1], [b0, a1, b1]]
+            prev = ring
+        P.append(tuple(c[d] + r * nrm[d] for d in range(3)))
+        apex = len(P) - 1
+        for i in range(n):
+            F.append([prev[(i + 1) % n], prev[i], apex])
+    return P, F
+
+
+def write_stl(path, P, F, scale, title=b'aneuclip corpus: AneuRisk lumen, capped, metres'):
     with open(path, 'wb') as o:
-        o.write(b'aneuclip corpus: AneuRisk lumen, capped, metres'.ljust(80, b' '))
+        o.write(title.ljust(80, b' '))
         o.write(struct.pack('<I', len(F)))
         for f in F:
             a, b, c = (tuple(x * scale for x in P[v]) for v in f)
@@ -127,6 +161,9 @@ def main(src, out):
         write_vtp(os.path.join(out, 'aneurisk_%s_%s.vtp' % (c, name)), *read_vtk(m(c)))
     P, F = cap_fans(*read_vtk(m('C0061')))
     write_stl(os.path.join(out, 'aneurisk_C0061_aca_bifurcation_capped_m.stl'), P, F, 0.001)
+    P, F = round_ends(*read_vtk(m('C0093')))
+    write_stl(os.path.join(out, 'aneurisk_C0093_mca_bifurcation_rounded.stl'), P, F, 1.0,
+              b'aneuclip corpus: AneuRisk lumen, rounded ends, mm')
     write_obj(os.path.join(out, 'aneurisk_C0096_dome_clipped.obj'), *read_vtk(os.path.join(src, 'C0096_test.vtk')))
 
 

@@ -435,6 +435,61 @@ TEST(GeometryErrors, BadInputsAreInputErrors) {
     fs::remove_all(dir);
 }
 
+// A segmentation's closed surface: a tube of radius 1.5 mm along z with rounded (hemispherical) blind ends at
+// z = ±11.5 and a sidewall sac of radius 2.5 mm. The ends are cut where the tube is tubular again (|z| ≤ 10),
+// perpendicular to the axis, and the sac is kept whole and labelled.
+TEST(SurfaceInput, RoundedEndsAreCutWhereTheVesselIsTubular) {
+    Volume<float> v;
+    v.grid.size = {50, 60, 140};
+    v.grid.spacing = {0.2, 0.2, 0.2};
+    v.grid.origin = {-4.9, -4.9, -13.9};
+    v.data.resize(v.grid.voxel_count());
+    const double R = 1.5, L = 10.0, Rs = 2.5;
+    const Eigen::Vector3d sac(0, 3.4, 1.0);
+    for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
+        for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
+            for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
+                const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                const Eigen::Vector3d p(x[0], x[1], x[2]);
+                const double zc = std::clamp(p.z(), -L, L);
+                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
+                const double ball = Rs - (p - sac).norm();
+                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max(tube, ball));
+            }
+    const SurfaceData closed = isosurface(v, 0.0, true);
+    const RoundedEnds ends = find_rounded_ends(closed, 0.2);
+    ASSERT_EQ(ends.planes.size(), 2u);
+    for (const auto& e : ends.planes) {
+        EXPECT_GT(std::abs(e.normal.z()), std::cos(5.0 * 3.14159265358979 / 180)) << e.normal.transpose();
+        EXPECT_GT(e.normal.z() * e.point.z(), 0.0) << "normals point towards the tips";
+        EXPECT_LE(std::abs(e.point.z()), L) << "cut inside the tubular part";
+        EXPECT_GE(std::abs(e.point.z()), L - 2.0 * R) << "cut near the rounded end";
+        EXPECT_NEAR(std::hypot(e.point.x(), e.point.y()), 0.0, 0.2);
+        EXPECT_NEAR(e.radius_mm, R, 0.15 * R);
+    }
+    ASSERT_GE(ends.kept_tips.size(), 1u);  // the sac's dome
+    bool dome = false;
+    for (const auto& t : ends.kept_tips) dome = dome || (t - sac).norm() < Rs + 0.3;
+    EXPECT_TRUE(dome);
+    // Through the surface stage: two open ends, the sac labelled.
+    const fs::path dir = fs::temp_directory_path() / ("aneu_rounded_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    write_mesh_file((dir / "rounded.stl").string(), closed);
+    const LumenResult r = lumen_from_mesh((dir / "rounded.stl").string(), SurfaceParams{});
+    EXPECT_EQ(r.lumen.loop_end_id.size(), 2);
+    EXPECT_EQ(value(r.qa, "input_rounded_ends_cut"), 2.0);
+    double sac_area = 0, sac_far = 0;
+    for (Eigen::Index f = 0; f < r.lumen.F.rows(); ++f) {
+        if (r.lumen.face_label[f] != 1) continue;
+        const Eigen::Vector3d c = (r.lumen.V.row(r.lumen.F(f, 0)) + r.lumen.V.row(r.lumen.F(f, 1)) + r.lumen.V.row(r.lumen.F(f, 2))).transpose() / 3.0;
+        sac_area += 1;
+        sac_far = std::max(sac_far, (c - sac).norm());
+    }
+    EXPECT_GT(sac_area, 0.0) << "the sac is labelled";
+    EXPECT_LT(sac_far, Rs + 0.5) << "only the sac is labelled";
+    fs::remove_all(dir);
+}
+
 TEST(ImageFilters, InsideDistanceOfACylinder) {
     Volume<std::uint8_t> m;
     m.grid.size = {40, 40, 20};

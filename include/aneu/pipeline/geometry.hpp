@@ -111,6 +111,18 @@ Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double
 /// more than 30°).
 std::vector<std::vector<int>> detect_flat_caps(const SurfaceData& s, double tol_deg = 5.0, double tol_mm = 0.1);
 
+/// Rounded ends of a closed surface (a segmentation's blind vessel ends): one end plane per skeleton tip whose
+/// vessel becomes tubular within a few radii of the tip (radius within ±15 % of its median over 3 radii),
+/// half a radius inside that point, perpendicular to the medial path, normal towards the tip. Tips that never
+/// become tubular (a sac, a bleb, a bump at a junction) are kept whole and listed. Voxels of `spacing_mm`.
+/// pipeline/rounded_ends.cpp (TEASAR-style tips on the voxelised surface).
+struct RoundedEnds {
+    std::vector<EndPlane> planes;
+    std::vector<Eigen::Vector3d> tips;  ///< per plane: the tip it cuts off
+    std::vector<Eigen::Vector3d> kept_tips;
+};
+RoundedEnds find_rounded_ends(const SurfaceData& closed, double spacing_mm);
+
 void surface_file(const std::string& in, const std::string& out, const SurfaceParams& p, StageRecord stage,
                   const std::string& snapshot_png = "", Reporter& rep = null_reporter());
 
