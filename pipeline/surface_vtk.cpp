@@ -253,7 +253,7 @@ namespace {
 double disc_radius(const EndPlane& p, double reach, double margin_mm) { return margin_mm >= 0 ? 1.5 * p.radius_mm + margin_mm : reach * (p.radius_mm + 1.0); }
 }  // namespace
 
-SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm) {
+SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm, double tip_along_mm) {
     // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
     // the vertices beyond the plane that reach it through an edge crossing the plane within `reach` ×
     // (radius + 1 mm) of its point. Another vessel passing beyond the plane elsewhere is kept.
@@ -293,6 +293,20 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
                     if ((x - p.point).norm() < R) cut_here[static_cast<size_t>(id)] = 1;
                 }
             }
+        }
+        if (tip_along_mm >= 0) {  // only the stub on the plane's axis: the piece nearest its far end
+            const Eigen::Vector3d far = p.point + tip_along_mm * p.normal;
+            int tip = -1;
+            double best = 1e300;
+            for (Eigen::Index v = 0; v < nv; ++v) {
+                if (comp[static_cast<size_t>(v)] < 0) continue;
+                const double dd = (s.V.row(v).transpose() - far).squaredNorm();
+                if (dd < best) {
+                    best = dd;
+                    tip = comp[static_cast<size_t>(v)];
+                }
+            }
+            for (int c = 0; c < static_cast<int>(cut_here.size()); ++c) cut_here[static_cast<size_t>(c)] = cut_here[static_cast<size_t>(c)] && c == tip;
         }
         for (Eigen::Index v = 0; v < nv; ++v) {
             const int c = comp[static_cast<size_t>(v)];

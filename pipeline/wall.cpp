@@ -490,7 +490,10 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     r.qa.emplace_back("outer_isosurface_triangles", static_cast<double>(outer.F.rows()));
     // Not decimated before remeshing: VTK's quadric and DecimatePro decimations were both measured to leave
     // non-manifold edges on this surface; CGAL remeshes the fine isosurface directly.
-    outer = clip_at_planes(outer, planes, 3.0, t_max + 2 * h);
+    // Each plane removes the outer surface's stub round the lumen's extension (it ends about ext + t beyond the
+    // plane on the axis), and nothing else: next to a short branch, its parent's wall can bulge beyond the
+    // branch's plane inside the disc (C0095).
+    outer = clip_at_planes(outer, planes, 3.0, t_max + 2 * h, ext);
     std::vector<std::vector<int>> outer_loops;
     try {
         outer_loops = boundary_loops(outer);
@@ -499,21 +502,28 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     }
     if (outer_loops.size() != static_cast<size_t>(lumen.loop_end_id.size())) {
         // Where: the end planes that got no outer loop or more than one (each loop counted at its nearest plane).
+        const auto mm = [](double x) { return shortest(std::round(x * 100) / 100); };
+        const auto at = [&](const Eigen::Vector3d& x) { return "(" + mm(x.x()) + ", " + mm(x.y()) + ", " + mm(x.z()) + ")"; };
         std::vector<int> count(planes.size(), 0);
+        std::vector<std::string> seen(planes.size());  // per plane: its loops' centres and sizes
         for (const auto& l : outer_loops) {
             Eigen::Vector3d c = Eigen::Vector3d::Zero();
             for (int v : l) c += outer.V.row(v).transpose();
             c /= static_cast<double>(l.size());
+            double rl = 0;
+            for (int v : l) rl = std::max(rl, (outer.V.row(v).transpose() - c).norm());
             size_t best = 0;
             for (size_t q = 1; q < planes.size(); ++q)
                 if ((c - planes[q].point).norm() < (c - planes[best].point).norm()) best = q;
-            if (!planes.empty()) ++count[best];
+            if (planes.empty()) continue;
+            ++count[best];
+            seen[best] += std::string(seen[best].empty() ? "" : ", ") + "loop at " + at(c) + " of radius " + mm(rl) + " mm";
         }
         std::string where;
         for (size_t q = 0; q < planes.size(); ++q)
             if (count[q] != 1)
-                where += std::string(where.empty() ? "" : "; ") + "end " + std::to_string(planes[q].id) + " at (" + shortest(planes[q].point.x()) + ", " +
-                         shortest(planes[q].point.y()) + ", " + shortest(planes[q].point.z()) + ") mm has " + std::to_string(count[q]) + " outer loop(s)";
+                where += std::string(where.empty() ? "" : "; ") + "end " + std::to_string(planes[q].id) + " at " + at(planes[q].point) + " mm (lumen radius " +
+                         mm(planes[q].radius_mm) + " mm) has " + std::to_string(count[q]) + " outer loop(s)" + (seen[q].empty() ? "" : ": " + seen[q]);
         throw MeshingError("wall: check 'outer ends' failed: the cut outer surface has " + std::to_string(outer_loops.size()) + " open ends, the lumen " +
                            std::to_string(lumen.loop_end_id.size()) + (where.empty() ? "" : ": " + where) +
                            " (are two vessels, or a branch and its parent, closer than the wall thickness near that end?)");
