@@ -68,6 +68,23 @@ std::vector<std::vector<int>> chain_loops(const std::vector<std::array<int, 2>>&
     return loops;
 }
 
+// Neck: the edges between an aneurysm face and a face of another region, chained into loops.
+std::vector<std::vector<int>> neck_loops_of(const Eigen::MatrixX3i& F, const Eigen::VectorXi& face_region, const std::vector<std::string>& region_names) {
+    const auto it = std::find(region_names.begin(), region_names.end(), "aneurysm");
+    if (it == region_names.end()) return {};
+    const int sac = static_cast<int>(it - region_names.begin());
+    std::map<std::pair<int, int>, std::array<int, 2>> edge_faces;  // (min,max) -> (#sac faces, #other faces)
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            auto& c = edge_faces[std::minmax(F(f, k), F(f, (k + 1) % 3))];
+            ++c[face_region[f] == sac ? 0 : 1];
+        }
+    std::vector<std::array<int, 2>> neck;
+    for (const auto& [e, c] : edge_faces)
+        if (c[0] == 1 && c[1] == 1) neck.push_back({e.first, e.second});
+    return chain_loops(neck);
+}
+
 }  // namespace
 
 Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets,
@@ -103,6 +120,88 @@ Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& node
         }
     }
     return t;
+}
+
+Eigen::MatrixX3d SimLumen::deformed(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& X_sim) const {
+    Eigen::MatrixX3d y = X;
+    for (Eigen::Index v = 0; v < X.rows(); ++v) y.row(v) += x.row(bind[v]) - X_sim.row(bind[v]);
+    return y;
+}
+
+SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
+                       const Eigen::VectorXi& inner) {
+    SimLumen L;
+    if (inner.size() == 0 || s.size() == 0) return L;
+    static constexpr int FACES[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};  // outward for positive tets
+    std::vector<char> in_set(static_cast<size_t>(nodes.rows()), 0);
+    for (Eigen::Index i = 0; i < inner.size(); ++i) in_set[static_cast<size_t>(inner[i])] = 1;
+    std::map<std::array<int, 3>, std::pair<int, Eigen::Index>> seen;  // sorted corners -> (count, tet * 4 + face)
+    for (Eigen::Index e = 0; e < tets.rows(); ++e)
+        for (int f = 0; f < 4; ++f) {
+            std::array<int, 3> key{tets(e, FACES[f][0]), tets(e, FACES[f][1]), tets(e, FACES[f][2])};
+            if (!(in_set[static_cast<size_t>(key[0])] && in_set[static_cast<size_t>(key[1])] && in_set[static_cast<size_t>(key[2])])) continue;
+            std::sort(key.begin(), key.end());
+            auto& v = seen[key];
+            ++v.first;
+            v.second = 4 * e + f;
+        }
+    // Bind each corner node to the nearest simulated vertex within 1.5 mm.
+    PointGrid grid;
+    grid.build(s.X, 0.75);
+    std::unordered_map<int, int> local;  // volume node -> lumen vertex (-1: unbound)
+    std::vector<int> bind, order;
+    std::vector<int> cand;
+    auto vertex_of = [&](int n) {
+        const auto it = local.find(n);
+        if (it != local.end()) return it->second;
+        const Eigen::Vector3d p = nodes.row(n).transpose();
+        grid.query(Aabb{p - Eigen::Vector3d::Constant(1.5), p + Eigen::Vector3d::Constant(1.5)}, cand);
+        int best = -1;
+        double bd = 1.5;
+        for (int c : cand) {
+            const double d = (s.X.row(c).transpose() - p).norm();
+            if (d <= bd) {
+                bd = d;
+                best = c;
+            }
+        }
+        int id = -1;
+        if (best >= 0) {
+            id = static_cast<int>(order.size());
+            order.push_back(n);
+            bind.push_back(best);
+        }
+        local.emplace(n, id);
+        return id;
+    };
+    std::vector<std::array<int, 3>> tris;
+    std::vector<int> reg;
+    for (const auto& [key, v] : seen) {
+        if (v.first != 1) continue;
+        const Eigen::Index e = v.second / 4;
+        const int* lf = FACES[v.second % 4];
+        const int a = vertex_of(tets(e, lf[0])), b = vertex_of(tets(e, lf[1])), c = vertex_of(tets(e, lf[2]));
+        if (a < 0 || b < 0 || c < 0) continue;
+        tris.push_back({a, c, b});  // out of the lumen: against the tetrahedron's outward normal
+        reg.push_back(tet_region.size() ? tet_region[e] : 0);
+    }
+    L.X.resize(static_cast<Eigen::Index>(order.size()), 3);
+    L.bind.resize(static_cast<Eigen::Index>(order.size()));
+    L.wall_mm.resize(static_cast<Eigen::Index>(order.size()));
+    for (size_t i = 0; i < order.size(); ++i) {
+        const auto v = static_cast<Eigen::Index>(i);
+        L.X.row(v) = nodes.row(order[i]);
+        L.bind[v] = bind[i];
+        L.wall_mm[v] = (s.X.row(bind[i]) - L.X.row(v)).norm();
+    }
+    L.F.resize(static_cast<Eigen::Index>(tris.size()), 3);
+    L.face_region.resize(static_cast<Eigen::Index>(tris.size()));
+    for (size_t f = 0; f < tris.size(); ++f) {
+        for (int k = 0; k < 3; ++k) L.F(static_cast<Eigen::Index>(f), k) = tris[f][static_cast<size_t>(k)];
+        L.face_region[static_cast<Eigen::Index>(f)] = reg[f];
+    }
+    L.neck_loops = neck_loops_of(L.F, L.face_region, s.region_names);
+    return L;
 }
 
 SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
@@ -199,21 +298,7 @@ SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi&
         s.adj_offsets[static_cast<size_t>(i) + 1] = s.adj_offsets[static_cast<size_t>(i)] + static_cast<int>(l.size());
         s.adj.insert(s.adj.end(), l.begin(), l.end());
     }
-    // Neck: edges between an aneurysm face and a face of another region.
-    const auto it = std::find(s.region_names.begin(), s.region_names.end(), "aneurysm");
-    if (it != s.region_names.end()) {
-        const int sac = static_cast<int>(it - s.region_names.begin());
-        std::map<std::pair<int, int>, std::array<int, 2>> edge_faces;  // (min,max) -> (#sac faces, #other faces)
-        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
-            for (int k = 0; k < 3; ++k) {
-                auto& c = edge_faces[std::minmax(s.F(f, k), s.F(f, (k + 1) % 3))];
-                ++c[s.face_region[f] == sac ? 0 : 1];
-            }
-        std::vector<std::array<int, 2>> neck;
-        for (const auto& [e, c] : edge_faces)
-            if (c[0] == 1 && c[1] == 1) neck.push_back({e.first, e.second});
-        s.neck_loops = chain_loops(neck);
-    }
+    s.neck_loops = neck_loops_of(s.F, s.face_region, s.region_names);
     return s;
 }
 
@@ -317,8 +402,9 @@ SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
                          "outer wall surface to be condensed)");
     }
     const auto inner = b.volume->node_sets.find("inner");
-    m.surface.thickness = wall_thickness(m.surface, m.nodes, b.volume->tets,
-                                         inner == b.volume->node_sets.end() ? Eigen::VectorXi() : inner->second);
+    const Eigen::VectorXi inner_set = inner == b.volume->node_sets.end() ? Eigen::VectorXi() : inner->second;
+    m.surface.thickness = wall_thickness(m.surface, m.nodes, b.volume->tets, inner_set);
+    m.surface.lumen = extract_lumen(m.surface, m.nodes, b.volume->tets, b.volume->tet_region, inner_set);
     m.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return m;
 }

@@ -484,6 +484,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["peak_vessel_force_n"] = a.peak_vessel_force_n;
     j["neck_length_mm"] = a.neck_length_mm;
     j["neck_closed_fraction"] = a.neck_closed_fraction;
+    j["neck_gap_mm"] = scene.neck_gap_mm;
+    if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
+    j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
+    j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;
     j["haptic_ticks"] = a.haptic_ticks;
@@ -541,10 +545,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                   "  repositionings             %d\n"
                   "  force above %.2f N         %d time(s), peak %.3f N\n"
                   "  speed above %.1f mm/s      %d time(s) while touching\n"
-                  "  aneurysm neck closed       %.0f %% of %.1f mm\n",
+                  "  aneurysm neck closed       %.0f %% of %.1f mm (walls within %.2g mm; %.0f %% between closed jaws)\n",
                   scene.path.c_str(), model.case_id.c_str(), a.total_time_s, a.clips_used, a.clips_deposited,
                   a.repositionings, scene.force_threshold_n, a.force_exceedances, a.peak_force_n,
-                  scene.velocity_threshold_mm_s, a.velocity_exceedances, 100.0 * a.neck_closed_fraction, a.neck_length_mm);
+                  scene.velocity_threshold_mm_s, a.velocity_exceedances, 100.0 * a.neck_closed_fraction, a.neck_length_mm,
+                  scene.neck_gap_mm, 100.0 * a.neck_between_jaws_fraction);
     o << buf;
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
     if (a.max_displacement_to_thickness > 0) {

@@ -199,6 +199,7 @@ Scene read_scene(const std::string& path) {
         s.force_threshold_n = o.num("force_threshold_n", s.force_threshold_n, 0, 1e4);
         s.velocity_threshold_mm_s = o.num("velocity_threshold_mm_s", s.velocity_threshold_mm_s, 0, 1e6);
         s.neck_tolerance_mm = o.num("neck_tolerance_mm", s.neck_tolerance_mm, 0, 10);
+        s.neck_gap_mm = o.num("neck_gap_mm", s.neck_gap_mm, 0, 5);
         o.done();
     }
     if (top.has("outputs")) {

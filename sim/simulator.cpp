@@ -10,6 +10,7 @@
 #include <set>
 
 #include "aneu/core/error.hpp"
+#include "aneu/sim/assessment.hpp"
 
 namespace aneu::sim {
 namespace {
@@ -822,8 +823,14 @@ struct Simulator::Impl {
         out.clips_deposited = 0;
         for (const Clip& c : clips)
             if (c.state == Clip::State::DEPOSITED && !c.model.empty()) ++out.clips_deposited;
-        // Neck closure: length of the deformed neck line lying between the jaws of a closed clip.
         const Eigen::MatrixX3d x = deformed();
+        const SimLumen& lumen = model.surface.lumen;
+        const NeckOcclusion occ = neck_occlusion(lumen, lumen.deformed(x, model.surface.X), scene.neck_gap_mm, lumen.wall_mm);
+        out.neck_closed_fraction = occ.fraction;
+        out.neck_length_mm = occ.length_mm;
+        out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
+        out.neck_interpenetration_mm = occ.max_interpenetration_mm;
+        // The neck line lying between the jaws of a closed clip (where the clip is, not what it achieved).
         double total = 0, closed = 0;
         for (const auto& loop : model.surface.neck_loops) {
             for (size_t k = 0; k < loop.size(); ++k) {
@@ -846,8 +853,7 @@ struct Simulator::Impl {
                 }
             }
         }
-        out.neck_length_mm = total;
-        out.neck_closed_fraction = total > 0 ? closed / total : 0.0;
+        out.neck_between_jaws_fraction = total > 0 ? closed / total : 0.0;
         return out;
     }
 };

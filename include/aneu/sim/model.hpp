@@ -19,6 +19,20 @@ struct RegionSphere {
     double radius_mm = 0.0;
 };
 
+/// The lumen (the wall's inner surface) under the working region, for the assessment: the real-time model
+/// computes the outer surface only, and each lumen vertex moves with the nearest simulated vertex (a thin wall:
+/// its compression under a clip is small beside the displacements that close a neck).
+struct SimLumen {
+    Eigen::MatrixX3d X;                ///< #L×3 rest positions [mm]
+    Eigen::MatrixX3i F;                ///< #F×3 triangles, normals out of the lumen (into the wall)
+    Eigen::VectorXi face_region;       ///< #F: index into SimSurface::region_names
+    Eigen::VectorXi bind;              ///< #L: simulated-surface vertex whose displacement the vertex takes
+    Eigen::VectorXd wall_mm;           ///< #L: distance to that vertex at rest (the local wall thickness)
+    std::vector<std::vector<int>> neck_loops;  ///< closed vertex loops between "aneurysm" faces and others: the neck line
+    /// Deformed positions, given the simulated surface's deformed positions `x` (#S×3) and rest positions `X`.
+    Eigen::MatrixX3d deformed(const Eigen::MatrixX3d& x, const Eigen::MatrixX3d& X_sim) const;
+};
+
 /// The simulated (outer) surface, indexed by its own vertices s = 0..#S-1.
 struct SimSurface {
     Eigen::MatrixX3d X;                ///< #S×3 rest positions [mm]
@@ -34,6 +48,8 @@ struct SimSurface {
     /// #S local wall thickness [mm]: distance to the inner wall surface (faces of node set "inner"); NaN where
     /// the bundle has no inner node set or no inner face lies within 8 mm. Set by load_model.
     Eigen::VectorXd thickness;
+    /// The lumen under the simulated surface (empty when the bundle has no "inner" node set). Set by load_model.
+    SimLumen lumen;
     Eigen::Index size() const { return X.rows(); }
 };
 
@@ -41,6 +57,12 @@ struct SimSurface {
 /// corners are all in `inner` (NaN when there is none within 8 mm, or `inner` is empty).
 Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets,
                                const Eigen::VectorXi& inner);
+
+/// The lumen under a simulated surface: boundary faces of `tets` whose corners are all in `inner` (corner
+/// faces of 10-node elements), regions from their tetrahedra, each vertex bound to the nearest simulated
+/// vertex within 1.5 mm; faces with a vertex left unbound (outside the working region) are dropped.
+SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
+                       const Eigen::VectorXi& inner);
 
 /// What the simulator keeps in memory from a bundle.
 ///

@@ -112,7 +112,8 @@ struct Scene {
     // assessment
     double force_threshold_n = 0.5;
     double velocity_threshold_mm_s = 30.0;
-    double neck_tolerance_mm = 0.5;
+    double neck_tolerance_mm = 0.5;       ///< the neck line between closed jaws: this far beside them still counts
+    double neck_gap_mm = 0.05;            ///< the neck is closed where the opposite inner walls are this close (or touch)
     // outputs ("" = not written); resolved against the scene file's directory unless absolute
     std::string log, haptic_log, series, report;
 };

@@ -61,8 +61,13 @@ struct Assessment {
     /// with that displacement and thickness [mm]: the linear model's validity (Scene::linear_limit).
     double max_displacement_to_thickness = 0.0, max_displacement_mm = 0.0, max_displacement_thickness_mm = 0.0;
     double peak_vessel_force_n = 0.0;  ///< largest ½ Σ|f| on the vessel over all frames
-    double neck_closed_fraction = 0.0;  ///< fraction of the neck line (by length) held closed between clip jaws
+    /// Fraction of the neck line (by length on the lumen) whose opposite inner walls touch or lie within
+    /// Scene::neck_gap_mm (neck_occlusion, assessment.hpp): the occlusion.
+    double neck_closed_fraction = 0.0;
     double neck_length_mm = 0.0;
+    double neck_min_gap_mm = 0.0;             ///< smallest lumen gap across the neck line (negative: walls pass through)
+    double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
+    double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
     int skipped_inputs = 0;         ///< live lines refused
     long frames = 0, haptic_ticks = 0;
 };

@@ -1,0 +1,89 @@
+// SPDX-License-Identifier: MIT
+// Measures of a clipping's result: the neck occlusion (assessment.hpp).
+#include "aneu/sim/assessment.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+namespace aneu::sim {
+
+NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm) {
+    NeckOcclusion out;
+    if (lumen.neck_loops.empty()) return out;
+    const Eigen::MatrixX3i& F = lumen.F;
+    const Eigen::Index L = y.rows(), NF = F.rows();
+    // Deformed normals (out of the lumen; area weighted at the vertices).
+    Eigen::MatrixX3d fn(NF, 3), vn = Eigen::MatrixX3d::Zero(L, 3);
+    std::vector<std::vector<int>> faces_of(static_cast<size_t>(L));
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        const Eigen::Vector3d a = y.row(F(f, 0)), b = y.row(F(f, 1)), c = y.row(F(f, 2));
+        const Eigen::Vector3d n = (b - a).cross(c - a);
+        for (int k = 0; k < 3; ++k) {
+            vn.row(F(f, k)) += n.transpose();
+            faces_of[static_cast<size_t>(F(f, k))].push_back(static_cast<int>(f));
+        }
+        const double len = n.norm();
+        fn.row(f) = len > 0 ? Eigen::RowVector3d((n / len).transpose()) : Eigen::RowVector3d::Zero();
+    }
+    for (Eigen::Index v = 0; v < L; ++v) {
+        const double len = vn.row(v).norm();
+        if (len > 0) vn.row(v) /= len;
+    }
+    constexpr double SEARCH_MM = 12.0;  // across the widest neck
+    const double inf = std::numeric_limits<double>::infinity();
+    // The gap at a neck vertex: along the ray from it across the lumen (against its normal), the nearest crossing
+    // of an opposite face (facing it: normals more than 120° apart), in front (the gap) or behind (the walls pass
+    // through each other, looked for no deeper than the vertex's own wall: beyond it lies another vessel or the
+    // sac overhanging the parent, not an interpenetration). Its own faces and its one ring's are not "opposite".
+    auto gap_at = [&](int v) {
+        const double behind = v < wall_mm.size() ? wall_mm[v] : 0.0;
+        const Eigen::Vector3d yv = y.row(v).transpose(), dir = -vn.row(v).transpose();
+        std::set<int> own;
+        for (int f : faces_of[static_cast<size_t>(v)])
+            for (int k = 0; k < 3; ++k)
+                for (int g : faces_of[static_cast<size_t>(F(f, k))]) own.insert(g);
+        double gap = inf;
+        for (Eigen::Index f = 0; f < NF; ++f) {
+            if (fn.row(f).dot(dir) < 0.5 || own.count(static_cast<int>(f))) continue;
+            const Eigen::Vector3d a = y.row(F(f, 0)), b = y.row(F(f, 1)), c = y.row(F(f, 2));
+            if ((a - yv).norm() > SEARCH_MM + (b - a).norm() + (c - a).norm()) continue;  // cheap reject
+            // Möller–Trumbore, both directions along the ray.
+            const Eigen::Vector3d e1 = b - a, e2 = c - a, pv = dir.cross(e2);
+            const double det = e1.dot(pv);
+            if (std::abs(det) < 1e-14) continue;
+            const Eigen::Vector3d tv = yv - a;
+            const double u = tv.dot(pv) / det;
+            if (u < 0 || u > 1) continue;
+            const Eigen::Vector3d qv = tv.cross(e1);
+            const double w = dir.dot(qv) / det;
+            if (w < 0 || u + w > 1) continue;
+            const double hit = e2.dot(qv) / det;
+            if (hit <= SEARCH_MM && hit >= -behind && std::abs(hit) < std::abs(gap)) gap = hit;
+        }
+        return gap;
+    };
+    out.min_gap_mm = inf;
+    for (const auto& loop : lumen.neck_loops) {
+        std::vector<double> g(loop.size());
+        for (size_t k = 0; k < loop.size(); ++k) {
+            g[k] = gap_at(loop[k]);
+            out.min_gap_mm = std::min(out.min_gap_mm, g[k]);
+            if (g[k] < 0) out.max_interpenetration_mm = std::max(out.max_interpenetration_mm, -g[k]);
+        }
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const size_t l = (k + 1) % loop.size();
+            const double len = (y.row(loop[l]) - y.row(loop[k])).norm();
+            out.length_mm += len;
+            if (g[k] <= gap_tol_mm && g[l] <= gap_tol_mm) out.closed_mm += len;
+        }
+    }
+    out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
+    return out;
+}
+
+}  // namespace aneu::sim

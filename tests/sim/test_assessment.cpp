@@ -1,0 +1,126 @@
+// SPDX-License-Identifier: MIT
+// Neck occlusion on scenes with known answers: a tube whose ring at z = 0 is the neck line, flattened by an
+// exact "pinch" map (the wall's mid-surface becomes a stadium of half-height g/2 + t/2, so the lumen gap in the
+// flat part is exactly g), across the neck and beside it.
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "aneu/sim/assessment.hpp"
+
+using namespace aneu::sim;
+
+namespace {
+
+constexpr double PI = 3.14159265358979323846;
+constexpr double R_OUT = 1.5, T = 0.3, R_IN = R_OUT - T;
+constexpr int NT = 96, NZ = 81;
+constexpr double Z0 = -8.0, Z1 = 8.0;
+
+/// The lumen of a tube (radius R_IN = R_OUT − T) along z, normals out of the lumen; the faces with z > 0
+/// are the "sac", so the ring at z = 0 is the neck line.
+SimLumen tube() {
+    SimLumen s;
+    s.X.resize(NT * NZ, 3);
+    for (int k = 0; k < NZ; ++k)
+        for (int i = 0; i < NT; ++i) {
+            const double th = 2 * PI * i / NT;
+            s.X.row(k * NT + i) << R_IN * std::cos(th), R_IN * std::sin(th), Z0 + (Z1 - Z0) * k / (NZ - 1);
+        }
+    s.F.resize(2 * NT * (NZ - 1), 3);
+    int f = 0;
+    for (int k = 0; k + 1 < NZ; ++k)
+        for (int i = 0; i < NT; ++i) {
+            const int a = k * NT + i, b = k * NT + (i + 1) % NT, c = a + NT, d = b + NT;
+            s.F.row(f++) << a, b, d;  // outward: (b − a) × (d − a) points away from the axis
+            s.F.row(f++) << a, d, c;
+        }
+    s.face_region.resize(s.F.rows());
+    for (Eigen::Index g = 0; g < s.F.rows(); ++g) s.face_region[g] = s.X(s.F(g, 0), 2) + s.X(s.F(g, 1), 2) + s.X(s.F(g, 2), 2) > 0 ? 1 : 0;
+    std::vector<int> ring;
+    for (int i = 0; i < NT; ++i) ring.push_back((NZ / 2) * NT + i);
+    s.neck_loops = {ring};
+    return s;
+}
+
+/// The tube flattened round z = zc (fully within ±1.5 mm, blending back to round over the next 2 mm) so that
+/// the lumen gap is g in the flat part: the wall's mid-surface (radius R_OUT − T/2) is mapped by arc length onto
+/// a stadium of half-height c = (g + T)/2 with semicircular folds of radius c, and the lumen lies T/2 inside it.
+Eigen::MatrixX3d pinched(const SimLumen& s, double zc, double g) {
+    const double rm = R_OUT - 0.5 * T, c = 0.5 * (g + T);
+    const double L = 0.25 * (2 * PI * rm - 2 * PI * c);  // half the length of each flat side
+    Eigen::MatrixX3d x = s.X;
+    for (Eigen::Index v = 0; v < s.X.rows(); ++v) {
+        const double z = s.X(v, 2), dz = std::abs(z - zc);
+        const double phi = dz <= 1.5 ? 1.0 : dz >= 3.5 ? 0.0 : std::pow(std::cos(0.5 * PI * (dz - 1.5) / 2.0), 2);
+        double th = std::atan2(s.X(v, 1), s.X(v, 0));
+        if (th < 0) th += 2 * PI;
+        // Arc length from the fold at +x (th = 0), counter-clockwise; the stadium is walked the same way.
+        double a = rm * th;
+        const double q = PI * c;  // a quarter... half of one fold's arc
+        Eigen::Vector2d p, n;
+        auto fold = [&](double cx, double ang) {
+            n << std::cos(ang), std::sin(ang);
+            p = Eigen::Vector2d(cx, 0) + c * n;
+        };
+        if (a < 0.5 * q) fold(L, a / c);
+        else if ((a -= 0.5 * q) < 2 * L) {
+            n << 0, 1;
+            p << L - a, c;
+        } else if ((a -= 2 * L) < q) fold(-L, 0.5 * PI + a / c);
+        else if ((a -= q) < 2 * L) {
+            n << 0, -1;
+            p << -L + a, -c;
+        } else {
+            a -= 2 * L;
+            fold(L, -0.5 * PI + a / c);
+        }
+        const Eigen::Vector2d inner = p - 0.5 * T * n;
+        const Eigen::Vector2d rest(s.X(v, 0), s.X(v, 1));
+        const Eigen::Vector2d moved = rest + phi * (inner - rest);
+        x(v, 0) = moved.x();
+        x(v, 1) = moved.y();
+    }
+    return x;
+}
+
+}  // namespace
+
+TEST(NeckOcclusion, OpenTubeIsOpen) {
+    const SimLumen s = tube();
+    const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T);
+    const NeckOcclusion o = neck_occlusion(s, s.X, 0.05, wall);
+    EXPECT_EQ(o.fraction, 0.0);
+    // The lumen's diameter across the neck, 2 (R − t) = 2.4 mm (polygon: cos(π/96) of it).
+    EXPECT_NEAR(o.min_gap_mm, 2 * (R_OUT - T), 0.01);
+    EXPECT_NEAR(o.length_mm, 2 * PI * (R_OUT - T), 0.01);
+    EXPECT_EQ(o.max_interpenetration_mm, 0.0);
+}
+
+TEST(NeckOcclusion, TubePinchedFlatAcrossTheNeckIsClosed) {
+    const SimLumen s = tube();
+    const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T);
+    const NeckOcclusion o = neck_occlusion(s, pinched(s, 0.0, 0.0), 0.05, wall);
+    EXPECT_GE(o.fraction, 0.97) << o.closed_mm << " of " << o.length_mm;
+    EXPECT_NEAR(o.min_gap_mm, 0.0, 0.01);
+    EXPECT_LE(o.max_interpenetration_mm, 0.01);
+    // Flattened to a 0.3 mm slit: the gap is measured, nothing is closed at tolerance 0.05 mm.
+    const NeckOcclusion slit = neck_occlusion(s, pinched(s, 0.0, 0.3), 0.05, wall);
+    EXPECT_LE(slit.fraction, 0.03);
+    EXPECT_NEAR(slit.min_gap_mm, 0.3, 0.02);
+    // ... and everything is closed at a tolerance above the slit.
+    EXPECT_GE(neck_occlusion(s, pinched(s, 0.0, 0.3), 0.35, wall).fraction, 0.9);
+    // Pressed through each other by 0.1 mm: closed, and the interpenetration is reported. (The folds are then
+    // inverted — the inner fold's radius is negative — and the few edges there are not counted closed.)
+    const NeckOcclusion through = neck_occlusion(s, pinched(s, 0.0, -0.1), 0.05, wall);
+    EXPECT_GE(through.fraction, 0.93);
+    EXPECT_NEAR(through.max_interpenetration_mm, 0.1, 0.015);
+}
+
+TEST(NeckOcclusion, ClipBesideTheNeckClosesNone) {
+    const SimLumen s = tube();
+    const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T);
+    const NeckOcclusion o = neck_occlusion(s, pinched(s, 5.0, 0.0), 0.05, wall);  // flat at z = 3.5 … 6.5, round at z ≤ 1.5
+    EXPECT_EQ(o.fraction, 0.0);
+    EXPECT_NEAR(o.min_gap_mm, 2 * (R_OUT - T), 0.01);
+}
