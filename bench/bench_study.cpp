@@ -187,16 +187,25 @@ int main(int argc, char** argv) {
         std::vector<size_t> order(clip.size());
         for (size_t k = 0; k < order.size(); ++k) order[k] = k;
         std::sort(order.begin(), order.end(), [&](size_t a, size_t c) { return s.node[clip[a]] < s.node[clip[c]]; });
+        // A bundle condensed on the corner nodes of 10-node elements (`condense --nodes corners`) is pushed at its
+        // corners only, as the simulator pushes it; the mid-edge nodes follow from K.
+        const bool corners_only = b.fem->element_order == 2 && m.surface.size() < s.size();
         for (size_t k : order) {
             const int v = clip[k];
             sim::Prescribed q;
             for (int a = 0; a < 3; ++a) q.cols[a] = row_of[static_cast<size_t>(3 * s.node[v] + a)];
             q.u = -depth * bump[k] * s.N.row(v).transpose();
             if (q.cols.minCoeff() < 0) {
+                if (corners_only) continue;
                 std::fprintf(stderr, "%s: a clip node is not condensed\n", case_path.c_str());
                 return 2;
             }
             p.push_back(q);
+        }
+        out["pushed_nodes"] = p.size();
+        if (p.empty()) {
+            std::fprintf(stderr, "%s: no clip node is condensed\n", case_path.c_str());
+            return 2;
         }
         sim::ContactSolver solver(m);
         const sim::SolveResult r = solver.solve(p, 0, sim::GroupMethod::EXACT, m.dof_node.size());

@@ -61,7 +61,7 @@ for e in json.load(sys.stdin)['entries']:
   for prec in float32 float64; do
     local t0 t1
     t0=$(date +%s.%N)
-    "$prep" condense "$d/fem.h5" -o "$d/case_$prec.h5" --precision "$prec" -q
+    "$prep" condense "$d/fem.h5" -o "$d/case_$prec.h5" --precision "$prec" --region-label all --nodes all -q
     t1=$(date +%s.%N)
     "$probe" "$d/fem.h5" --case "$d/case_$prec.h5" $centre_arg |
       $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$h, reference=0, condense_s=$t1-$t0); print(json.dumps(j))" >>"$jsonl"
@@ -83,7 +83,7 @@ if [ -f "$d/fem.h5" ]; then
   for R in 2.5 4 6; do
     echo "== region sphere $R mm, h $hr, order 2, float32"
     t0=$(date +%s.%N)
-    "$prep" condense "$d/fem.h5" -o "$d/case_r$R.h5" --precision float32 --region-sphere "$c,$R" -q
+    "$prep" condense "$d/fem.h5" -o "$d/case_r$R.h5" --precision float32 --region-sphere "$c,$R" --nodes all -q
     t1=$(date +%s.%N)
     "$probe" "$d/fem.h5" --case "$d/case_r$R.h5" $centre_arg |
       $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$hr, reference=0, region_mm=$R, condense_s=$t1-$t0); print(json.dumps(j))" >>"$jsonl"
@@ -120,7 +120,7 @@ for e in json.load(sys.stdin)['entries']:
   else
     local t0 t1
     t0=$(date +%s.%N)
-    "$prep" condense "$d/fem.h5" -o "$d/case_f32.h5" --precision float32 -q
+    "$prep" condense "$d/fem.h5" -o "$d/case_f32.h5" --precision float32 --region-label all --nodes all -q
     t1=$(date +%s.%N)
     "$probe" "$d/fem.h5" --case "$d/case_f32.h5" --centre "$pc" |
       $py -c "import json,sys; j=json.loads(sys.stdin.read()); j.update(h=$e, reference=0, case_name='phantom', condense_s=$t1-$t0); print(json.dumps(j))" >>"$pjsonl"

@@ -51,7 +51,7 @@ void validate(const CondenseStageParams& p) {
         if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("condense: region box needs min < max on every axis");
     }
     if (!(p.region_margin_mm >= 0 && p.region_margin_mm < 1e3)) throw InputError("condense: --region-margin-mm must be >= 0");
-    if (p.region_margin_mm > 0 && p.region_label.empty()) throw InputError("condense: --region-margin-mm needs --region-label");
+    if (p.nodes != "corners" && p.nodes != "all") throw InputError("condense: --nodes '" + p.nodes + "': expected corners or all");
 }
 std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p) {
     const auto& n = p.numeric;
@@ -67,17 +67,31 @@ std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseSt
             {"region_sphere_mm", sphere},
             {"region_box_mm", box},
             {"region_label", p.region_label},
-            {"region_margin_mm", shortest(p.region_margin_mm)}};
+            {"region_margin_mm", shortest(p.region_margin_mm)},
+            {"nodes", p.nodes}};
+}
+
+std::string resolved_region_label(const VolumeData& v, const CondenseStageParams& p) {
+    if (p.region_label == "all") return "";
+    if (p.region_label != "auto") return p.region_label;
+    if (p.region_sphere || p.region_box) return "";
+    const auto it = std::find(v.region_names.begin(), v.region_names.end(), "aneurysm");
+    if (it == v.region_names.end()) return "";
+    const int r = static_cast<int>(it - v.region_names.begin());
+    for (Eigen::Index t = 0; t < v.tet_region.size(); ++t)
+        if (v.tet_region[t] == r) return "aneurysm";
+    return "";
 }
 
 std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
     for (const char* s : {"outer", "fixed"})
         if (!v.node_sets.count(s)) throw InputError(std::string("condense: /volume has no node set '") + s + "'");
     std::set<int> fixed(v.node_sets.at("fixed").data(), v.node_sets.at("fixed").data() + v.node_sets.at("fixed").size());
-    std::vector<char> in_label(static_cast<size_t>(v.nodes.rows()), p.region_label.empty());
-    if (!p.region_label.empty()) {
-        const auto it = std::find(v.region_names.begin(), v.region_names.end(), p.region_label);
-        if (it == v.region_names.end()) throw InputError("condense: region label '" + p.region_label + "' is not a region of the mesh");
+    const std::string label = resolved_region_label(v, p);
+    std::vector<char> in_label(static_cast<size_t>(v.nodes.rows()), label.empty());
+    if (!label.empty()) {
+        const auto it = std::find(v.region_names.begin(), v.region_names.end(), label);
+        if (it == v.region_names.end()) throw InputError("condense: region label '" + label + "' is not a region of the mesh");
         const int r = static_cast<int>(it - v.region_names.begin());
         for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
             if (v.tet_region[t] == r)
@@ -98,11 +112,14 @@ std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
             }
         }
     }
+    std::vector<char> corner(static_cast<size_t>(v.nodes.rows()), v.tets.cols() == 4 || p.nodes == "all");
+    for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
+        for (int a = 0; a < 4; ++a) corner[static_cast<size_t>(v.tets(t, a))] = 1;
     std::vector<int> kept;
     const Eigen::VectorXi& outer = v.node_sets.at("outer");
     for (Eigen::Index k = 0; k < outer.size(); ++k) {
         const int n = outer[k];
-        if (fixed.count(n) || !in_label[static_cast<size_t>(n)]) continue;
+        if (fixed.count(n) || !in_label[static_cast<size_t>(n)] || !corner[static_cast<size_t>(n)]) continue;
         const Eigen::Vector3d x = v.nodes.row(n).transpose();
         if (p.region_sphere) {
             const auto& s = *p.region_sphere;
@@ -233,6 +250,13 @@ void condense_file(const std::string& in, const std::string& out, const Condense
     Bundle b = read_bundle(in);
     if (!b.volume || !b.fem) throw InputError(in + ": needs /volume and /fem (run `aneuprep assemble` first)");
     const std::vector<int> nodes = kept_nodes(*b.volume, p);
+    {
+        const std::string label = resolved_region_label(*b.volume, p);
+        rep.info(label.empty() ? std::string("condense: working region: every outer node") + (p.region_label == "auto" && !p.region_sphere && !p.region_box ? " (no aneurysm region in the mesh)" : "") +
+                                     (p.region_sphere || p.region_box ? " inside the given sphere/box" : "")
+                               : "condense: working region: region '" + label + "' and " + shortest(p.region_margin_mm) + " mm around it (" +
+                                     std::to_string(nodes.size()) + " of " + std::to_string(b.volume->node_sets.at("outer").size()) + " outer nodes)");
+    }
     Eigen::VectorXi kept(3 * static_cast<Eigen::Index>(nodes.size()));
     for (size_t k = 0; k < nodes.size(); ++k)
         for (int a = 0; a < 3; ++a) kept[3 * static_cast<Eigen::Index>(k) + a] = 3 * nodes[k] + a;

@@ -244,6 +244,11 @@ SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi&
         }
         const int m01 = tets(s.tet, mid_slot(lf[0], lf[1])), m12 = tets(s.tet, mid_slot(lf[1], lf[2])),
                   m20 = tets(s.tet, mid_slot(lf[2], lf[0]));
+        if (!(condensed(m01) || condensed(m12) || condensed(m20))) {  // corners only condensed: the corner triangle
+            tris.push_back({c0, c1, c2});
+            tri_region.push_back(reg);
+            continue;
+        }
         if (!(condensed(m01) && condensed(m12) && condensed(m20))) continue;
         for (const auto& t : {std::array<int, 3>{c0, m01, m20}, std::array<int, 3>{m01, c1, m12},
                               std::array<int, 3>{m20, m12, c2}, std::array<int, 3>{m01, m12, m20}}) {
@@ -385,7 +390,9 @@ SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
             for (Eigen::Index p = 0; p < M; ++p) P(p, j) = W(m.file_row[p], j);
         W.swap(P);
     };
-    if (want_float) {
+    if (opt.geometry_only) {
+        // no W
+    } else if (want_float) {
         if (c.precision == Precision::FLOAT32) {
             m.Wf = read_condensed_columns_f(bundle_path, m.active);
         } else {

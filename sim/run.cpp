@@ -10,6 +10,7 @@
 #include <fstream>
 #include <iostream>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -304,29 +305,15 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             }
         } else {
             if (!opt.live) throw InputError(sc.path + ": live_input is set but no pose stream was given");
-            std::string line;
-            long lineno = 0;
-            double t_now = 0;
-            while (std::getline(*opt.live, line)) {
-                ++lineno;
-                if (line.empty() || line[0] == '#') continue;
-                std::string why;
-                const auto s = parse_live_line(line, why);
-                int idx = -1;
-                if (s) {
-                    idx = sim.instrument_index(s->instrument);
-                    if (idx < 0) why = "unknown instrument \"" + s->instrument + "\"";
-                    else if (s->t + 1e-12 < t_now) why = "time " + g(s->t) + " s goes back (now " + g(t_now) + " s)";
-                }
-                if (!s || !why.empty()) {
-                    sim.count_skipped_input();
-                    message("pose stream line " + std::to_string(lineno) + " skipped: " + why);
-                    continue;
-                }
+            LiveReader reader(*opt.live, [&](const std::string& name) { return sim.instrument_index(name); });
+            const auto skipped = [&](long line, const std::string& why) {
+                sim.count_skipped_input();
+                message("pose stream line " + std::to_string(line) + " skipped: " + why);
+            };
+            while (const auto s = reader.next(skipped)) {
                 // Advance the timeline to the sample's time, then apply it.
-                while (static_cast<double>(n) / H + 1e-12 < s->t) tick(static_cast<double>(n) / H);
-                t_now = s->t;
-                sim.set_input(idx, s->key, s->t);
+                while (static_cast<double>(n) / H + 1e-12 < s->sample.t) tick(static_cast<double>(n) / H);
+                sim.set_input(s->instrument, s->sample.key, s->sample.t);
             }
             tick(static_cast<double>(n) / H);
         }
@@ -402,7 +389,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         htime.step_s.reserve(htime.tick_s.capacity());
         const double hp = 1.0 / H;
         double t_prev = -1, next = 0;
-        std::istream* live = sc.live_input ? opt.live : nullptr;
+        std::optional<LiveReader> reader;
+        if (sc.live_input && opt.live) reader.emplace(*opt.live, [&](const std::string& name) { return sim.instrument_index(name); });
         while (true) {
             const double t = now();
             if (!sc.live_input && t > sc.duration_s) break;
@@ -415,20 +403,17 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             htime.step_s.push_back(now() - t);
             if (hlog.out.on()) hbuf.emplace_back(t, F);
             t_prev = t;
-            if (live) {
-                // One line per tick at most (a pose device streams at the haptic rate).
-                std::string line;
-                if (!std::getline(*live, line)) break;
-                std::string why;
-                const auto s = parse_live_line(line, why);
-                const int idx = s ? sim.instrument_index(s->instrument) : -1;
+            if (reader) {
+                // One sample per tick at most (a pose device streams at the haptic rate), applied at the tick's time.
+                std::vector<std::pair<long, std::string>> refused;
+                const auto s = reader->next([&](long line, const std::string& why) { refused.emplace_back(line, why); });
                 std::lock_guard<std::mutex> lk(mx);
-                if (!s || idx < 0) {
+                for (const auto& [line, why] : refused) {
                     sim.count_skipped_input();
-                    message("pose stream line skipped: " + (s ? "unknown instrument \"" + s->instrument + "\"" : why));
-                } else {
-                    sim.set_input(idx, s->key, t);
+                    message("pose stream line " + std::to_string(line) + " skipped: " + why);
                 }
+                if (!s) break;
+                sim.set_input(s->instrument, s->sample.key, t);
             }
             next += hp;
             const double wait = next - now();

@@ -385,4 +385,30 @@ std::optional<LiveSample> parse_live_line(const std::string& line, std::string& 
     return s;
 }
 
+LiveReader::LiveReader(std::istream& in, std::function<int(const std::string&)> instrument_index) : m_in(in), m_index(std::move(instrument_index)) {}
+
+std::optional<LiveReader::Sample> LiveReader::next(const std::function<void(long, const std::string&)>& skipped) {
+    std::string line;
+    while (std::getline(m_in, line)) {
+        ++m_line;
+        const auto first = line.find_first_not_of(" \t\r");
+        if (first == std::string::npos || line[first] == '#') continue;
+        std::string why;
+        const auto s = parse_live_line(line, why);
+        int idx = -1;
+        if (s) {
+            idx = m_index(s->instrument);
+            if (idx < 0) why = "unknown instrument \"" + s->instrument + "\"";
+            else if (s->t + 1e-12 < m_t) why = "time " + std::to_string(s->t) + " s goes back (the stream was at " + std::to_string(m_t) + " s)";
+        }
+        if (!s || !why.empty()) {
+            skipped(m_line, why);
+            continue;
+        }
+        m_t = s->t;
+        return Sample{*s, idx};
+    }
+    return std::nullopt;
+}
+
 }  // namespace aneu::sim

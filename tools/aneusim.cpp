@@ -1,13 +1,16 @@
 // SPDX-License-Identifier: MIT
 // aneusim: the real-time clipping simulator. Links aneu_sim + aneu_core only (no offline stack).
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 
 #include <CLI/CLI.hpp>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/sim/model.hpp"
+#include "aneu/sim/plan.hpp"
 #include "aneu/sim/simulator.hpp"
 #include "cli_common.hpp"
 
@@ -45,6 +48,13 @@ int main(int argc, char** argv) {
     run->add_option("--clip-method", method, "deposited clips: exact or two-solve (the published method)")
         ->check(CLI::IsMember({"exact", "two-solve"}));
 
+    // aneusim plan BUNDLE -o SCENE: a scene with a clip across the detected neck.
+    auto* plan = app.add_subcommand("plan", "write a scene for a case bundle: a straight clip approaching and closing across the detected neck, "
+                                            "a suction tube parked nearby");
+    std::string plan_bundle, plan_out;
+    plan->add_option("bundle", plan_bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
+    plan->add_option("-o,--output", plan_out, "scene file to write (JSON); its outputs are named after it")->required();
+
     CLI11_PARSE(app, argc, argv);
     apply_logging_options(log);
     if (load->parsed()) {
@@ -62,6 +72,23 @@ int main(int argc, char** argv) {
                        "W_columns_loaded {}\nprecision {}\nload_seconds {:.3f}\n",
                        bundle, m.nodes.rows(), m.surface.size(), m.surface.F.rows(), m.surface.neck_loops.size(),
                        m.dof_node.size(), m.active.size(), f32 ? "float32" : "float64", m.load_seconds);
+        });
+    }
+    if (plan->parsed()) {
+        return run_guarded("aneusim plan", [&] {
+            namespace fs = std::filesystem;
+            aneu::sim::LoadOptions lo;
+            lo.geometry_only = true;
+            const auto m = aneu::sim::load_model(plan_bundle, lo);
+            const fs::path out = fs::absolute(plan_out);
+            const std::string ref = fs::relative(fs::absolute(plan_bundle), out.parent_path()).string();
+            const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string());
+            aneu::AtomicTextFile f(plan_out);
+            f.out() << text;
+            f.commit();
+            const aneu::sim::NeckFrame nf = aneu::sim::neck_frame(m);
+            logger().info("planned {}: neck {:.2f} x {:.2f} mm at ({:.2f}, {:.2f}, {:.2f}); run it with `aneusim run {}`", plan_out, nf.length_mm,
+                          nf.width_mm, nf.centre.x(), nf.centre.y(), nf.centre.z(), plan_out);
         });
     }
     return run_guarded("aneusim run", [&] {

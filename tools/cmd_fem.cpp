@@ -108,8 +108,14 @@ void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::
             ->capture_default_str();
         c->add_option("--region-sphere", *sphere, "working region x,y,z,radius [mm]")->delimiter(',')->expected(4);
         c->add_option("--region-box", *box, "working region xmin,ymin,zmin,xmax,ymax,zmax [mm]")->delimiter(',')->expected(6);
-        c->add_option("--region-label", p->region_label, "only nodes of this tissue region (artery, aneurysm)");
-        c->add_option("--region-margin-mm", p->region_margin_mm, "with --region-label: also nodes within this distance of the region")
+        c->add_option("--region-label", p->region_label,
+                      "only nodes of this tissue region (artery, aneurysm) and --region-margin-mm around it; auto: the aneurysm when the mesh has "
+                      "one and no sphere/box is given; all: the whole outer surface")
+            ->capture_default_str();
+        c->add_option("--region-margin-mm", p->region_margin_mm, "with a region label: also nodes within this distance of the region")
+            ->capture_default_str();
+        c->add_option("--nodes", p->nodes, "10-node tetrahedra: corners (the outer surface's corner nodes; W as small as for 4-node) or all")
+            ->check(CLI::IsMember({"corners", "all"}))
             ->capture_default_str();
     }
 }

@@ -126,6 +126,25 @@ TEST(Stages, ChainWritesEveryGroupAndProvenance) {
     CondenseStageParams cp;
     cp.numeric.precision = Precision::FLOAT64;
     cp.numeric.tile_size = 64;
+    // By default only the outer surface's corner nodes are kept (a tube without a sac: the whole surface).
+    {
+        const VolumeData v = *read_bundle(d.file("fem.h5")).volume;
+        std::vector<char> corner(static_cast<size_t>(v.nodes.rows()), 0);
+        for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
+            for (int a = 0; a < 4; ++a) corner[static_cast<size_t>(v.tets(t, a))] = 1;
+        const Eigen::VectorXi& fx = v.node_sets.at("fixed");
+        const std::set<int> fixed_set(fx.data(), fx.data() + fx.size());
+        size_t corners_free = 0;
+        for (Eigen::Index k = 0; k < v.node_sets.at("outer").size(); ++k) {
+            const int n = v.node_sets.at("outer")[k];
+            corners_free += corner[static_cast<size_t>(n)] && !fixed_set.count(n);
+        }
+        const std::vector<int> kept = kept_nodes(v, cp);
+        EXPECT_EQ(kept.size(), corners_free);
+        for (int n : kept) EXPECT_TRUE(corner[static_cast<size_t>(n)]);
+        EXPECT_EQ(resolved_region_label(v, cp), "") << "no aneurysm region: the whole surface";
+    }
+    cp.nodes = "all";  // below: every outer node, mid-edge ones included
     r.stage = "condense";
     condense_file(d.file("fem.h5"), d.file("case.h5"), cp, r);
     const Bundle b = read_bundle(d.file("case.h5"));
@@ -178,7 +197,9 @@ TEST(TubeSac, WallIsClosedLabelledAndMeshesIntoTwoRegions) {
     EXPECT_LT(n_sac, v.tets.rows() / 2);
     // Condensing only the aneurysm's nodes keeps nodes on the sac and the ring of its neck.
     CondenseStageParams cp;
+    EXPECT_EQ(resolved_region_label(v, cp), "aneurysm") << "the default working region is the sac's";
     cp.region_label = "aneurysm";
+    cp.region_margin_mm = 0.0;
     const std::vector<int> kept = kept_nodes(v, cp);
     ASSERT_FALSE(kept.empty());
     for (int n : kept) ASSERT_LT((v.nodes.row(n).transpose() - C).norm(), p.sac_radius_mm + p.sac_thickness_mm + 3 * p.edge_mm);

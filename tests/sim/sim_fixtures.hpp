@@ -18,10 +18,10 @@ struct TubeCase {
     fem::StructuredMesh mesh;
 };
 
-/// Tube r 1.5..1.9 mm, length 8 mm along z; elements whose centroid has z in [3,5] and angle within
-/// ±40° of +x are "aneurysm" (E_sac), the rest "artery" (E_art).
+/// Tube r 1.5..1.9 mm, length 8 mm along z; elements whose centroid has z in [sac_z0, sac_z1] (3, 5) and angle
+/// within ±sac_deg (40°) of +x are "aneurysm" (E_sac), the rest "artery" (E_art).
 inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, double E_art = 1.0, double E_sac = 1.0,
-                          double nu = 0.45) {
+                          double nu = 0.45, double sac_z0 = 3.0, double sac_z1 = 5.0, double sac_deg = 40.0) {
     TubeCase c;
     c.mesh = fem::tube_mesh(1.5, 1.9, 8.0, 2, n_theta, n_z);
     const auto& m = c.mesh;
@@ -30,7 +30,7 @@ inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, d
         Eigen::RowVector3d g = Eigen::RowVector3d::Zero();
         for (int k = 0; k < 4; ++k) g += m.V.row(m.T(e, k)) / 4.0;
         const double ang = std::atan2(g.y(), g.x());
-        region[e] = (g.z() > 3.0 && g.z() < 5.0 && std::abs(ang) < 40.0 * M_PI / 180.0) ? 1 : 0;
+        region[e] = (g.z() > sac_z0 && g.z() < sac_z1 && std::abs(ang) < sac_deg * M_PI / 180.0) ? 1 : 0;
     }
     std::vector<Material> mats{{"artery", E_art, nu}, {"aneurysm", E_sac, nu}};
     c.K = fem::assemble_stiffness(m.V, m.T, region, mats);

@@ -89,6 +89,7 @@ struct SimModel {
 struct LoadOptions {
     std::optional<RegionSphere> region;        ///< none: the whole simulated surface
     std::optional<Precision> working_precision;  ///< convert W after reading (none: keep the file's)
+    bool geometry_only = false;                  ///< the mesh, surface and lumen without W (planning, inspection)
 };
 
 /// Loads a case bundle for simulation, reading only the columns of W whose node lies in the region
@@ -104,8 +105,9 @@ inline SimModel load_model(const std::string& bundle_path, const std::optional<R
     return load_model(bundle_path, o);
 }
 
-/// The simulated surface of a mesh: boundary faces (corner faces split in four for 10-node elements) whose
-/// nodes all have their three DOFs in `row_of_dof` (−1 = not condensed), oriented outward.
+/// The simulated surface of a mesh: boundary faces whose nodes all have their three DOFs in `row_of_dof`
+/// (−1 = not condensed), oriented outward. 10-node elements: a face whose mid-edge nodes are condensed too is
+/// split in four; one whose corners only are condensed (`condense --nodes corners`) is the corner triangle.
 /// @param[in] row_of_dof  3#N: row of each DOF (3·node + axis), −1 if absent
 SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
                            const std::vector<std::string>& region_names, const std::vector<int>& row_of_dof);

@@ -4,7 +4,9 @@
 /// A simulation scene (JSON file in configs/scenes/): the bundle, clip models, instruments with a scripted
 /// trajectory or live input, rigid obstacles, the working region, contact/haptic parameters, assessment
 /// thresholds and outputs. Format: docs/scene_format.md.
+#include <functional>
 #include <iosfwd>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -135,5 +137,25 @@ struct LiveSample {
 };
 /// Parses a live line; returns nullopt and sets `why` for garbage, NaN/inf, or a zero direction.
 std::optional<LiveSample> parse_live_line(const std::string& line, std::string& why);
+
+/// The live pose stream, for every run mode alike: blank lines and `#` comments are passed over; a line that
+/// does not parse, names an unknown instrument or goes back in time is skipped, with its line number and why.
+class LiveReader {
+public:
+    /// `instrument_index`: the scene's instrument of a name, −1 if none.
+    LiveReader(std::istream& in, std::function<int(const std::string&)> instrument_index);
+    struct Sample {
+        LiveSample sample;
+        int instrument = -1;
+    };
+    /// The next valid sample (nullopt at the end of the stream); `skipped(line_number, why)` for each refused line.
+    std::optional<Sample> next(const std::function<void(long, const std::string&)>& skipped);
+
+private:
+    std::istream& m_in;
+    std::function<int(const std::string&)> m_index;
+    long m_line = 0;
+    double m_t = -std::numeric_limits<double>::infinity();
+};
 
 }  // namespace aneu::sim

@@ -1,0 +1,40 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// Scene planning for any case bundle (`aneusim plan`): the neck from the labels, a straight clip that approaches
+/// along the neck's long axis from the freer side and closes across it, a suction tube parked nearby (sim/plan.cpp).
+#include <string>
+
+#include <Eigen/Core>
+
+#include "aneu/sim/model.hpp"
+
+namespace aneu::sim {
+
+/// The neck's frame: the sac's border on the lumen (SimLumen::neck_loops), its centre (by length), principal axes
+/// (long, short: in the neck plane) and the plane's normal towards the sac, with the neck's extents along them.
+struct NeckFrame {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    Eigen::Vector3d long_axis = Eigen::Vector3d::UnitX();
+    Eigen::Vector3d short_axis = Eigen::Vector3d::UnitY();
+    Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  ///< towards the sac
+    double length_mm = 0.0;  ///< extent along the long axis
+    double width_mm = 0.0;   ///< extent along the short axis
+    double line_mm = 0.0;    ///< length of the neck line
+};
+/// @throws InputError when the bundle has no neck (no "aneurysm" region on the lumen under the condensed surface)
+NeckFrame neck_frame(const SimModel& m);
+
+struct PlanOptions {
+    double approach_mm = 12.0;    ///< the applier starts this far back along the long axis
+    double max_opening_deg = 60.0;
+};
+
+/// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the
+/// outputs are named after `stem` beside the scene. The clip opens to 80 % of `max_opening_deg`; its hinge stands
+/// far enough before the neck that every neck point passes between the open jaws with its wall and 0.5 mm to
+/// spare (at least 1 mm); the blades are the shortest of 3, 5, …, 15 mm that reach 0.5 mm past the neck.
+/// @throws InputError no neck, or a neck longer than the longest clip
+std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const std::string& stem, const PlanOptions& o = {});
+
+}  // namespace aneu::sim

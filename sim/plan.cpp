@@ -1,0 +1,176 @@
+// SPDX-License-Identifier: MIT
+// `aneusim plan`: a scene with a clip across the detected neck (plan.hpp).
+#include "aneu/sim/plan.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "aneu/core/error.hpp"
+
+namespace aneu::sim {
+
+namespace {
+constexpr double PI = 3.14159265358979323846;
+nlohmann::json vec(const Eigen::Vector3d& x) {
+    auto r = [](double v) { return std::round(v * 1e4) / 1e4; };
+    return nlohmann::json::array({r(x.x()), r(x.y()), r(x.z())});
+}
+}  // namespace
+
+NeckFrame neck_frame(const SimModel& m) {
+    const SimLumen& L = m.surface.lumen;
+    if (L.neck_loops.empty()) {
+        throw InputError(m.case_id + ": no aneurysm neck in the bundle (no border between 'aneurysm' and another region on the lumen under "
+                                     "the condensed surface); label the sac (aneuprep surface) and condense around it");
+    }
+    NeckFrame nf;
+    // Centre and covariance by length along the neck line (edge midpoints weighted by edge length).
+    double total = 0;
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    for (const auto& loop : L.neck_loops)
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const Eigen::Vector3d a = L.X.row(loop[k]), b = L.X.row(loop[(k + 1) % loop.size()]);
+            const double len = (b - a).norm();
+            c += 0.5 * len * (a + b);
+            total += len;
+        }
+    c /= total;
+    Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+    for (const auto& loop : L.neck_loops)
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const Eigen::Vector3d a = L.X.row(loop[k]), b = L.X.row(loop[(k + 1) % loop.size()]);
+            const Eigen::Vector3d q = 0.5 * (a + b) - c;
+            C += (b - a).norm() * q * q.transpose();
+        }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);  // ascending
+    nf.centre = c;
+    nf.line_mm = total;
+    nf.normal = es.eigenvectors().col(0);
+    nf.short_axis = es.eigenvectors().col(1);
+    nf.long_axis = es.eigenvectors().col(2);
+    // The normal towards the sac: the sac faces' centroid.
+    const auto it = std::find(m.surface.region_names.begin(), m.surface.region_names.end(), "aneurysm");
+    const int sac = it == m.surface.region_names.end() ? -1 : static_cast<int>(it - m.surface.region_names.begin());
+    Eigen::Vector3d sc = Eigen::Vector3d::Zero();
+    int ns = 0;
+    for (Eigen::Index f = 0; f < L.F.rows(); ++f)
+        if (L.face_region[f] == sac) {
+            sc += (L.X.row(L.F(f, 0)) + L.X.row(L.F(f, 1)) + L.X.row(L.F(f, 2))).transpose() / 3.0;
+            ++ns;
+        }
+    if (ns > 0 && nf.normal.dot(sc / ns - c) < 0) nf.normal = -nf.normal;
+    nf.short_axis = nf.normal.cross(nf.long_axis).normalized();  // right-handed: long × short = normal
+    double lo = 1e300, hi = -1e300, wlo = 1e300, whi = -1e300;
+    for (const auto& loop : L.neck_loops)
+        for (int v : loop) {
+            const Eigen::Vector3d q = L.X.row(v).transpose() - c;
+            lo = std::min(lo, q.dot(nf.long_axis));
+            hi = std::max(hi, q.dot(nf.long_axis));
+            wlo = std::min(wlo, q.dot(nf.short_axis));
+            whi = std::max(whi, q.dot(nf.short_axis));
+        }
+    nf.length_mm = hi - lo;
+    nf.width_mm = whi - wlo;
+    return nf;
+}
+
+std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const std::string& stem, const PlanOptions& o) {
+    const NeckFrame nf = neck_frame(m);
+    const SimSurface& s = m.surface;
+    double t_max = 0;
+    for (Eigen::Index v = 0; v < s.thickness.size(); ++v)
+        if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
+    constexpr double JAW_W = 1.0, JAW_T = 0.5;
+    // The jaws' mid-plane lies just above the neck plane on the sac's side (the parent artery stays free): the
+    // jaws' width spans the normal direction.
+    const double lift = 0.5 * JAW_W + 0.2;
+    const Eigen::Vector3d u = nf.long_axis, w = nf.short_axis, n = nf.normal;
+    // The opening (80 % of the clip's largest) and the hinge's distance before the neck's near end: every neck
+    // point must pass between the open jaws with its wall and 0.5 mm to spare, at least 1 mm.
+    const double opening = 0.8 * o.max_opening_deg;
+    const double tan_half = std::tan(0.5 * opening * PI / 180.0);
+    auto margin_for = [&](double side) {
+        double m = 1.0;
+        for (const auto& loop : s.lumen.neck_loops)
+            for (int v : loop) {
+                const Eigen::Vector3d q = s.lumen.X.row(v).transpose() - nf.centre;
+                const double from_near = side * q.dot(u) + 0.5 * nf.length_mm;
+                m = std::max(m, (std::abs(q.dot(w)) + t_max + 0.5) / tan_half - from_near);
+            }
+        return m;
+    };
+    // The side to come from: the one with fewer simulated-surface vertices in the corridor the open jaws sweep.
+    auto corridor = [&](double side) {
+        const double back = 0.5 * nf.length_mm + margin_for(side);
+        int count = 0;
+        for (Eigen::Index v = 0; v < s.size(); ++v) {
+            const Eigen::Vector3d q = s.X.row(v).transpose() - nf.centre;
+            const double along = side * q.dot(u), across = std::abs(q.dot(w)), up = q.dot(n) - lift;
+            if (along < -back && along > -(back + o.approach_mm) && across < 0.5 * nf.width_mm + 2.0 && std::abs(up) < JAW_W) ++count;
+        }
+        return count;
+    };
+    const double side = corridor(1.0) <= corridor(-1.0) ? 1.0 : -1.0;
+    const double margin = margin_for(side);
+    // The clip: straight blades of the shortest standard length (3 … 15 mm in 2 mm steps) reaching 0.5 mm past the neck.
+    double blade = 0;
+    for (double l = 3; l <= 15; l += 2)
+        if (l >= margin + nf.length_mm + 0.5) {
+            blade = l;
+            break;
+        }
+    if (blade == 0) {
+        throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
+                         " mm; the longest straight clip planned (15 mm, open " + std::to_string(opening) + " deg) does not span it");
+    }
+    const Eigen::Vector3d axis = side * u;
+    const Eigen::Vector3d hinge = nf.centre - (0.5 * nf.length_mm + margin) * axis + lift * n;
+    const Eigen::Vector3d start = hinge - o.approach_mm * axis;
+    // The suction tube parked beside the neck, 3 mm clear of the vessel, pointing at it.
+    Eigen::Vector3d park = nf.centre - (0.5 * nf.width_mm + 4.0) * w + 2.0 * n;
+    for (int it = 0; it < 40; ++it) {
+        double dmin = std::numeric_limits<double>::infinity();
+        for (Eigen::Index v = 0; v < s.size(); ++v) dmin = std::min(dmin, (s.X.row(v).transpose() - park).norm());
+        if (dmin >= 3.0) break;
+        park -= 0.5 * w;
+    }
+    const double t_in = 0.8, t_close = 1.3, t_release = 1.5, t_out = 1.9;
+    nlohmann::ordered_json j;
+    j["bundle"] = bundle_ref;
+    j["clip_models"][std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm"] = {
+        {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", o.max_opening_deg}};
+    const std::string model = std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm";
+    j["outputs"] = {{"log", stem + "_log.csv"}, {"series", stem + "_series"}, {"report", stem + "_report.json"}};
+    nlohmann::ordered_json ap;
+    ap["name"] = "applier";
+    ap["kind"] = "clip_applier";
+    ap["keyframes"] = nlohmann::ordered_json::array();
+    ap["keyframes"].push_back({{"t", 0.0}, {"position", vec(start)}, {"axis", vec(axis)}, {"up", vec(w)}, {"opening_deg", opening}, {"load", model}});
+    ap["keyframes"].push_back({{"t", t_in}, {"position", vec(hinge)}, {"opening_deg", opening}});
+    ap["keyframes"].push_back({{"t", t_close}, {"position", vec(hinge)}, {"opening_deg", 0.0}});
+    ap["keyframes"].push_back({{"t", t_release}, {"position", vec(hinge)}, {"opening_deg", 0.0}, {"release", true}});
+    ap["keyframes"].push_back({{"t", t_out}, {"position", vec(start)}, {"opening_deg", 0.0}});
+    nlohmann::ordered_json su;
+    su["name"] = "suction";
+    su["kind"] = "suction";
+    su["radius_mm"] = 0.75;
+    su["keyframes"] = nlohmann::ordered_json::array();
+    su["keyframes"].push_back({{"t", 0.0}, {"position", vec(park)}, {"axis", vec(w)}, {"up", vec(n)}});
+    su["keyframes"].push_back({{"t", t_out}, {"position", vec(park)}});
+    j["instruments"] = nlohmann::ordered_json::array({ap, su});
+    char head[1024];
+    std::snprintf(head, sizeof head,
+                  "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
+                  "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes along the neck's long axis from the freer side, open %.0f deg,\n"
+                  "// closes across the neck at t = %.1f s and is released; the suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
+                  m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, n.x(), n.y(), n.z(),
+                  blade, opening, t_close);
+    return std::string(head) + j.dump(2) + "\n";
+}
+
+}  // namespace aneu::sim

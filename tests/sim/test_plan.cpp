@@ -1,0 +1,97 @@
+// SPDX-License-Identifier: MIT
+// The planner on a tube whose "sac" patch has a known neck: z 2.5 … 5.5 mm (3 mm long, along z) and ±22.5° of +x
+// on the lumen (r 1.5 mm: a chord of 1.15 mm), so the neck's long axis is z, its normal +x.
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include "aneu/sim/plan.hpp"
+#include "aneu/sim/scene.hpp"
+#include "aneu/sim/simulator.hpp"
+#include "sim_fixtures.hpp"
+
+using namespace aneu;
+namespace fs = std::filesystem;
+
+namespace {
+struct PlannedTube {
+    fs::path dir, bundle;
+    PlannedTube() {
+        dir = fs::temp_directory_path() / ("aneu_plan_" + std::to_string(::getpid()));
+        fs::create_directories(dir);
+        bundle = dir / "tube.h5";
+        write_bundle(bundle.string(), test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.5, 5.5, 25.0).bundle);
+    }
+    ~PlannedTube() { fs::remove_all(dir); }
+};
+}  // namespace
+
+TEST(Plan, NeckFrameOfAKnownNeck) {
+    PlannedTube t;
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(t.bundle.string(), lo);
+    EXPECT_TRUE(m.Wf.size() == 0 && m.Wd.size() == 0) << "geometry only: no W read";
+    const sim::NeckFrame nf = sim::neck_frame(m);
+    EXPECT_GT(std::abs(nf.long_axis.z()), 0.99) << nf.long_axis.transpose();
+    EXPECT_GT(nf.normal.x(), 0.98) << "towards the sac: " << nf.normal.transpose();
+    EXPECT_NEAR(nf.length_mm, 3.0, 0.05);
+    // Across, the region's border follows the tetrahedra of 7.5° cells (the structured mesh splits each cell
+    // into tetrahedra one way): between the chords of ±22.5° and ±30°, off-centre by at most one cell's arc.
+    EXPECT_GE(nf.width_mm, 2 * 1.5 * std::sin(22.5 * M_PI / 180) - 1e-9);
+    EXPECT_LE(nf.width_mm, 2 * 1.5 * std::sin(30.0 * M_PI / 180));
+    EXPECT_NEAR(nf.centre.z(), 4.0, 0.05);
+    EXPECT_NEAR(nf.centre.y(), 0.0, 0.25);  // about one cell's arc (0.2 mm)
+    EXPECT_NEAR(nf.short_axis.dot(nf.long_axis), 0.0, 1e-9);
+}
+
+TEST(Plan, SceneClosesAClipAcrossTheNeck) {
+    PlannedTube t;
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(t.bundle.string(), lo);
+    const std::string text = sim::plan_scene(m, "tube.h5", "planned");
+    const sim::NeckFrame nf = sim::neck_frame(m);
+    const fs::path scene_path = t.dir / "planned.json";
+    {
+        std::ofstream(scene_path) << text;
+    }
+    // It reads as a scene: a straight clip along z, opening across y, the hinge before the neck's end, the jaws
+    // just above the neck plane on the sac's side, open wide enough for the neck to pass between them.
+    const sim::Scene sc = sim::read_scene(scene_path.string());
+    ASSERT_EQ(sc.clip_models.size(), 1u) << text;
+    const sim::ClipModel& cm = sc.clip_models.begin()->second;
+    ASSERT_EQ(sc.instruments.size(), 2u);
+    const auto& keys = sc.instruments[0].keys;
+    ASSERT_GE(keys.size(), 4u);
+    const sim::Pose& closed = keys[2].pose;
+    EXPECT_GT(std::abs(closed.axis.z()), 0.99);
+    EXPECT_GT(std::abs(closed.up.y()), 0.99);
+    const double margin = std::abs(closed.position.z() - nf.centre.z()) - 0.5 * nf.length_mm;
+    EXPECT_GE(margin, 1.0);
+    EXPECT_GT(closed.position.x(), 1.5);
+    // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
+    const double half = 0.5 * keys[0].opening_deg * M_PI / 180;
+    EXPECT_GE((margin + 0.5 * nf.length_mm) * std::tan(half), 0.5 * nf.width_mm + 0.4 + 0.5 - 0.3);
+    EXPECT_EQ(keys[2].opening_deg, 0.0);
+    // The jaws at full closure span the neck along z, with the shortest standard blade that does.
+    EXPECT_GE(cm.jaw_length_mm, margin + nf.length_mm + 0.5);
+    EXPECT_LT(cm.jaw_length_mm - 2, margin + nf.length_mm + 0.5);
+    const double tip = closed.position.z() + closed.axis.z() * cm.jaw_length_mm;
+    EXPECT_LE(std::min(closed.position.z(), tip), 2.5 - 0.5);
+    EXPECT_GE(std::max(closed.position.z(), tip), 5.5 + 0.5);
+    // And it runs: the clip is loaded, closed and left on the vessel.
+    sim::Scene run = sc;
+    run.log = run.series = run.report = "";
+    sim::Simulator s(run, sim::load_model(t.bundle.string()));
+    sim::RunOptions opt;
+    opt.deterministic = true;
+    const sim::Assessment a = sim::run_scene(s, opt);
+    EXPECT_EQ(a.clips_used, 1);
+    EXPECT_EQ(a.clips_deposited, 1);
+    EXPECT_GT(a.peak_vessel_force_n, 0.0) << "the clip touched the vessel";
+}
