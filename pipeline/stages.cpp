@@ -1,7 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "aneu/pipeline/stages.hpp"
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <cmath>
+#include <map>
 #include <set>
 
 #include <Eigen/Geometry>
@@ -97,18 +101,33 @@ std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
             if (v.tet_region[t] == r)
                 for (Eigen::Index a = 0; a < v.tets.cols(); ++a) in_label[static_cast<size_t>(v.tets(t, a))] = 1;
         if (p.region_margin_mm > 0) {  // grow by the margin (straight-line distance to the region's nodes)
-            std::vector<Eigen::Vector3d> core;
+            // The region's nodes in cells of the margin's size: a node within the margin of one lies in one of the
+            // 27 cells around its own.
+            const double m = p.region_margin_mm, m2 = m * m;
+            const auto cell = [&](const Eigen::Vector3d& x) {
+                return std::array<long, 3>{static_cast<long>(std::floor(x.x() / m)), static_cast<long>(std::floor(x.y() / m)),
+                                           static_cast<long>(std::floor(x.z() / m))};
+            };
+            std::map<std::array<long, 3>, std::vector<Eigen::Vector3d>> core;
             for (Eigen::Index n = 0; n < v.nodes.rows(); ++n)
-                if (in_label[static_cast<size_t>(n)]) core.push_back(v.nodes.row(n).transpose());
-            const double m2 = p.region_margin_mm * p.region_margin_mm;
+                if (in_label[static_cast<size_t>(n)]) core[cell(v.nodes.row(n).transpose())].push_back(v.nodes.row(n).transpose());
             const Eigen::VectorXi& outer = v.node_sets.at("outer");
             for (Eigen::Index k = 0; k < outer.size(); ++k) {
                 const Eigen::Vector3d x = v.nodes.row(outer[k]).transpose();
-                for (const auto& c : core)
-                    if ((x - c).squaredNorm() <= m2) {
-                        in_label[static_cast<size_t>(outer[k])] = 1;
-                        break;
-                    }
+                const auto c = cell(x);
+                bool near = false;
+                for (long i = -1; i <= 1 && !near; ++i)
+                    for (long j = -1; j <= 1 && !near; ++j)
+                        for (long l = -1; l <= 1 && !near; ++l) {
+                            const auto it = core.find({c[0] + i, c[1] + j, c[2] + l});
+                            if (it == core.end()) continue;
+                            for (const auto& y : it->second)
+                                if ((x - y).squaredNorm() <= m2) {
+                                    near = true;
+                                    break;
+                                }
+                        }
+                if (near) in_label[static_cast<size_t>(outer[k])] = 1;
             }
         }
     }

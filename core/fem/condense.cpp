@@ -107,8 +107,51 @@ cholmod_sparse* lower_csc(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K,
     return A;
 }
 
-void factorize(Cholmod& ch, const std::string& what) {
-    ch.L = cholmod_analyze(ch.A, &ch.c);
+/// With METIS and the free DOFs in node triples (3k, 3k+1, 3k+2 belong to one node), the ordering is computed on
+/// the node graph and expanded to the DOFs: the same nested dissection on a graph with a ninth of the edges
+/// (the C0001 real case, 445 k DOFs of 10-node elements: analysis 15 s -> a few seconds).
+cholmod_factor* analyze_by_nodes(Cholmod& ch) {
+    const cholmod_sparse* A = ch.A;
+    const auto n = static_cast<std::int64_t>(A->nrow);
+    if (n % 3 != 0 || n == 0) return nullptr;
+    const std::int64_t nn = n / 3;
+    const auto* Ap = static_cast<const int*>(A->p);
+    const auto* Ai = static_cast<const int*>(A->i);
+    // Lower node pattern, column by column (rows ≥ column), without duplicates.
+    std::vector<int> mark(static_cast<size_t>(nn), -1), cp(static_cast<size_t>(nn) + 1, 0), ci;
+    ci.reserve(static_cast<size_t>(Ap[n] / 6 + nn));
+    for (std::int64_t J = 0; J < nn; ++J) {
+        for (std::int64_t j = 3 * J; j < 3 * J + 3; ++j)
+            for (int k = Ap[j]; k < Ap[j + 1]; ++k) {
+                const int I = Ai[k] / 3;
+                if (I >= J && mark[static_cast<size_t>(I)] != static_cast<int>(J)) {
+                    mark[static_cast<size_t>(I)] = static_cast<int>(J);
+                    ci.push_back(I);
+                }
+            }
+        cp[static_cast<size_t>(J) + 1] = static_cast<int>(ci.size());
+    }
+    cholmod_sparse* G = cholmod_allocate_sparse(static_cast<size_t>(nn), static_cast<size_t>(nn), ci.size(), 0, 1, -1, CHOLMOD_PATTERN, &ch.c);
+    if (!G) return nullptr;
+    std::copy(cp.begin(), cp.end(), static_cast<int*>(G->p));
+    std::copy(ci.begin(), ci.end(), static_cast<int*>(G->i));
+    std::vector<int> node_perm(static_cast<size_t>(nn));
+    const int ok = cholmod_metis(G, nullptr, 0, 1, node_perm.data(), &ch.c);
+    cholmod_free_sparse(&G, &ch.c);
+    if (!ok) return nullptr;
+    std::vector<int> perm(static_cast<size_t>(n));
+    for (std::int64_t k = 0; k < nn; ++k)
+        for (int a = 0; a < 3; ++a) perm[static_cast<size_t>(3 * k + a)] = 3 * node_perm[static_cast<size_t>(k)] + a;
+    const int saved = ch.c.method[0].ordering;
+    ch.c.method[0].ordering = CHOLMOD_GIVEN;
+    cholmod_factor* L = cholmod_analyze_p(ch.A, perm.data(), nullptr, 0, &ch.c);
+    ch.c.method[0].ordering = saved;
+    return L;
+}
+
+void factorize(Cholmod& ch, const std::string& what, bool node_triples = false) {
+    if (node_triples && ch.c.method[0].ordering == CHOLMOD_METIS) ch.L = analyze_by_nodes(ch);
+    if (!ch.L) ch.L = cholmod_analyze(ch.A, &ch.c);
     if (!ch.L) throw NumericalError("condense: CHOLMOD analysis of " + what + " failed: " + g_cholmod_error);
 }
 
@@ -438,7 +481,12 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     Cholmod ch(p.ordering);
     ch.A = lower_csc(K, newidx, nf, &ch.c);
     auto t0 = Clock::now();
-    factorize(ch, "K");
+    bool triples = nf % 3 == 0;  // every node's three DOFs free together, in order
+    for (int k = 0; k < nf && triples; k += 3)
+        triples = free_dofs[static_cast<size_t>(k)] % 3 == 0 && free_dofs[static_cast<size_t>(k) + 1] == free_dofs[static_cast<size_t>(k)] + 1 &&
+                  free_dofs[static_cast<size_t>(k) + 2] == free_dofs[static_cast<size_t>(k)] + 2;
+    factorize(ch, "K", triples);
+    const double analyze_s = since(t0);
     Timing tm;
     const double nb = std::ceil(static_cast<double>(m) / p.tile_size);
     const double w_bytes = (p.precision == Precision::FLOAT32 ? 4.0 : 8.0) * nb * (nb + 1) / 2 * p.tile_size * p.tile_size;
@@ -535,6 +583,7 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
                        {"nnz_L", nnzL},
                        {"factor_flops", fl_factor},
                        {"factor_s", tm.factor_s},
+                       {"analyze_s", analyze_s},
                        {"w_s", tm.solve_s},
                        {"w_flops", tm.flops},
                        {"w_gflops_per_s", tm.solve_s > 0 ? tm.flops / tm.solve_s / 1e9 : 0.0},
