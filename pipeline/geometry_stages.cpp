@@ -73,7 +73,7 @@ void segment_file(const std::string& image_path, const std::string& out, const S
     Segmentation seg = segment(image_path, p, rep);
     log_qa("segment", seg.qa, rep);
     Bundle b;
-    b.meta.case_id = stem(out);
+    b.meta.case_id = case_id_of(out);
     b.image = std::move(seg.image);
     stage.qa = seg.qa;
     finish(b, stage, t0, out, rep);
@@ -98,7 +98,7 @@ void surface_file(const std::string& in, const std::string& out, const SurfacePa
         if (!b.image) throw InputError(in + ": no /image (run `aneuprep segment` first, or give a surface mesh .stl/.vtp/.vtk/.obj/.ply)");
         r = lumen_from_segmentation(*b.image, p, rep);
     } else {
-        b.meta.case_id = stem(out);
+        b.meta.case_id = case_id_of(out);
         r = lumen_from_mesh(in, p, rep);
     }
     log_qa("surface", r.qa, rep);

@@ -29,4 +29,19 @@ inline std::string stem(const std::string& path) {
     return s.substr(0, s.find('.'));
 }
 
+/// The case id a stage output carries: its file's stem, unless that is the name `aneuprep run` gives a stage's
+/// output in a case folder (out/cases/<id>/segment.h5 …), where the folder names the case.
+inline std::string case_id_of(const std::string& path) {
+    const std::string s = stem(path);
+    for (const char* canonical : {"segment", "surface", "wall", "volume", "fem", "case"})
+        if (s == canonical) {
+            const auto slash = path.find_last_of('/');
+            if (slash == std::string::npos || slash == 0) return s;
+            const std::string dir = path.substr(0, slash);
+            const std::string parent = dir.substr(dir.find_last_of('/') + 1);
+            return parent.empty() || parent == "." || parent == ".." ? s : parent;
+        }
+    return s;
+}
+
 }  // namespace aneu::pipeline

@@ -158,7 +158,7 @@ void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord 
     validate(p);
     const auto t0 = std::chrono::steady_clock::now();
     Bundle b;
-    b.meta.case_id = stem(out);
+    b.meta.case_id = case_id_of(out);
     if (p.sac_radius_mm > 0) {
         b.surfaces["wall"] = tube_sac_wall_surface({p.inner_radius_mm, p.thickness_mm, p.length_mm, p.sac_radius_mm,
                                                     p.sac_thickness_mm, p.neck_radius_mm, p.edge_mm});
