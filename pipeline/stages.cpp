@@ -279,12 +279,11 @@ void condense_file(const std::string& in, const std::string& out, const Condense
     Eigen::VectorXi kept(3 * static_cast<Eigen::Index>(nodes.size()));
     for (size_t k = 0; k < nodes.size(); ++k)
         for (int a = 0; a < 3; ++a) kept[3 * static_cast<Eigen::Index>(k) + a] = 3 * nodes[k] + a;
-    // K is stored as its upper triangle; the condensation reads both.
-    Eigen::SparseMatrix<double, Eigen::RowMajor> K = b.fem->K;
-    if (b.fem->K_upper_only) {
-        Eigen::SparseMatrix<double, Eigen::RowMajor> full = K.selfadjointView<Eigen::Upper>();
-        K = full;
-    }
+    // K is stored as its upper triangle: the sparse method reads only that; the dense one needs both.
+    const bool symmetrise = b.fem->K_upper_only && p.numeric.method == fem::CondenseMethod::DENSE;
+    Eigen::SparseMatrix<double, Eigen::RowMajor> full;
+    if (symmetrise) full = b.fem->K.selfadjointView<Eigen::Upper>();
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& K = symmetrise ? full : b.fem->K;
     b.condensed = fem::condense(K, b.fem->fixed_dofs, kept, p.numeric, rep);
     finish(b, stage, t0, out, rep);
 }

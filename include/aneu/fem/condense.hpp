@@ -32,7 +32,8 @@ struct CondenseParams {
 void validate(const CondenseParams& p);
 
 /// Condenses K onto the kept DOFs.
-/// @param[in] K           3#N×3#N stiffness [N/mm], both triangles (as assemble_stiffness returns)
+/// @param[in] K           3#N×3#N stiffness [N/mm], both triangles (as assemble_stiffness returns); the SPARSE
+///                        method reads only the upper triangle (entries j ≥ i of row i), so K stored upper-only serves too
 /// @param[in] fixed_dofs  DOFs held at zero (removed from K)
 /// @param[in] kept_dofs   DOFs of M (unique, not fixed)
 /// @return the DOF map and W with diagnostics (method, seconds per step, flops, GFLOP/s, predicted and
