@@ -19,6 +19,7 @@
 #include <H5Cpp.h>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/sim/simulator.hpp"
@@ -42,35 +43,21 @@ std::string g(double x) {
     return b;
 }
 
-// A text output written under a temporary name and renamed when complete.
+// A text output written under a temporary name and renamed when complete (AtomicTextFile); off when its path is empty.
 class TextOut {
 public:
-    explicit TextOut(std::string path) : m_path(std::move(path)) {
-        if (m_path.empty()) return;
-        m_tmp = part_name(m_path);
-        m_out.open(m_tmp);
-        if (!m_out) throw IoError(m_path + ": cannot write (does the directory exist?)");
+    explicit TextOut(const std::string& path) {
+        if (!path.empty()) m_file.emplace(path);
     }
-    ~TextOut() {
-        if (!m_tmp.empty() && !m_done) {
-            m_out.close();
-            std::remove(m_tmp.c_str());
-        }
-    }
-    bool on() const { return !m_path.empty(); }
-    std::ofstream& out() { return m_out; }
+    bool on() const { return m_file.has_value(); }
+    std::ofstream& out() { return m_file ? m_file->out() : m_off; }
     void finish() {
-        if (!on()) return;
-        m_out.close();
-        if (!m_out) throw IoError(m_path + ": write failed");
-        commit(m_tmp, m_path);
-        m_done = true;
+        if (m_file) m_file->commit();
     }
 
 private:
-    std::string m_path, m_tmp;
-    std::ofstream m_out;
-    bool m_done = false;
+    std::optional<AtomicTextFile> m_file;
+    std::ofstream m_off;  // never opened: writes to it go nowhere
 };
 
 // Deformed surface (and clip jaws) over time: one HDF5 file with a dataset per step, and an XDMF file that
