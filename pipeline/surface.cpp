@@ -635,40 +635,9 @@ LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Rep
                                  shortest(p.cap_tolerance_deg) + " and --cap-tolerance-mm " + shortest(p.cap_tolerance_mm) + ") and " +
                                  std::to_string(ends.planes.size()) + " rounded end(s) where a vessel becomes tubular; a lumen surface needs open ends, flat caps or 2 rounded vessel ends");
             }
-            // Each plane cuts off only its own tip: the part beyond the plane that is connected to the tip (a
-            // disc would also cut a neighbouring vessel that passes beyond the plane).
-            SurfaceData cut = s;
-            for (size_t q = 0; q < ends.planes.size(); ++q) {
-                const EndPlane& pl = ends.planes[q];
-                Eigen::Index tip = 0;
-                (cut.V.rowwise() - ends.tips[q].transpose()).rowwise().squaredNorm().minCoeff(&tip);
-                std::vector<char> beyond(static_cast<size_t>(cut.V.rows()), 0);
-                std::vector<std::vector<int>> adj(static_cast<size_t>(cut.V.rows()));
-                for (Eigen::Index f = 0; f < cut.F.rows(); ++f)
-                    for (int k = 0; k < 3; ++k) {
-                        adj[static_cast<size_t>(cut.F(f, k))].push_back(cut.F(f, (k + 1) % 3));
-                        adj[static_cast<size_t>(cut.F(f, (k + 1) % 3))].push_back(cut.F(f, k));
-                    }
-                auto ahead = [&](int v) { return pl.normal.dot(cut.V.row(v).transpose() - pl.point) > 0; };
-                if (!ahead(static_cast<int>(tip))) throw MeshingError("surface: check 'rounded end tip beyond its cut' failed at " + vec3(ends.tips[q]));
-                std::vector<int> stack{static_cast<int>(tip)};
-                beyond[static_cast<size_t>(tip)] = 1;
-                while (!stack.empty()) {
-                    const int u = stack.back();
-                    stack.pop_back();
-                    for (int w : adj[static_cast<size_t>(u)])
-                        if (!beyond[static_cast<size_t>(w)] && ahead(w)) {
-                            beyond[static_cast<size_t>(w)] = 1;
-                            stack.push_back(w);
-                        }
-                }
-                // The vertices next to the tip's part keep their exact distance (the cut runs through their edges).
-                std::vector<char> region = beyond;
-                for (size_t v = 0; v < beyond.size(); ++v)
-                    if (beyond[v])
-                        for (int w : adj[v]) region[static_cast<size_t>(w)] = 1;
-                cut = clip_region_at_plane(cut, region, pl);
-            }
+            // Each plane cuts off only its own tip (a disc alone would also cut a neighbouring vessel that passes
+            // beyond the plane).
+            SurfaceData cut = clip_at_planes(s, ends.planes, 3.0, 1.0, ends.tips);
             std::vector<std::vector<int>> cut_loops;
             try {
                 cut_loops = boundary_loops(cut);

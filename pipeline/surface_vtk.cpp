@@ -253,7 +253,8 @@ namespace {
 double disc_radius(const EndPlane& p, double reach, double margin_mm) { return margin_mm >= 0 ? 1.5 * p.radius_mm + margin_mm : reach * (p.radius_mm + 1.0); }
 }  // namespace
 
-SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm, double tip_along_mm) {
+SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach, double margin_mm,
+                           const std::vector<Eigen::Vector3d>& tips) {
     // Per plane, only the piece beyond it that its disc cuts off is removed: the connected components of
     // the vertices beyond the plane that reach it through an edge crossing the plane within `reach` ×
     // (radius + 1 mm) of its point. Another vessel passing beyond the plane elsewhere is kept.
@@ -265,7 +266,8 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
             adj[static_cast<size_t>(s.F(f, (k + 1) % 3))].push_back(s.F(f, k));
         }
     std::vector<double> scalar(static_cast<size_t>(nv), -1.0);
-    for (const auto& p : planes) {
+    for (size_t q = 0; q < planes.size(); ++q) {
+        const EndPlane& p = planes[q];
         const double R = disc_radius(p, reach, margin_mm);
         std::vector<double> d(static_cast<size_t>(nv));
         for (Eigen::Index i = 0; i < nv; ++i) d[static_cast<size_t>(i)] = p.normal.dot(s.V.row(i).transpose() - p.point);
@@ -294,8 +296,8 @@ SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& pl
                 }
             }
         }
-        if (tip_along_mm >= 0) {  // only the stub on the plane's axis: the piece nearest its far end
-            const Eigen::Vector3d far = p.point + tip_along_mm * p.normal;
+        if (q < tips.size()) {  // only the piece nearest the plane's tip
+            const Eigen::Vector3d& far = tips[q];
             int tip = -1;
             double best = 1e300;
             for (Eigen::Index v = 0; v < nv; ++v) {

@@ -493,7 +493,9 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     // Each plane removes the outer surface's stub round the lumen's extension (it ends about ext + t beyond the
     // plane on the axis), and nothing else: next to a short branch, its parent's wall can bulge beyond the
     // branch's plane inside the disc (C0095).
-    outer = clip_at_planes(outer, planes, 3.0, t_max + 2 * h, ext);
+    std::vector<Eigen::Vector3d> stub_ends;
+    for (const auto& pl : planes) stub_ends.push_back(pl.point + ext * pl.normal);
+    outer = clip_at_planes(outer, planes, 3.0, t_max + 2 * h, stub_ends);
     std::vector<std::vector<int>> outer_loops;
     try {
         outer_loops = boundary_loops(outer);

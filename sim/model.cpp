@@ -132,19 +132,8 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
                        const Eigen::VectorXi& inner) {
     SimLumen L;
     if (inner.size() == 0 || s.size() == 0) return L;
-    static constexpr int FACES[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};  // outward for positive tets
-    std::vector<char> in_set(static_cast<size_t>(nodes.rows()), 0);
-    for (Eigen::Index i = 0; i < inner.size(); ++i) in_set[static_cast<size_t>(inner[i])] = 1;
-    std::map<std::array<int, 3>, std::pair<int, Eigen::Index>> seen;  // sorted corners -> (count, tet * 4 + face)
-    for (Eigen::Index e = 0; e < tets.rows(); ++e)
-        for (int f = 0; f < 4; ++f) {
-            std::array<int, 3> key{tets(e, FACES[f][0]), tets(e, FACES[f][1]), tets(e, FACES[f][2])};
-            if (!(in_set[static_cast<size_t>(key[0])] && in_set[static_cast<size_t>(key[1])] && in_set[static_cast<size_t>(key[2])])) continue;
-            std::sort(key.begin(), key.end());
-            auto& v = seen[key];
-            ++v.first;
-            v.second = 4 * e + f;
-        }
+    Eigen::VectorXi face_tet;
+    const Eigen::MatrixXi IF = fem::boundary_faces_in_set(nodes, tets, inner, &face_tet);  // outward from the wall
     // Bind each corner node to the nearest simulated vertex within 1.5 mm.
     PointGrid grid;
     grid.build(s.X, 0.75);
@@ -176,14 +165,11 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
     };
     std::vector<std::array<int, 3>> tris;
     std::vector<int> reg;
-    for (const auto& [key, v] : seen) {
-        if (v.first != 1) continue;
-        const Eigen::Index e = v.second / 4;
-        const int* lf = FACES[v.second % 4];
-        const int a = vertex_of(tets(e, lf[0])), b = vertex_of(tets(e, lf[1])), c = vertex_of(tets(e, lf[2]));
+    for (Eigen::Index f = 0; f < IF.rows(); ++f) {
+        const int a = vertex_of(IF(f, 0)), b = vertex_of(IF(f, 1)), c = vertex_of(IF(f, 2));
         if (a < 0 || b < 0 || c < 0) continue;
-        tris.push_back({a, c, b});  // out of the lumen: against the tetrahedron's outward normal
-        reg.push_back(tet_region.size() ? tet_region[e] : 0);
+        tris.push_back({a, c, b});  // out of the lumen: against the wall's outward normal
+        reg.push_back(tet_region.size() ? tet_region[face_tet[f]] : 0);
     }
     L.X.resize(static_cast<Eigen::Index>(order.size()), 3);
     L.bind.resize(static_cast<Eigen::Index>(order.size()));

@@ -28,7 +28,8 @@ int mid_of(int a, int b) {
 
 }  // namespace
 
-Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& node_set) {
+Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& node_set,
+                                      Eigen::VectorXi* face_tet) {
     if (T.cols() != 4 && T.cols() != 10) throw InputError("tetrahedra must have 4 or 10 nodes, not " + std::to_string(T.cols()));
     static constexpr int FACES[4][3] = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
     std::vector<char> in(static_cast<size_t>(V.rows()), 0);
@@ -50,6 +51,7 @@ Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::Ma
     }
     const bool quadratic = T.cols() == 10;
     Eigen::MatrixXi F(static_cast<Eigen::Index>(faces.size()), quadratic ? 6 : 3);
+    if (face_tet) face_tet->resize(static_cast<Eigen::Index>(faces.size()));
     for (size_t i = 0; i < faces.size(); ++i) {
         const auto [t, f] = faces[i];
         std::array<int, 3> l{FACES[f][0], FACES[f][1], FACES[f][2]};
@@ -59,6 +61,7 @@ Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::Ma
         const Eigen::Vector3d d = V.row(T(t, opposite));
         if ((b - a).cross(c - a).dot(d - a) > 0) std::swap(l[1], l[2]);
         const auto r = static_cast<Eigen::Index>(i);
+        if (face_tet) (*face_tet)[r] = t;
         for (int k = 0; k < 3; ++k) F(r, k) = T(t, l[k]);
         if (quadratic) {
             F(r, 3) = T(t, mid_of(l[0], l[1]));

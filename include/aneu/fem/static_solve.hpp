@@ -15,8 +15,9 @@ namespace aneu::fem {
 
 /// Boundary faces of the tetrahedra `T` (#T×4 or #T×10) whose corners all lie in `node_set`, oriented
 /// outward from their tetrahedron: #F×3 for 4-node tets, #F×6 for 10-node tets (corners, then the mid-edge
-/// nodes of (0,1), (1,2), (2,0)), as pressure_loads takes them.
-Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& node_set);
+/// nodes of (0,1), (1,2), (2,0)), as pressure_loads takes them. `face_tet`, when given, receives each face's tetrahedron.
+Eigen::MatrixXi boundary_faces_in_set(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& node_set,
+                                      Eigen::VectorXi* face_tet = nullptr);
 
 /// Consistent nodal forces [N] (3#N) of a pressure p [MPa] on the faces of node set `set` ("inner": blood
 /// pressure). @throws InputError when the set is missing or has no boundary face

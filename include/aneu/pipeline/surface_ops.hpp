@@ -42,11 +42,11 @@ SurfaceData isosurface_blocks(const ImageGrid& g, const std::vector<FieldBlock>&
 /// Of what remains, the largest connected piece is kept. Boundary loops lie in the planes.
 /// With `margin_mm` ≥ 0 the disc's radius is 1.5 × radius + `margin_mm` instead (the wall's outer surface:
 /// a wider disc would also cut the wall of a parent vessel that passes beyond a short branch's plane).
-/// With `tip_along_mm` ≥ 0 only one piece per plane is removed: the one nearest the point `tip_along_mm` beyond the
-/// plane on its axis (the end's own stub; the wall of a parent vessel that bulges beyond a short branch's plane
-/// within the disc stays).
+/// With `tips` (one point per plane) only one piece per plane is removed: the one nearest its tip (the end's own
+/// stub, or a rounded end; the wall of a parent vessel that bulges beyond a short branch's plane within the disc
+/// stays).
 SurfaceData clip_at_planes(const SurfaceData& s, const std::vector<EndPlane>& planes, double reach = 3.0, double margin_mm = -1.0,
-                           double tip_along_mm = -1.0);
+                           const std::vector<Eigen::Vector3d>& tips = {});
 
 /// Cuts `s` at one plane, only where `region` (per vertex) is set: the region's part beyond the plane is removed
 /// (exact cut, new loop snapped into the plane); the rest of the surface is untouched. The largest piece is kept.
