@@ -35,7 +35,7 @@ json truth_json(const PhantomParams& p, const PhantomGeometry& g, const Rasteriz
                 const std::vector<EndPlane>& planes) {
     json j;
     j["description"] = "aneuclip phantom ground truth; physical LPS frame, mm";
-    for (const auto& [k, v] : parameter_list(p)) j["parameters"][k] = v;
+    for (const auto& [k, v] : phantom_spec().parameters(p)) j["parameters"][k] = v;
     j["grid"] = grid_json(r.labels.grid);
     for (const auto& v : g.vessels) {
         json pts = json::array();

@@ -117,48 +117,7 @@ const Offsets& offsets26() {
 
 }  // namespace
 
-void validate(const SegmentParams& p) {
-    if (p.roi_mm) {
-        const auto& b = *p.roi_mm;
-        if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("segment: --roi-mm needs xmin < xmax, ymin < ymax, zmin < zmax");
-    }
-    if (p.smoothing_iterations < 0 || p.smoothing_iterations > 100) throw InputError("segment: --smoothing-iterations must be in 0..100");
-    if (!(p.conductance_hu_per_mm > 0)) throw InputError("segment: --conductance-hu-per-mm must be > 0");
-    if (p.threshold_hu && p.upper_hu && !(*p.upper_hu > *p.threshold_hu)) throw InputError("segment: --upper-hu must be above --threshold-hu");
-    if (p.select != "seed" && p.select != "largest") throw InputError("segment: --select = '" + p.select + "': expected seed or largest");
-    if (!(p.min_end_area_mm2 > 0)) throw InputError("segment: --min-end-area-mm2 must be > 0");
-    if (p.end_inset_mm < 0) throw InputError("segment: --end-inset-mm must be >= 0 (0 = automatic)");
-    for (const auto& e : p.planes) {
-        if (!(e.radius_mm > 0) || !(std::abs(e.normal.norm() - 1.0) < 1e-6)) {
-            throw InputError("segment: --plane " + std::to_string(e.id) + ": needs a unit normal and a radius > 0");
-        }
-    }
-}
 
-std::vector<std::pair<std::string, std::string>> parameter_list(const SegmentParams& p) {
-    auto list = [](const auto& a) {
-        std::string s;
-        for (double x : a) s += (s.empty() ? "" : ",") + shortest(x);
-        return s;
-    };
-    std::string seeds, planes;
-    for (const auto& s : p.seeds_mm) seeds += (seeds.empty() ? "" : ";") + list(s);
-    for (const auto& e : p.planes) {
-        planes += (planes.empty() ? "" : ";") + list(std::array<double, 7>{e.point.x(), e.point.y(), e.point.z(), e.normal.x(), e.normal.y(),
-                                                                            e.normal.z(), e.radius_mm});
-    }
-    return {{"roi_mm", p.roi_mm ? list(*p.roi_mm) : "whole image"},
-            {"smoothing_iterations", std::to_string(p.smoothing_iterations)},
-            {"conductance_hu_per_mm", shortest(p.conductance_hu_per_mm)},
-            {"threshold_hu", p.threshold_hu ? shortest(*p.threshold_hu) : "auto"},
-            {"upper_hu", p.upper_hu ? shortest(*p.upper_hu) : "none"},
-            {"seeds_mm", seeds.empty() ? "auto" : seeds},
-            {"select", p.select},
-            {"fill_holes", p.fill_holes ? "true" : "false"},
-            {"min_end_area_mm2", shortest(p.min_end_area_mm2)},
-            {"end_inset_mm", p.end_inset_mm > 0 ? shortest(p.end_inset_mm) : "auto"},
-            {"planes", planes.empty() ? "auto" : planes}};
-}
 
 std::vector<std::vector<std::size_t>> border_crossings(const Volume<std::uint8_t>& mask, const std::vector<std::uint8_t>& roi,
                                                        double min_area_mm2) {

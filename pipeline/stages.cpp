@@ -19,61 +19,8 @@
 namespace aneu::pipeline {
 
 
-void validate(const TubeWallParams& p) {
-    if (!(p.inner_radius_mm > 0 && p.thickness_mm > 0 && p.length_mm > 0)) throw InputError("tubewall: radius, thickness and length must be > 0");
-    if (p.n_theta < 3 || p.n_z < 1) throw InputError("tubewall: n_theta must be >= 3 and n_z >= 1");
-    if (p.sac_radius_mm < 0) throw InputError("tubewall: sac_radius_mm must be >= 0 (0 = no sac)");
-    if (p.sac_radius_mm > 0 && p.bend_radius_mm != 0) throw InputError("tubewall: a sac needs a straight tube (bend_radius_mm = 0)");
-    if (p.sac_radius_mm > 0 && !(p.neck_radius_mm > 0 && p.neck_radius_mm < p.sac_radius_mm)) {
-        throw InputError("tubewall: neck_radius_mm = " + shortest(p.neck_radius_mm) + ": must be in (0, sac_radius_mm)");
-    }
-    if (p.bend_radius_mm != 0 && !(p.bend_radius_mm > p.inner_radius_mm + p.thickness_mm)) {
-        throw InputError("tubewall: bend_radius_mm = " + shortest(p.bend_radius_mm) + ": must be 0 (straight) or > inner radius + thickness");
-    }
-}
-std::vector<std::pair<std::string, std::string>> parameter_list(const TubeWallParams& p) {
-    return {{"inner_radius_mm", shortest(p.inner_radius_mm)}, {"thickness_mm", shortest(p.thickness_mm)}, {"length_mm", shortest(p.length_mm)},
-            {"bend_radius_mm", shortest(p.bend_radius_mm)}, {"n_theta", std::to_string(p.n_theta)}, {"n_z", std::to_string(p.n_z)},
-            {"sac_radius_mm", shortest(p.sac_radius_mm)}, {"sac_thickness_mm", shortest(p.sac_thickness_mm)},
-            {"neck_radius_mm", shortest(p.neck_radius_mm)}, {"edge_mm", shortest(p.edge_mm)}};
-}
 
-void validate(const AssembleParams& p) {
-    if (p.element_order != 1 && p.element_order != 2) throw InputError("assemble: element_order = " + std::to_string(p.element_order) + ": expected 1 or 2");
-    fem::validate_materials({{"artery", p.E_artery_mpa, p.nu_artery}, {"aneurysm", p.E_aneurysm_mpa, p.nu_aneurysm}}, 2);
-}
-std::vector<std::pair<std::string, std::string>> parameter_list(const AssembleParams& p) {
-    return {{"element_order", std::to_string(p.element_order)}, {"E_artery_mpa", shortest(p.E_artery_mpa)}, {"nu_artery", shortest(p.nu_artery)},
-            {"E_aneurysm_mpa", shortest(p.E_aneurysm_mpa)}, {"nu_aneurysm", shortest(p.nu_aneurysm)}};
-}
 
-void validate(const CondenseStageParams& p) {
-    fem::validate(p.numeric);
-    if (p.region_sphere && !((*p.region_sphere)[3] > 0)) throw InputError("condense: region sphere radius must be > 0");
-    if (p.region_box) {
-        const auto& b = *p.region_box;
-        if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("condense: region box needs min < max on every axis");
-    }
-    if (!(p.region_margin_mm >= 0 && p.region_margin_mm < 1e3)) throw InputError("condense: --region-margin-mm must be >= 0");
-    if (p.nodes != "corners" && p.nodes != "all") throw InputError("condense: --nodes '" + p.nodes + "': expected corners or all");
-}
-std::vector<std::pair<std::string, std::string>> parameter_list(const CondenseStageParams& p) {
-    const auto& n = p.numeric;
-    std::string sphere, box;
-    if (p.region_sphere) for (double x : *p.region_sphere) sphere += (sphere.empty() ? "" : ",") + shortest(x);
-    if (p.region_box) for (double x : *p.region_box) box += (box.empty() ? "" : ",") + shortest(x);
-    return {{"method", n.method == fem::CondenseMethod::SPARSE ? "sparse" : "dense"},
-            {"precision", n.precision == Precision::FLOAT32 ? "float32" : "float64"},
-            {"tile_size", std::to_string(n.tile_size)},
-            {"ordering", n.ordering},
-            {"memory_limit_gb", shortest(n.memory_limit_gb)},
-            {"residual_columns", std::to_string(n.residual_columns)},
-            {"region_sphere_mm", sphere},
-            {"region_box_mm", box},
-            {"region_label", p.region_label},
-            {"region_margin_mm", shortest(p.region_margin_mm)},
-            {"nodes", p.nodes}};
-}
 
 std::string resolved_region_label(const VolumeData& v, const CondenseStageParams& p) {
     if (p.region_label == "all") return "";

@@ -367,42 +367,7 @@ void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporte
 
 }  // namespace
 
-void validate(const SurfaceParams& p) {
-    if (!(p.edge_mm > 0 && p.edge_mm < 1e3)) throw InputError("surface: --edge-mm must be > 0 mm (and finite)");
-    if (p.remesher != "netgen" && p.remesher != "cgal") throw InputError("surface: --remesher = '" + p.remesher + "': expected netgen or cgal");
-    if (p.smoothing_iterations < 0) throw InputError("surface: --smoothing-iterations must be >= 0");
-    if (!(p.smoothing_passband > 0 && p.smoothing_passband < 2)) throw InputError("surface: --smoothing-passband must be in (0, 2)");
-    if (!(p.aneurysm_ratio_high >= p.aneurysm_ratio_low && p.aneurysm_ratio_low > 1.0)) {
-        throw InputError("surface: need --aneurysm-ratio-high >= --aneurysm-ratio-low > 1");
-    }
-    if (p.aneurysm_sphere && !((*p.aneurysm_sphere)[3] > 0)) throw InputError("surface: --aneurysm-sphere radius must be > 0");
-    if (p.aneurysm_sphere && !p.aneurysm_labelmap.empty()) throw InputError("surface: give --aneurysm-sphere or --aneurysm-labelmap, not both");
-    if (!(p.timeout_s > 0)) throw InputError("surface: --timeout-s must be > 0");
-    if (!(p.cap_tolerance_deg > 0 && p.cap_tolerance_deg < 45)) throw InputError("surface: --cap-tolerance-deg must be in (0, 45)");
-    if (!(p.cap_tolerance_mm > 0 && p.cap_tolerance_mm < 10)) throw InputError("surface: --cap-tolerance-mm must be in (0, 10)");
-    if (!(p.input_scale > 0 && p.input_scale < 1e7)) throw InputError("surface: --input-scale must be > 0 (1000 for a file in metres)");
-    if (!(p.end_clearance_mm >= 0 && p.end_clearance_mm < 100)) throw InputError("surface: --end-clearance-mm must be >= 0");
-}
 
-std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p) {
-    std::string sphere;
-    if (p.aneurysm_sphere)
-        for (double x : *p.aneurysm_sphere) sphere += (sphere.empty() ? "" : ",") + shortest(x);
-    return {{"edge_mm", shortest(p.edge_mm)},
-            {"remesher", p.remesher},
-            {"smoothing_iterations", std::to_string(p.smoothing_iterations)},
-            {"smoothing_passband", shortest(p.smoothing_passband)},
-            {"iso_hu", p.iso_hu != 0 ? shortest(p.iso_hu) : "segmentation threshold"},
-            {"aneurysm_ratio_high", shortest(p.aneurysm_ratio_high)},
-            {"aneurysm_ratio_low", shortest(p.aneurysm_ratio_low)},
-            {"aneurysm_sphere", sphere.empty() ? "none" : sphere},
-            {"aneurysm_labelmap", p.aneurysm_labelmap.empty() ? "none" : p.aneurysm_labelmap},
-            {"timeout_s", shortest(p.timeout_s)},
-            {"cap_tolerance_deg", shortest(p.cap_tolerance_deg)},
-            {"cap_tolerance_mm", shortest(p.cap_tolerance_mm)},
-            {"input_scale", shortest(p.input_scale)},
-            {"end_clearance_mm", shortest(p.end_clearance_mm)}};
-}
 
 Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low) {
     const Eigen::Index nf = s.F.rows();

@@ -185,24 +185,12 @@ private:
 }  // namespace
 
 void validate(const TetMeshParams& p) {
-    if (p.mesher != "tetgen" && p.mesher != "netgen") throw InputError("tetmesh: mesher = '" + p.mesher + "': expected tetgen or netgen");
+    tetmesh_spec().validate(p);
 #ifndef ANEU_WITH_NETGEN
     if (p.mesher == "netgen") throw InputError("tetmesh: mesher = netgen, but this build has no Netgen (ANEU_WITH_NETGEN=OFF)");
 #endif
-    if (!(p.max_volume_mm3 >= 0)) throw InputError("tetmesh: max_volume_mm3 = " + shortest(p.max_volume_mm3) + ": must be >= 0 (0 = automatic)");
-    if (!(p.radius_edge_max >= 1.0)) throw InputError("tetmesh: radius_edge_max = " + shortest(p.radius_edge_max) + ": must be >= 1 (TetGen needs > 1 to terminate reliably)");
-    if (!(p.min_dihedral_deg >= 0 && p.min_dihedral_deg < 30)) throw InputError("tetmesh: min_dihedral_deg = " + shortest(p.min_dihedral_deg) + ": must be in [0, 30)");
-    if (!(p.opt_max_dihedral_deg >= 90 && p.opt_max_dihedral_deg <= 179)) {
-        throw InputError("tetmesh: opt_max_dihedral_deg = " + shortest(p.opt_max_dihedral_deg) + ": must be in [90, 179]");
-    }
-    if (!(p.timeout_s > 0)) throw InputError("tetmesh: timeout_s must be > 0");
 }
 
-std::vector<std::pair<std::string, std::string>> parameter_list(const TetMeshParams& p) {
-    return {{"mesher", p.mesher}, {"max_volume_mm3", shortest(p.max_volume_mm3)}, {"radius_edge_max", shortest(p.radius_edge_max)},
-            {"min_dihedral_deg", shortest(p.min_dihedral_deg)}, {"opt_max_dihedral_deg", shortest(p.opt_max_dihedral_deg)},
-            {"timeout_s", shortest(p.timeout_s)}};
-}
 
 void check_closed_surface(const SurfaceData& s, const std::string& what) {
     if (s.F.rows() < 4) throw InputError(what + ": " + std::to_string(s.F.rows()) + " triangles; a closed surface needs at least 4");

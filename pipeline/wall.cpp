@@ -331,25 +331,7 @@ NamedValues stats(const std::string& prefix, std::vector<double> v) {
 
 }  // namespace
 
-void validate(const WallParams& p) {
-    if (!(p.artery_thickness_mm > 0)) throw InputError("wall: --artery-thickness-mm must be > 0");
-    if (!(p.aneurysm_thickness_mm >= 0)) throw InputError("wall: --aneurysm-thickness-mm must be >= 0 (0 = one third of the artery's)");
-    if (!(p.blend_mm > 0)) throw InputError("wall: --blend-mm must be > 0");
-    if (!(p.grid_spacing_mm >= 0)) throw InputError("wall: --grid-spacing-mm must be >= 0 (0 = the thinner of the thinnest wall and half the outer edge)");
-    if (!(p.edge_mm >= 0)) throw InputError("wall: --edge-mm must be >= 0 (0 = the lumen's mean edge)");
-    if (p.remesher != "cgal" && p.remesher != "netgen") throw InputError("wall: --remesher = '" + p.remesher + "': expected cgal or netgen");
-    if (!(p.timeout_s > 0)) throw InputError("wall: --timeout-s must be > 0");
-}
 
-std::vector<std::pair<std::string, std::string>> parameter_list(const WallParams& p) {
-    return {{"artery_thickness_mm", shortest(p.artery_thickness_mm)},
-            {"aneurysm_thickness_mm", p.aneurysm_thickness_mm > 0 ? shortest(p.aneurysm_thickness_mm) : "artery / 3"},
-            {"blend_mm", shortest(p.blend_mm)},
-            {"grid_spacing_mm", p.grid_spacing_mm > 0 ? shortest(p.grid_spacing_mm) : "min(thinnest wall, outer edge / 2)"},
-            {"edge_mm", p.edge_mm > 0 ? shortest(p.edge_mm) : "lumen mean edge"},
-            {"remesher", p.remesher},
-            {"timeout_s", shortest(p.timeout_s)}};
-}
 
 WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& planes, const WallParams& p, Reporter& rep) {
     validate(p);

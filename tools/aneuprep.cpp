@@ -19,9 +19,7 @@ void build_aneuprep(CLI::App& app, LoggingOptions& log, const std::vector<std::s
     app.set_config("--config", "", "TOML file with one [section] per subcommand; command-line flags override it");
     app.allow_config_extras(CLI::config_extras_mode::error);
     add_logging_options(app, log);
-    add_phantom_command(app, args, action);
-    add_geometry_commands(app, args, action);
-    add_fem_commands(app, args, action);
+    add_stage_commands(app, args, action);
     add_inspect_command(app, action);
     add_snapshot_command(app, action);
     add_run_command(app, action);

@@ -2,6 +2,7 @@
 #include "cli_common.hpp"
 
 #include <chrono>
+#include <filesystem>
 #include <map>
 
 #include <spdlog/sinks/basic_file_sink.h>
@@ -68,10 +69,21 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
     try {
         body();
         return 0;
+    } catch (const UnknownOptionError& e) {
+        logger().flush();
+        fmt::print(stderr, "{}: error: {}\n", name, e.what());
+        return EXIT_UNKNOWN_OPTION;
     } catch (const InputError& e) {
         logger().flush();
         fmt::print(stderr, "{}: error: {}\n", name, e.what());
         return EXIT_INPUT;
+    } catch (const std::filesystem::filesystem_error& e) {
+        logger().flush();
+        std::string paths;
+        if (!e.path1().empty()) paths += " '" + e.path1().string() + "'";
+        if (!e.path2().empty()) paths += " '" + e.path2().string() + "'";
+        fmt::print(stderr, "{}: error: file system:{} {}\n", name, paths, e.code().message());
+        return EXIT_PROCESSING;
     } catch (const std::exception& e) {
         logger().flush();
         fmt::print(stderr, "{}: error: {}\n", name, e.what());
@@ -79,41 +91,8 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
     }
 }
 
-namespace {
-std::function<void(const StagePlan&)>& sink_storage() {
-    static std::function<void(const StagePlan&)> sink;
-    return sink;
-}
-}  // namespace
-
-void set_plan_sink(std::function<void(const StagePlan&)> sink) { sink_storage() = std::move(sink); }
-const std::function<void(const StagePlan&)>& plan_sink() { return sink_storage(); }
-
 std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
 
-CLI::App* stage_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action,
-                        const std::string& name, const std::string& help, bool has_input,
-                        std::function<void(const StageIo&, StageRecord)> run,
-                        std::function<std::vector<std::pair<std::string, std::string>>()> params) {
-    auto io = std::make_shared<StageIo>();
-    auto* c = app.add_subcommand(name, help);
-    if (has_input) c->add_option("input", io->input, "input stage file (.h5)")->required();
-    c->add_option("-o,--output", io->output, "output stage file (.h5), written atomically")->required();
-    c->callback([io, &action, args, name, run, params, has_input] {
-        action = [io, args, name, run, params, has_input] {
-            return run_guarded("aneuprep " + name, [&] {
-                std::vector<std::string> inputs;
-                if (has_input) inputs.push_back(io->input);
-                if (plan_sink()) {
-                    plan_sink()(StagePlan{name, params(), inputs, io->output});
-                    return;
-                }
-                run(*io, make_stage_record(name, shell_join(args), params(), inputs));
-            });
-        };
-    });
-    return c;
-}
 
 
 }  // namespace aneu::tools

@@ -12,16 +12,15 @@
 
 namespace aneu::tools {
 
-void add_phantom_command(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
+/// Every stage subcommand (phantom, segment, surface, wall, tetmesh, assemble, condense, tubewall).
+void add_stage_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_inspect_command(CLI::App& app, std::function<int()>& action);
 void add_snapshot_command(CLI::App& app, std::function<int()>& action);
-void add_fem_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
-void add_geometry_commands(CLI::App& app, const std::vector<std::string>& args, std::function<int()>& action);
 void add_run_command(CLI::App& app, std::function<int()>& action);
 void add_report_command(CLI::App& app, std::function<int()>& action);
 void add_export_commands(CLI::App& app, std::function<int()>& action);
 
-/// Registers every aneuprep subcommand and option on `app` (main, and `run` for each stage it plans or runs).
+/// Registers every aneuprep subcommand and option on `app`.
 void build_aneuprep(CLI::App& app, LoggingOptions& log, const std::vector<std::string>& args,
                     std::function<int()>& action);
 /// Parses argv into `app`: -1 when parsing succeeded, else the exit code (after printing the error).

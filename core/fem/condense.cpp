@@ -437,14 +437,6 @@ std::uint64_t peak_memory_bytes() {
     return 0;
 }
 
-void validate(const CondenseParams& p) {
-    if (p.tile_size < 8 || p.tile_size > 4096) throw InputError("condense: tile_size = " + std::to_string(p.tile_size) + ": must be in [8, 4096]");
-    if (p.memory_limit_gb < 0) throw InputError("condense: memory_limit_gb must be >= 0 (0 = automatic)");
-    if (p.residual_columns < 0) throw InputError("condense: residual_columns must be >= 0");
-    if (p.ordering != "metis" && p.ordering != "nesdis" && p.ordering != "amd") {
-        throw InputError("condense: ordering = '" + p.ordering + "': expected metis, nesdis or amd");
-    }
-}
 
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
                        const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep) {

@@ -18,6 +18,12 @@ class InputError : public Error {
 public:
     using Error::Error;
 };
+/// An option the stage does not have (a misspelt config key or --set): exit code 109, the code CLI11 gives an
+/// unknown command-line option, so a config and a command line that name the same wrong key fail alike.
+class UnknownOptionError : public InputError {
+public:
+    using InputError::InputError;
+};
 /// A file could not be read or written, or its content does not follow the schema (exit code 1, or 2
 /// when the file was a user input; the tools decide).
 class IoError : public Error {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "aneu/core/bundle.hpp"
+#include "aneu/core/options.hpp"
 #include "aneu/core/reporter.hpp"
 
 namespace aneu::pipeline {
@@ -31,9 +32,75 @@ struct SegmentParams {
     double end_inset_mm = 0.0;                    ///< end plane distance inside the border; 0 = automatic
     std::vector<EndPlane> planes;                 ///< given end planes (replace the detected ones)
 };
+/// The options of `aneuprep segment`, declared once (command line, case config, --set, validation,
+/// provenance, --help: aneu/core/options.hpp).
+inline const opt::Spec<SegmentParams>& segment_spec() {
+    using namespace opt;
+    using P = SegmentParams;
+    static const Spec<P> spec = [] {
+        Spec<P> s("segment");
+        s.optional_numbers<6>("roi-mm", &P::roi_mm, "mm", "whole image", "region of interest xmin,ymin,zmin,xmax,ymax,zmax (default: whole image)")
+            .integer("smoothing-iterations", &P::smoothing_iterations, closed(0, 100), "anisotropic diffusion steps (0 = off)")
+            .real("conductance-hu-per-mm", &P::conductance_hu_per_mm, "HU/mm", gt(0), "diffusion keeps gradients well above this as edges")
+            .optional_real("threshold-hu", &P::threshold_hu, "HU", "auto", "lumen threshold or 'auto' (half maximum between tissue and lumen)")
+            .optional_real("upper-hu", &P::upper_hu, "HU", "none", "upper lumen threshold or 'none'")
+            .tuples<3>("seed", &P::seeds_mm, "mm", "auto", "seed point x,y,z in the lumen (repeatable; default: automatic)")
+            .named("seeds_mm")
+            .text("select", &P::select, {"seed", "largest"}, "seed: the seed-connected lumen; largest: the largest component")
+            .flag("fill-holes", &P::fill_holes, "fill cavities of the mask")
+            .real("min-end-area-mm2", &P::min_end_area_mm2, "mm²", gt(0), "smaller crossings of the ROI border are not vessel ends")
+            .real("end-inset-mm", &P::end_inset_mm, "mm", ge(0), "end plane distance inside the ROI border along the centerline (0 = automatic)", "auto");
+        Option planes;
+        planes.key = "plane";
+        planes.name = "planes";
+        planes.unit = "mm";
+        planes.form = Form::REPEATED;
+        planes.count = 7;
+        planes.help = "end plane x,y,z,nx,ny,nz,radius (repeatable; replaces the detected planes)";
+        s.custom(
+            planes,
+            [](P& p, const std::vector<std::string>& v) {
+                p.planes.clear();
+                for (const auto& text : v) {
+                    const auto x = parse_numbers({text}, 7, "--plane '" + text + "'");
+                    EndPlane e;
+                    e.id = static_cast<int>(p.planes.size());
+                    e.point = Eigen::Vector3d(x[0], x[1], x[2]);
+                    e.normal = Eigen::Vector3d(x[3], x[4], x[5]);
+                    if (e.normal.norm() > 0) e.normal.normalize();
+                    e.radius_mm = x[6];
+                    p.planes.push_back(e);
+                }
+            },
+            [](const P& p) {
+                std::string t;
+                for (const auto& e : p.planes) {
+                    t += (t.empty() ? "" : ";") + join_numbers(std::array<double, 7>{e.point.x(), e.point.y(), e.point.z(), e.normal.x(),
+                                                                                      e.normal.y(), e.normal.z(), e.radius_mm});
+                }
+                return t.empty() ? std::string("auto") : t;
+            },
+            [](const P& p) {
+                for (const auto& e : p.planes) {
+                    if (!(e.radius_mm > 0) || !(std::abs(e.normal.norm() - 1.0) < 1e-6)) {
+                        throw InputError("segment: --plane " + std::to_string(e.id) + ": needs a unit normal and a radius > 0");
+                    }
+                }
+            });
+        s.rule([](const P& p) {
+             if (p.roi_mm) {
+                 const auto& b = *p.roi_mm;
+                 if (!(b[0] < b[3] && b[1] < b[4] && b[2] < b[5])) throw InputError("segment: --roi-mm needs xmin < xmax, ymin < ymax, zmin < zmax");
+             }
+         }).rule([](const P& p) {
+            if (p.threshold_hu && p.upper_hu && !(*p.upper_hu > *p.threshold_hu)) throw InputError("segment: --upper-hu must be above --threshold-hu");
+        });
+        return s;
+    }();
+    return spec;
+}
 /// @throws InputError naming the first invalid field
-void validate(const SegmentParams& p);
-std::vector<std::pair<std::string, std::string>> parameter_list(const SegmentParams& p);
+inline void validate(const SegmentParams& p) { segment_spec().validate(p); }
 
 /// Result of a segmentation: /image content and QA figures.
 struct Segmentation {
@@ -86,8 +153,38 @@ struct SurfaceParams {
     double input_scale = 1.0;             ///< surface input: coordinates are multiplied by this (1000 for a file in metres)
     double end_clearance_mm = 1.0;        ///< end planes move inward until other vessels are this far from the cut (≥ 2 × the wall)
 };
-void validate(const SurfaceParams& p);
-std::vector<std::pair<std::string, std::string>> parameter_list(const SurfaceParams& p);
+/// The options of `aneuprep surface`, declared once.
+inline const opt::Spec<SurfaceParams>& surface_spec() {
+    using namespace opt;
+    using P = SurfaceParams;
+    static const Spec<P> spec = [] {
+        Spec<P> s("surface");
+        s.real("edge-mm", &P::edge_mm, "mm", gt(0), "target edge length")
+            .text("remesher", &P::remesher, {"netgen", "cgal"}, "netgen (the published method) or cgal (isotropic remeshing)")
+            .integer("smoothing-iterations", &P::smoothing_iterations, ge(0), "windowed-sinc smoothing iterations (0 = off)")
+            .real("smoothing-passband", &P::smoothing_passband, "", open(0, 2), "windowed-sinc pass band (smaller = smoother)")
+            .real("iso-hu", &P::iso_hu, "HU", any(), "isosurface level (0 = the segmentation's threshold)", "segmentation threshold")
+            .real("aneurysm-ratio-high", &P::aneurysm_ratio_high, "", gt(1), "sac seed: centerline distance > this x local radius")
+            .real("aneurysm-ratio-low", &P::aneurysm_ratio_low, "", gt(1), "sac growth: connected faces above this x local radius")
+            .optional_numbers<4>("aneurysm-sphere", &P::aneurysm_sphere, "mm", "none", "override: faces inside x,y,z,r are the sac")
+            .text("aneurysm-labelmap", &P::aneurysm_labelmap, {}, "override: image whose non-zero voxels are the sac (e.g. painted in 3D Slicer)", "none")
+            .real("timeout-s", &P::timeout_s, "s", gt(0), "kill Netgen after this many seconds, then remesh with CGAL")
+            .real("cap-tolerance-deg", &P::cap_tolerance_deg, "deg", open(0, 45), "surface input: a flat end cap's faces turn at most this from its fitted plane")
+            .real("cap-tolerance-mm", &P::cap_tolerance_mm, "mm", open(0, 10), "surface input: a flat end cap's vertices lie at most this from its fitted plane")
+            .real("input-scale", &P::input_scale, "", open(0, 1e7), "surface input: multiply coordinates by this (1000 for a file in metres)")
+            .real("end-clearance-mm", &P::end_clearance_mm, "mm", closed_open(0, 100), "move end planes inward until other vessels are this far from the cut")
+            .rule([](const P& p) {
+                if (!(p.aneurysm_ratio_high >= p.aneurysm_ratio_low)) throw InputError("surface: need --aneurysm-ratio-high >= --aneurysm-ratio-low > 1");
+            })
+            .rule([](const P& p) {
+                if (p.aneurysm_sphere && !((*p.aneurysm_sphere)[3] > 0)) throw InputError("surface: --aneurysm-sphere radius must be > 0");
+                if (p.aneurysm_sphere && !p.aneurysm_labelmap.empty()) throw InputError("surface: give --aneurysm-sphere or --aneurysm-labelmap, not both");
+            });
+        return s;
+    }();
+    return spec;
+}
+inline void validate(const SurfaceParams& p) { surface_spec().validate(p); }
 
 /// Result of `surface`: the lumen surface (labels artery/aneurysm, loops with end ids), the /image it was
 /// made from (for a mesh input: the voxelised surface with its centerline and planes) and QA figures.
@@ -137,8 +234,25 @@ struct WallParams {
     std::string remesher = "cgal";       ///< cgal or netgen, for the outer surface
     double timeout_s = 30.0;             ///< a Netgen remesh is killed after this; then CGAL runs
 };
-void validate(const WallParams& p);
-std::vector<std::pair<std::string, std::string>> parameter_list(const WallParams& p);
+/// The options of `aneuprep wall`, declared once.
+inline const opt::Spec<WallParams>& wall_spec() {
+    using namespace opt;
+    using P = WallParams;
+    static const Spec<P> spec = [] {
+        Spec<P> s("wall");
+        s.real("artery-thickness-mm", &P::artery_thickness_mm, "mm", gt(0), "wall thickness of the artery")
+            .real("aneurysm-thickness-mm", &P::aneurysm_thickness_mm, "mm", ge(0), "wall thickness of the sac (0 = one third of the artery's)", "artery / 3")
+            .real("blend-mm", &P::blend_mm, "mm", gt(0), "width of the thickness transition across the neck")
+            .real("grid-spacing-mm", &P::grid_spacing_mm, "mm", ge(0), "distance-field grid spacing (0 = the thinner of the thinnest wall and half the outer edge)",
+                  "min(thinnest wall, outer edge / 2)")
+            .real("edge-mm", &P::edge_mm, "mm", ge(0), "target edge of the outer surface (0 = the lumen's mean edge)", "lumen mean edge")
+            .text("remesher", &P::remesher, {"cgal", "netgen"}, "remesher of the outer surface")
+            .real("timeout-s", &P::timeout_s, "s", gt(0), "kill Netgen after this many seconds, then remesh with CGAL");
+        return s;
+    }();
+    return spec;
+}
+inline void validate(const WallParams& p) { wall_spec().validate(p); }
 
 /// Result of `wall`: the closed wall surface (labels inner, outer, cap:<end>; regions artery/aneurysm;
 /// thickness per outer vertex) and QA figures (thickness statistics per region, checks, triangle quality).

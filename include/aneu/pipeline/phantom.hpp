@@ -14,6 +14,7 @@
 
 #include "aneu/core/bundle.hpp"
 #include "aneu/core/image_grid.hpp"
+#include "aneu/core/options.hpp"
 #include "aneu/core/reporter.hpp"
 
 namespace aneu::pipeline {
@@ -41,10 +42,58 @@ struct PhantomParams {
     double noise_sd_hu = 10.0;         ///< additive Gaussian noise
     int supersampling = 4;             ///< sub-samples per voxel edge for partial volume and the truth mask
 };
+void validate_phantom_geometry(const PhantomParams& p);
+
+/// The options of `aneuprep phantom`, declared once.
+inline const opt::Spec<PhantomParams>& phantom_spec() {
+    using namespace opt;
+    using P = PhantomParams;
+    static const Spec<P> spec = [] {
+        Spec<P> s("phantom");
+        s.integer("seed", &P::seed, ge(0), "noise seed")
+            .numbers<3>("spacing-mm", &P::spacing_mm, "mm", "voxel size i,j,k")
+            .numbers<3>("fov-mm", &P::fov_mm, "mm", "grid extent i,j,k")
+            .numbers<3>("fov-centre-mm", &P::fov_centre_mm, "mm", "grid centre x,y,z")
+            .numbers<3>("oblique-deg", &P::oblique_deg, "deg", "grid rotation about x,y,z")
+            .real("parent-radius-mm", &P::parent_radius_mm, "mm", closed(0.5, 5), "parent artery lumen radius")
+            .real("bend-radius-mm", &P::parent_bend_radius_mm, "mm", any(), "parent artery bend radius")
+            .named("parent_bend_radius_mm")
+            .real("branch-radius-mm", &P::branch_radius_mm, "mm", any(), "branch lumen radius")
+            .real("dome-diameter-mm", &P::dome_diameter_mm, "mm", closed(2, 20), "aneurysm dome diameter")
+            .real("neck-diameter-mm", &P::neck_diameter_mm, "mm", any(), "aneurysm neck diameter (< dome)");
+        auto inverted = [&s](const char* key, const char* name, bool P::*field, const char* help) {
+            Option o;
+            o.key = key;
+            o.name = name;
+            o.form = Form::FLAG;
+            o.negatable = false;
+            o.help = help;
+            s.custom(
+                o, [field, key](P& p, const std::vector<std::string>& v) {
+                    p.*field = !(v.size() == 1 && parse_bool(v[0], std::string("--") + key));
+                },
+                [field](const P& p) { return std::string(p.*field ? "true" : "false"); });
+        };
+        inverted("no-branch", "with_branch", &P::with_branch, "omit the branch");
+        inverted("no-sac", "with_sac", &P::with_sac, "omit the aneurysm");
+        s.flag("bone", &P::with_bone, "add a bone-like structure beside the sac", false)
+            .named("with_bone")
+            .real("lumen-hu", &P::lumen_hu, "HU", closed(-1024, 3071), "contrast-filled lumen")
+            .real("tissue-hu", &P::tissue_hu, "HU", closed(-1024, 3071), "soft tissue")
+            .real("bone-hu", &P::bone_hu, "HU", closed(-1024, 3071), "bone")
+            .real("bone-gap-mm", &P::bone_gap_mm, "mm", closed(0, 20), "gap between the sac and the bone (0 = touching)")
+            .real("psf-sigma-mm", &P::psf_sigma_mm, "mm", closed(0, 5), "point-spread function sigma")
+            .real("noise-sd-hu", &P::noise_sd_hu, "HU", closed(0, 1000), "Gaussian noise standard deviation")
+            .integer("supersampling", &P::supersampling, closed(1, 16), "sub-samples per voxel edge (partial volume)")
+            .rule(validate_phantom_geometry);
+        return s;
+    }();
+    return spec;
+}
+/// The rules across parameters (grid size, radii, bend, neck < dome). @throws InputError
+void validate_phantom_geometry(const PhantomParams& p);
 /// @throws InputError naming the first invalid field and the valid range
-void validate(const PhantomParams& p);
-/// Every parameter as (name, value) text, defaults included (for provenance).
-std::vector<std::pair<std::string, std::string>> parameter_list(const PhantomParams& p);
+inline void validate(const PhantomParams& p) { phantom_spec().validate(p); }
 
 /// A vessel: a polyline centerline swept by a ball of constant radius (a capsule chain).
 struct Vessel {

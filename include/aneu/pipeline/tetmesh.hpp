@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "aneu/core/bundle.hpp"
+#include "aneu/core/options.hpp"
 #include "aneu/core/reporter.hpp"
 
 namespace aneu::pipeline {
@@ -20,9 +21,25 @@ struct TetMeshParams {
     double opt_max_dihedral_deg = 140.0;  ///< TetGen's optimiser (level 9, flips + smoothing + insertion) works on tetrahedra whose largest dihedral angle exceeds this
     double timeout_s = 300.0;          ///< the mesher runs in a child process, killed after this
 };
-/// @throws InputError naming the field
+/// The options of `aneuprep tetmesh`, declared once.
+inline const opt::Spec<TetMeshParams>& tetmesh_spec() {
+    using namespace opt;
+    using P = TetMeshParams;
+    static const Spec<P> spec = [] {
+        Spec<P> s("tetmesh");
+        s.text("mesher", &P::mesher, {"tetgen", "netgen"}, "tetgen (boundary preserved) or netgen")
+            .real("max-volume-mm3", &P::max_volume_mm3, "mm³", ge(0), "max tet volume (0 = from the surface's edge length)")
+            .real("radius-edge-max", &P::radius_edge_max, "", ge(1), "TetGen radius-edge bound (> 1 to terminate reliably)")
+            .real("min-dihedral-deg", &P::min_dihedral_deg, "deg", closed_open(0, 30), "TetGen dihedral bound")
+            .real("opt-max-dihedral-deg", &P::opt_max_dihedral_deg, "deg", closed(90, 179),
+                  "TetGen's optimiser flips and smooths tetrahedra with a larger dihedral angle")
+            .real("timeout-s", &P::timeout_s, "s", gt(0), "kill the mesher after this");
+        return s;
+    }();
+    return spec;
+}
+/// The spec's rules, and Netgen present in this build when asked for. @throws InputError naming the field
 void validate(const TetMeshParams& p);
-std::vector<std::pair<std::string, std::string>> parameter_list(const TetMeshParams& p);
 
 /// Checks that a surface is closed, 2-manifold and consistently oriented (every edge in exactly two
 /// faces, once in each direction) and outward (positive enclosed volume).
