@@ -567,7 +567,7 @@ LumenResult lumen_from_segmentation(const ImageData& seg, const SurfaceParams& p
 LumenResult lumen_from_mesh(const std::string& path, const SurfaceParams& p, Reporter& rep) {
     validate(p);
     LumenResult r;
-    SurfaceData s = read_mesh_file(path);
+    SurfaceData s = read_mesh_file(path, p.weld_mm / p.input_scale);
     check_input_surface(s, path, p.input_scale);
     std::vector<std::vector<int>> loops;
     try {

@@ -360,7 +360,7 @@ void smooth_surface(SurfaceData& s, int iterations, double passband) {
     }
 }
 
-SurfaceData read_mesh_file(const std::string& path) {
+SurfaceData read_mesh_file(const std::string& path, double weld) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) throw InputError(path + ": no such file (expected a surface mesh: .stl, .vtp, .vtk, .obj, .ply)");
     vtkSmartPointer<vtkPolyData> poly;
@@ -393,10 +393,15 @@ SurfaceData read_mesh_file(const std::string& path) {
     tri->PassLinesOff();
     // STL stores every triangle's corners separately, and other tools write the copies of one vertex with
     // rounding differences: weld vertices within 1e-6 of the bounding-box diagonal (0.05 µm on a 50 mm
-    // vessel, far below any edge).
+    // vessel, far below any edge), or within the given distance (a coarse exporter: --weld-mm).
     vtkNew<vtkCleanPolyData> clean;
     clean->SetInputConnection(tri->GetOutputPort());
-    clean->SetTolerance(1e-6);
+    if (weld > 0) {
+        clean->ToleranceIsAbsoluteOn();
+        clean->SetAbsoluteTolerance(weld);
+    } else {
+        clean->SetTolerance(1e-6);
+    }
     clean->Update();
     SurfaceData s = from_vtk(clean->GetOutput());
     if (s.F.rows() == 0) throw InputError(path + ": the file holds no triangles");

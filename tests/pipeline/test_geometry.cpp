@@ -368,6 +368,47 @@ TEST(Surface, StlFromAnotherToolOpenAndCapped) {
     fs::remove_all(dir);
 }
 
+// An exporter that writes each triangle's corners with its own rounding (here up to ±3 µm): the copies of a
+// vertex are not coincident, so the default weld (1e-6 of the diagonal, 0.03 µm here) leaves every triangle
+// loose and the surface is refused; --weld-mm 0.01 merges them back into the original surface.
+TEST(SurfaceInput, WeldToleranceMergesCoarselyRoundedCopies) {
+    const LumenResult& ref = default_lumen("cgal");
+    const fs::path dir = fs::temp_directory_path() / ("aneu_weld_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const std::string stl = (dir / "rounded_copies.stl").string();
+    {
+        std::FILE* f = std::fopen(stl.c_str(), "w");
+        ASSERT_NE(f, nullptr);
+        std::fprintf(f, "solid jitter\n");
+        std::uint64_t state = 12345;
+        auto jitter = [&state] {  // deterministic, uniform in [-3, 3] µm
+            state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+            return (static_cast<double>(state >> 11) / 9007199254740992.0 - 0.5) * 0.006;
+        };
+        for (Eigen::Index t = 0; t < ref.lumen.F.rows(); ++t) {
+            std::fprintf(f, " facet normal 0 0 0\n  outer loop\n");
+            for (int k = 0; k < 3; ++k) {
+                const Eigen::RowVector3d v = ref.lumen.V.row(ref.lumen.F(t, k));
+                std::fprintf(f, "   vertex %.9f %.9f %.9f\n", v.x() + jitter(), v.y() + jitter(), v.z() + jitter());
+            }
+            std::fprintf(f, "  endloop\n endfacet\n");
+        }
+        std::fprintf(f, "endsolid jitter\n");
+        std::fclose(f);
+    }
+    SurfaceParams p;
+    p.remesher = "cgal";
+    EXPECT_THROW((void)lumen_from_mesh(stl, p), InputError);
+    p.weld_mm = 0.01;
+    const SurfaceData welded = read_mesh_file(stl, p.weld_mm);
+    EXPECT_EQ(welded.V.rows(), ref.lumen.V.rows());
+    EXPECT_EQ(welded.F.rows(), ref.lumen.F.rows());
+    const LumenResult r = lumen_from_mesh(stl, p);
+    EXPECT_EQ(value(r.qa, "input_open_ends"), 3.0);
+    EXPECT_EQ(r.lumen.loop_end_id.size(), 3u);
+    fs::remove_all(dir);
+}
+
 TEST(Wall, ClosedThicknessAndBlend) {
     const LumenResult& r = default_lumen("cgal");
     WallParams p;

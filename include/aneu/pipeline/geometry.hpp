@@ -152,6 +152,7 @@ struct SurfaceParams {
     double cap_tolerance_mm = 0.1;        ///< surface input: a cap's vertices lie at most this from its plane
     double input_scale = 1.0;             ///< surface input: coordinates are multiplied by this (1000 for a file in metres)
     double end_clearance_mm = 1.0;        ///< end planes move inward until other vessels are this far from the cut (≥ 2 × the wall)
+    double weld_mm = 0.0;                 ///< surface input: vertices closer than this are one; 0 = 1e-6 of the bounding-box diagonal
 };
 /// The options of `aneuprep surface`, declared once.
 inline const opt::Spec<SurfaceParams>& surface_spec() {
@@ -173,6 +174,8 @@ inline const opt::Spec<SurfaceParams>& surface_spec() {
             .real("cap-tolerance-mm", &P::cap_tolerance_mm, "mm", open(0, 10), "surface input: a flat end cap's vertices lie at most this from its fitted plane")
             .real("input-scale", &P::input_scale, "", open(0, 1e7), "surface input: multiply coordinates by this (1000 for a file in metres)")
             .real("end-clearance-mm", &P::end_clearance_mm, "mm", closed_open(0, 100), "move end planes inward until other vessels are this far from the cut")
+            .real("weld-mm", &P::weld_mm, "mm", closed(0, 0.1), "surface input: merge vertices closer than this (0 = 1e-6 of the bounding-box diagonal)",
+                  "1e-6 of the diagonal")
             .rule([](const P& p) {
                 if (!(p.aneurysm_ratio_high >= p.aneurysm_ratio_low)) throw InputError("surface: need --aneurysm-ratio-high >= --aneurysm-ratio-low > 1");
             })

@@ -55,10 +55,10 @@ SurfaceData clip_region_at_plane(const SurfaceData& s, const std::vector<char>& 
 /// Non-shrinking smoothing (VTK windowed sinc, Taubin); boundary vertices do not move.
 void smooth_surface(SurfaceData& s, int iterations, double passband);
 
-/// Reads a triangle surface from STL, VTP, OBJ or PLY (by extension); coincident points are merged,
-/// polygons triangulated.
+/// Reads a triangle surface from STL, VTP, VTK, OBJ or PLY (by extension); points closer than `weld` (in the
+/// file's units; 0 = 1e-6 of the bounding-box diagonal) are merged, polygons triangulated.
 /// @throws InputError unsupported extension, unreadable file, no triangles
-SurfaceData read_mesh_file(const std::string& path);
+SurfaceData read_mesh_file(const std::string& path, double weld = 0.0);
 
 /// Writes a surface as VTP (face labels and regions as cell data) or STL, by extension.
 void write_mesh_file(const std::string& path, const SurfaceData& s);
