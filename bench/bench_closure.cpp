@@ -28,6 +28,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "bench_util.hpp"
 #include "aneu/core/error.hpp"
@@ -35,11 +36,9 @@
 #include "aneu/fem/static_solve.hpp"
 
 using namespace aneu;
-using clk = std::chrono::steady_clock;
 
 namespace {
 
-double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
 
 struct Contact {
     int side = 1;        ///< +1: the blade at y = +gap/2, −1: at −gap/2
@@ -151,9 +150,9 @@ int main(int argc, char** argv) {
     Xc.col(1).array() -= clip.centre.y();
     const double gap0 = 2 * half;
 
-    auto t0 = clk::now();
+    Stopwatch t0;
     const fem::NeoHookeanSolid solid(vol.nodes, vol.tets, vol.tet_region, fem.materials);
-    const double setup_s = secs(t0);
+    const double setup_s = t0.seconds();
     // The linear model's matrix is the neo-Hookean tangent at rest (same elements, quadrature, materials).
     double k_diff = 0, k_max = 0;
     {
@@ -172,7 +171,7 @@ int main(int argc, char** argv) {
 
     // Solve one model at the current gap, iterating the contact set; returns false if it cannot be solved.
     auto solve = [&](Track& t, bool nonlinear) {
-        const auto ts = clk::now();
+        const Stopwatch ts;
         for (int round = 0; round < 30; ++round) {
             const auto pres = prescribed_of(t, Xc, clip);
             Eigen::VectorXd reaction;
@@ -192,7 +191,7 @@ int main(int argc, char** argv) {
                 reaction = r.reaction;
             }
             ++t.rounds;
-            if (nonlinear && t.seconds + secs(ts) > max_seconds)
+            if (nonlinear && t.seconds + ts.seconds() > max_seconds)
                 throw NumericalError("time budget of " + std::to_string(static_cast<int>(max_seconds)) + " s for the neo-Hookean solves spent");
             // Release nodes the blade pulls on, then add the nodes that went through a blade.
             bool changed = false;
@@ -218,11 +217,11 @@ int main(int argc, char** argv) {
                 }
             }
             if (!changed) {
-                t.seconds += secs(ts);
+                t.seconds += ts.seconds();
                 return;
             }
         }
-        t.seconds += secs(ts);
+        t.seconds += ts.seconds();
         std::fprintf(stderr, "contact set did not settle in 30 rounds\n");
     };
 

@@ -13,13 +13,12 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/common.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/solver.hpp"
 
 using namespace aneu;
-using clk = std::chrono::steady_clock;
 
-static double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
 
 int main(int argc, char** argv) {
     if (argc < 2) {
@@ -92,9 +91,9 @@ int main(int argc, char** argv) {
         std::sort(p2.begin(), p2.end(), [](const sim::Prescribed& a, const sim::Prescribed& b) { return a.cols[0] < b.cols[0]; });
         solver.solve(p, 0, sim::GroupMethod::EXACT, near_rows);
         for (int r = 0; r < r_new; ++r) {
-            const auto t0 = clk::now();
+            const Stopwatch t0;
             const auto res = solver.solve(r % 2 ? p : p2, 0, sim::GroupMethod::EXACT, near_rows);
-            t_re += secs(t0);
+            t_re += t0.seconds();
             f_new += res.factor_s;
         }
         // The factor recomputed from scratch (a new solver each time).
@@ -120,9 +119,9 @@ int main(int argc, char** argv) {
             mv_near += res.smvm_s;
         }
         for (int r = 0; r < std::max(5, reps / 20); ++r) {
-            const auto t0 = clk::now();
+            const Stopwatch t0;
             solver.deformation(m.n_active, m.dof_node.size());
-            mv_all += secs(t0);
+            mv_all += t0.seconds();
         }
         const double upd_reuse = (f_ref + s_ref + mv_ref) / reps;
         nlohmann::json j{{"contact_nodes", n},

@@ -21,6 +21,7 @@
 #include <Eigen/SparseCore>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/sim/model.hpp"
@@ -29,11 +30,9 @@
 #include "bench_util.hpp"
 
 using namespace aneu;
-using clk = std::chrono::steady_clock;
 
 namespace {
 
-double secs(clk::time_point a) { return std::chrono::duration<double>(clk::now() - a).count(); }
 
 /// Closest point of triangle abc to p (sim::closest_point_on_triangle), as barycentric weights.
 Eigen::Vector3d closest_bary(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
@@ -121,9 +120,9 @@ int main(int argc, char** argv) {
     std::vector<std::pair<int, double>> pres;
     for (size_t k = 0; k < clip.size(); ++k)
         for (int a = 0; a < 3; ++a) pres.emplace_back(3 * s.node[clip[k]] + a, -depth * bump[k] * s.N(clip[k], a));
-    auto t0 = clk::now();
+    Stopwatch t0;
     const fem::DirichletResult fe = fem::solve_dirichlet(*b.fem, pres);
-    const double fem_s = secs(t0);
+    const double fem_s = t0.seconds();
     // The indenter's force: the generalised force conjugate to `depth`, Σ r_v · u_v / depth (u_v the prescribed
     // displacement); it converges with the mesh (∫ traction · shape dA), unlike a net force whose radial parts cancel.
     double force = 0;
@@ -227,7 +226,7 @@ int main(int argc, char** argv) {
         // Condition numbers (2-norm, power iteration) of K on the free DOFs and of the Schur complement S on the
         // condensed DOFs (S = W⁻¹: λmin(S) = 1/λmax(W), λmax(S) by power iteration on S x = K_MM x − K_MI K_II⁻¹ K_IM x).
         {
-            const auto t_cond = clk::now();
+            const Stopwatch t_cond;
             const FemData& fem = *b.fem;
             const Eigen::Index nd = fem.K.rows();
             std::vector<int> role(static_cast<size_t>(nd), 0);  // 0 interior (free, not kept), 1 kept, -1 fixed
@@ -280,7 +279,7 @@ int main(int argc, char** argv) {
             });
             out["cond_K_free"] = kmax * kinv;
             out["cond_schur"] = smax * wmax;
-            out["cond_s"] = secs(t_cond);
+            out["cond_s"] = t_cond.seconds();
         }
         // The condensation's own diagnostics: condition of K (CHOLMOD's estimate) and W's residual check.
         for (const auto& [k, v] : read_condensed_header(case_path).diagnostics) {
@@ -311,12 +310,12 @@ int main(int argc, char** argv) {
             std::sort(pb.begin(), pb.end(), by_col);
             solver.solve(pa, 0, sim::GroupMethod::EXACT, m.dof_node.size());
             const int reps = 400;  // a small model's update takes microseconds: enough repetitions to time it
-            t0 = clk::now();
+            t0 = Stopwatch();
             for (int k = 0; k < reps; ++k) solver.solve(pa, 0, sim::GroupMethod::EXACT, m.dof_node.size());
-            const double same = secs(t0) / reps;
-            t0 = clk::now();
+            const double same = t0.seconds() / reps;
+            t0 = Stopwatch();
             for (int k = 0; k < reps; ++k) solver.solve(k % 2 ? pa : pb, 0, sim::GroupMethod::EXACT, m.dof_node.size());
-            const double changed = secs(t0) / reps;
+            const double changed = t0.seconds() / reps;
             out["update_hz_" + std::to_string(n)] = 1.0 / same;
             out["update_changed_hz_" + std::to_string(n)] = 1.0 / changed;
         }

@@ -2,6 +2,8 @@
 // Case-bundle writer/reader, schema v1. Layout: docs/hdf5_layout.md.
 #include "aneu/core/bundle_io.hpp"
 
+#include "aneu/core/atomic_file.hpp"
+
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -410,42 +412,16 @@ FemData read_fem(const H5::H5File& f, const Ctx& ctx) {
     return fe;
 }
 
-void fsync_file(const std::string& path) {
-    const int fd = ::open(path.c_str(), O_RDONLY);
-    if (fd >= 0) {
-        ::fsync(fd);
-        ::close(fd);
-    }
-}
-
-/// Removes the temporary file unless the write was committed.
-struct TempFileGuard {
-    std::string path;
-    bool committed = false;
-    ~TempFileGuard() {
-        if (!committed) {
-            std::error_code ec;
-            fs::remove(path, ec);
-        }
-    }
-};
-
 }  // namespace
 
 void write_bundle(const std::string& path, const Bundle& b, const BundleWriteOptions& opt, Reporter& rep) {
     h5::silence_hdf5();
-    const fs::path target(path);
-    const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
-    std::error_code ec;
-    if (!fs::is_directory(dir, ec)) {
-        throw InputError(path + ": cannot write, directory '" + dir.string() + "' does not exist");
-    }
-    TempFileGuard guard{path + ".part-" + std::to_string(::getpid())};
+    AtomicPath out(path);
     const int total = 2 + (b.image ? 1 : 0) + static_cast<int>(b.surfaces.size()) + (b.volume ? 1 : 0) +
                       (b.fem ? 1 : 0) + (b.condensed ? 1 : 0);
     int done = 0;
     try {
-        H5::H5File f(guard.path, H5F_ACC_TRUNC);
+        H5::H5File f(out.tmp(), H5F_ACC_TRUNC);
         write_meta(f, b.meta);
         rep.progress("write", ++done, total);
         if (b.image) {
@@ -476,10 +452,7 @@ void write_bundle(const std::string& path, const Bundle& b, const BundleWriteOpt
         throw IoError(path + ": HDF5 write failed in " + e.getFuncName() + " (HDF5: " + h5::last_error_detail() +
                       ")");
     }
-    fsync_file(guard.path);
-    fs::rename(guard.path, target, ec);
-    if (ec) throw IoError(path + ": cannot rename the completed temporary file into place: " + ec.message());
-    guard.committed = true;
+    out.commit();
     rep.progress("write", total, total);
 }
 

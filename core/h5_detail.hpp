@@ -29,7 +29,8 @@ std::string last_error_detail();
 void silence_hdf5();
 
 /// Opens an existing bundle for reading and checks the format marker and schema version.
-/// @throws IoError naming the file: missing, not HDF5, truncated/corrupt, not a bundle, other version
+/// @throws InputError naming the file: missing, a directory, not HDF5, truncated/corrupt, not a bundle, other
+///         schema version (the file is the user's input; exit code 2)
 H5::H5File open_bundle(const std::string& path);
 
 bool exists(const H5::Group& g, const std::string& name);

@@ -237,9 +237,7 @@ std::string params_text(const StagePlan& p) {
 void write_if_changed(const fs::path& path, const std::string& text) {
     if (fs::exists(path) && read_file(path.string()) == text) return;
     fs::create_directories(path.parent_path());
-    AtomicTextFile f(path.string());
-    f.out() << text;
-    f.commit();
+    write_text_atomically(path.string(), text);
 }
 
 /// A make-safe word (no spaces, no '$', ':' or '#').
@@ -288,7 +286,11 @@ int remove_stale_parts(const std::string& output) {
     for (const auto& e : fs::directory_iterator(dir, ec)) {
         const std::string name = e.path().filename().string();
         if (name.rfind(prefix, 0) != 0) continue;
-        const std::string pid_text = name.substr(prefix.size());
+        std::string pid_text = name.substr(prefix.size());  // "<pid>" or "<pid><ext>" (AtomicPath)
+        const std::string ext = out.extension().string();
+        if (!ext.empty() && pid_text.size() > ext.size() && pid_text.compare(pid_text.size() - ext.size(), ext.size(), ext) == 0) {
+            pid_text.resize(pid_text.size() - ext.size());
+        }
         if (pid_text.empty() || pid_text.find_first_not_of("0123456789") != std::string::npos) continue;
         const long pid = std::stol(pid_text);
         if (pid > 0 && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH) {

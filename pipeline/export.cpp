@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/static_solve.hpp"
@@ -30,34 +31,6 @@ ExportFormat export_format_from_name(const std::string& name) {
 }
 
 namespace {
-
-/// A temporary file beside `path` (same extension, so writers that pick a format by it still do), renamed
-/// onto `path` by commit(); removed if never committed.
-class AtomicOutput {
-public:
-    explicit AtomicOutput(const std::string& path) : path_(path) {
-        const fs::path p(path);
-        if (!p.parent_path().empty() && !fs::is_directory(p.parent_path())) {
-            throw InputError(path + ": cannot create, parent directory '" + p.parent_path().string() + "' does not exist");
-        }
-        tmp_ = (p.parent_path() / (p.stem().string() + ".part-" + std::to_string(::getpid()) + p.extension().string())).string();
-    }
-    AtomicOutput(const AtomicOutput&) = delete;
-    AtomicOutput& operator=(const AtomicOutput&) = delete;
-    ~AtomicOutput() {
-        std::error_code ec;
-        if (!done_) fs::remove(tmp_, ec);
-    }
-    const std::string& tmp() const { return tmp_; }
-    void commit() {
-        fs::rename(tmp_, path_);
-        done_ = true;
-    }
-
-private:
-    std::string path_, tmp_;
-    bool done_ = false;
-};
 
 const VolumeData& need_volume(const Bundle& b, const std::string& input, const std::string& what) {
     if (!b.volume) throw InputError(input + ": no /volume (a tetrahedral mesh) to export as " + what + "; give the output of tetmesh, assemble or condense");
@@ -160,7 +133,7 @@ void export_file(const std::string& input, const std::string& output, const Expo
     BundleParts parts;
     parts.condensed_W = false;
     const Bundle b = read_bundle(input, parts);
-    AtomicOutput out(output);
+    AtomicPath out(output);
     switch (p.format) {
     case ExportFormat::INP:
         write_inp(b, input, out.tmp(), p);
@@ -202,7 +175,7 @@ double solve_file(const std::string& input, const std::string& output_csv, doubl
     if (!b.volume || !b.fem) throw InputError(input + ": needs /volume and /fem (the output of assemble or condense)");
     const Eigen::VectorXd f = fem::set_pressure_loads(*b.volume, pressure_set, pressure_mpa);
     const Eigen::VectorXd u = fem::solve_static(*b.fem, f);
-    AtomicOutput out(output_csv);
+    AtomicPath out(output_csv);
     {
         std::ofstream o(out.tmp());
         if (!o) throw IoError(output_csv + ": cannot write");

@@ -3,6 +3,7 @@
 // record, write the next stage file atomically, and render the snapshot if asked.
 #include <chrono>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
@@ -69,7 +70,7 @@ void segment_file(const std::string& image_path, const std::string& out, const S
                   const std::string& snapshot_png, Reporter& rep) {
     validate(p);
     if (!snapshot_png.empty()) require_snapshot_display();
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Segmentation seg = segment(image_path, p, rep);
     log_qa("segment", seg.qa, rep);
     Bundle b;
@@ -90,7 +91,7 @@ void surface_file(const std::string& in, const std::string& out, const SurfacePa
                   Reporter& rep) {
     validate(p);
     if (!snapshot_png.empty()) require_snapshot_display();
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b;
     LumenResult r;
     if (has_ext(in, ".h5")) {
@@ -119,7 +120,7 @@ void wall_file(const std::string& in, const std::string& out, const WallParams& 
                Reporter& rep) {
     validate(p);
     if (!snapshot_png.empty()) require_snapshot_display();
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b = read_bundle(in);
     const auto it = b.surfaces.find("lumen");
     if (it == b.surfaces.end()) throw InputError(in + ": no /surface/lumen (run `aneuprep surface` first)");

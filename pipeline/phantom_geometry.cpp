@@ -7,6 +7,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/phantom.hpp"
@@ -15,7 +16,6 @@ namespace aneu::pipeline {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 constexpr double DEG = PI / 180.0;
 /// Centerline sampling step [mm]: the chord error of a 15 mm bend is step²/(8·R) ≈ 5e-4 mm.
 constexpr double POLYLINE_STEP_MM = 0.25;

@@ -1,6 +1,5 @@
 // SPDX-License-Identifier: MIT
 // `aneuprep phantom`: synthesises the CT from the rasterised anatomy and writes every output atomically.
-#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -10,7 +9,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/bundle_io.hpp"
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/image_io.hpp"
 #include "aneu/pipeline/phantom.hpp"
@@ -61,22 +62,6 @@ json truth_json(const PhantomParams& p, const PhantomGeometry& g, const Rasteriz
     return j;
 }
 
-/// Removes the temporary directory unless the write was committed.
-struct TempDirGuard {
-    fs::path path;
-    bool committed = false;
-    ~TempDirGuard() {
-        if (!committed) {
-            std::error_code ec;
-            fs::remove_all(path, ec);
-        }
-    }
-};
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 }  // namespace
 
 Volume<std::int16_t> synthesize_ct(const PhantomParams& p, const Rasterized& r) {
@@ -105,19 +90,10 @@ Volume<std::int16_t> synthesize_ct(const PhantomParams& p, const Rasterized& r) 
 void write_phantom(const PhantomParams& p, const PhantomOutputs& outputs, const std::string& out_dir,
                    StageRecord stage, Reporter& rep) {
     validate(p);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch clock;
     const fs::path target = fs::path(out_dir).lexically_normal();
-    const fs::path parent = target.has_parent_path() ? target.parent_path() : fs::path(".");
-    std::error_code ec;
-    if (!fs::is_directory(parent, ec)) {
-        throw InputError(out_dir + ": cannot create, parent directory '" + parent.string() + "' does not exist");
-    }
-    if (fs::exists(target, ec) && !fs::is_directory(target, ec)) {
-        throw InputError(out_dir + ": exists and is not a directory");
-    }
-    TempDirGuard tmp{fs::path(target.string() + ".part-" + std::to_string(::getpid()))};
-    fs::remove_all(tmp.path, ec);
-    fs::create_directory(tmp.path);
+    AtomicPath out(out_dir, AtomicPath::Kind::DIRECTORY);
+    const fs::path dir(out.tmp());
 
     const PhantomGeometry geom = make_phantom_geometry(p);
     const ImageGrid grid = make_phantom_grid(p);
@@ -128,24 +104,24 @@ void write_phantom(const PhantomParams& p, const PhantomOutputs& outputs, const 
     const Volume<std::int16_t> ct = synthesize_ct(p, r);
     rep.progress("phantom", 2, 4);
 
-    if (outputs.nifti) write_image(tmp.path / "ct.nii.gz", ct);
-    if (outputs.nrrd) write_image(tmp.path / "ct.nrrd", ct);
-    if (outputs.mha) write_image(tmp.path / "ct.mha", ct);
+    if (outputs.nifti) write_image(dir / "ct.nii.gz", ct);
+    if (outputs.nrrd) write_image(dir / "ct.nrrd", ct);
+    if (outputs.mha) write_image(dir / "ct.mha", ct);
     if (outputs.dicom) {
-        fs::create_directory(tmp.path / "dicom");
-        write_dicom_series((tmp.path / "dicom").string(), ct, DicomSeriesInfo{});
+        fs::create_directory(dir / "dicom");
+        write_dicom_series((dir / "dicom").string(), ct, DicomSeriesInfo{});
     }
     rep.progress("phantom", 3, 4);
-    write_image((tmp.path / "truth_labels.nrrd").string(), r.labels);
+    write_image((dir / "truth_labels.nrrd").string(), r.labels);
     const std::vector<EndPlane> planes = true_end_planes(geom, grid);
     {
-        std::ofstream js(tmp.path / "truth.json");
+        std::ofstream js(dir / "truth.json");
         js << truth_json(p, geom, r, planes).dump(1) << "\n";
         if (!js) throw IoError((target / "truth.json").string() + ": write failed");
     }
     Bundle b;
     b.meta.case_id = target.filename().string();
-    stage.wall_time_s = seconds_since(t0);
+    stage.wall_time_s = clock.seconds();
     b.meta.stages.push_back(std::move(stage));
     ImageData im;
     im.grid = grid;
@@ -154,22 +130,12 @@ void write_phantom(const PhantomParams& p, const PhantomOutputs& outputs, const 
     im.centerline = true_centerline(geom, grid);
     im.planes = planes;
     b.image = std::move(im);
-    write_bundle((tmp.path / "truth.h5").string(), b);
+    write_bundle((dir / "truth.h5").string(), b);
 
-    // Replace the target directory in two renames; the old one is removed only once the new one is in place.
-    const fs::path old = fs::path(target.string() + ".old-" + std::to_string(::getpid()));
-    const bool had_old = fs::exists(target, ec);
-    if (had_old) fs::rename(target, old);
-    fs::rename(tmp.path, target, ec);
-    if (ec) {
-        if (had_old) fs::rename(old, target);
-        throw IoError(out_dir + ": cannot move the completed output into place: " + ec.message());
-    }
-    tmp.committed = true;
-    if (had_old) fs::remove_all(old, ec);
+    out.commit();
     rep.progress("phantom", 4, 4);
     rep.info("phantom: wrote " + out_dir + " (" + std::to_string(planes.size()) + " vessel ends) in " +
-             std::to_string(seconds_since(t0)) + " s");
+             std::to_string(clock.seconds()) + " s");
 }
 
 }  // namespace aneu::pipeline

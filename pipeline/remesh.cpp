@@ -16,11 +16,11 @@ namespace nglib {
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
-#include "isolated.hpp"
+#include "child_process.hpp"
 
 namespace aneu::pipeline {
 
-SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // geometry_cgal.cpp
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // surface_ops_cgal.cpp
 
 namespace {
 

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 // `aneuprep report`: the self-contained HTML QA page of a case.
+#include "aneu/core/common.hpp"
 #include "aneu/pipeline/report.hpp"
 
 #include <unistd.h>
@@ -13,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/provenance.hpp"
@@ -27,7 +29,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 
 std::string esc(const std::string& s) {
     std::string o;
@@ -395,13 +396,7 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
             "s.textContent=ok+' of '+im.length+' pictures shown';s.setAttribute('data-ok',ok==im.length&&im.length>0?'yes':'no');});</script>\n";
     page += "</body></html>\n";
 
-    const fs::path tmp = out.parent_path() / (out.filename().string() + ".part-" + std::to_string(::getpid()));
-    {
-        std::ofstream f(tmp, std::ios::binary);
-        f << page;
-        if (!f) throw IoError(tmp.string() + ": cannot write");
-    }
-    fs::rename(tmp, out);
+    write_text_atomically(out.string(), page);
     rep.info(fmt::format("report: {} pictures, {} -> {}", pg.pictures, human_bytes(page.size()), html));
 }
 

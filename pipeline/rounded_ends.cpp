@@ -19,6 +19,7 @@
 
 #include <Eigen/Dense>
 
+#include "aneu/core/common.hpp"
 #include "aneu/pipeline/geometry.hpp"
 #include "aneu/pipeline/image_filters.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -146,9 +147,7 @@ bool tubular_cut(const std::vector<Eigen::Vector3d>& x0, const std::vector<doubl
         size_t e = i;
         while (e < n && s[e] - s[i] < 3.0 * std::max(r[i], 1e-9)) ++e;
         if (e >= n) return false;
-        std::vector<double> w(r.begin() + static_cast<std::ptrdiff_t>(i), r.begin() + static_cast<std::ptrdiff_t>(e) + 1);
-        std::nth_element(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(w.size() / 2), w.end());
-        const double med = w[w.size() / 2];
+        const double med = percentile(std::vector<double>(r.begin() + static_cast<std::ptrdiff_t>(i), r.begin() + static_cast<std::ptrdiff_t>(e) + 1), 0.5);
         const auto [lo, hi] = std::minmax_element(r.begin() + static_cast<std::ptrdiff_t>(i), r.begin() + static_cast<std::ptrdiff_t>(e) + 1);
         if (*lo < 0.85 * med || *hi > 1.15 * med) continue;
         if (s[i] > 3.0 * med) return false;

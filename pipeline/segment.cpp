@@ -15,6 +15,7 @@
 
 #include <Eigen/Dense>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/geometry.hpp"
@@ -40,12 +41,6 @@ Ijk ijk_of(const ImageGrid& g, std::size_t lin) {
     return {static_cast<std::int64_t>(lin % nx), static_cast<std::int64_t>((lin / nx) % ny), static_cast<std::int64_t>(lin / (nx * ny))};
 }
 
-double percentile(std::vector<float> v, double q) {
-    if (v.empty()) return 0.0;
-    const auto k = static_cast<std::size_t>(std::clamp(q, 0.0, 1.0) * static_cast<double>(v.size() - 1));
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-    return v[k];
-}
 
 /// Physical bounding box of the grid's voxel centres, for messages.
 std::string grid_extent(const ImageGrid& g) {
@@ -319,7 +314,7 @@ CenterlineResult centerline_from_ends(const Volume<std::uint8_t>& mask, const Vo
                 const Eigen::Vector3d u = t.unitOrthogonal(), w = t.cross(u);
                 bool ok = true;
                 for (int q = 0; q < 16 && ok; ++q) {
-                    const double th = 2 * 3.14159265358979323846 * q / 16;
+                    const double th = 2 * PI * q / 16;
                     ok = in_roi(pts[at] + r * (std::cos(th) * u + std::sin(th) * w));
                 }
                 if (ok) break;

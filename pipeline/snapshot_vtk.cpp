@@ -31,6 +31,8 @@
 
 #include <Eigen/Dense>
 
+#include "aneu/core/common.hpp"
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/snapshot.hpp"
 #include "vtk_convert.hpp"
@@ -161,7 +163,7 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
         vtkNew<vtkTransform> tr;
         tr->Translate(p.point.data());
         const Eigen::Vector3d z(0, 0, 1), axis = z.cross(p.normal);
-        const double angle = std::atan2(axis.norm(), z.dot(p.normal)) * 180.0 / 3.14159265358979323846;
+        const double angle = std::atan2(axis.norm(), z.dot(p.normal))  / DEG;
         if (axis.norm() > 1e-12) tr->RotateWXYZ(angle, axis.x(), axis.y(), axis.z());
         else if (p.normal.z() < 0) tr->RotateWXYZ(180, 1, 0, 0);
         vtkNew<vtkTransformPolyDataFilter> tf;
@@ -230,11 +232,13 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
     vtkNew<vtkWindowToImageFilter> grab;
     grab->SetInput(win);
     grab->Update();
+    AtomicPath out(png);
     vtkNew<vtkPNGWriter> w;
-    w->SetFileName(png.c_str());
+    w->SetFileName(out.tmp().c_str());
     w->SetInputConnection(grab->GetOutputPort());
     w->Write();
     if (w->GetErrorCode() != 0) throw IoError(png + ": cannot write the PNG");
+    out.commit();
 }
 
 void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width, int height) {

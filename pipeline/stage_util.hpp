@@ -4,6 +4,7 @@
 #include <chrono>
 #include <string>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/bundle.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/reporter.hpp"
@@ -11,16 +12,13 @@
 
 namespace aneu::pipeline {
 
-inline double seconds_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 /// Records the stage (with its wall time) in /meta and writes the bundle atomically.
-inline void finish(Bundle& b, StageRecord& stage, std::chrono::steady_clock::time_point t0, const std::string& out, Reporter& rep) {
-    stage.wall_time_s = seconds_since(t0);
+inline void finish(Bundle& b, StageRecord& stage, const Stopwatch& t0, const std::string& out, Reporter& rep) {
+    stage.wall_time_s = t0.seconds();
     b.meta.stages.push_back(stage);
     write_bundle(out, b, {}, rep);
-    rep.info(stage.stage + ": wrote " + out + " in " + shortest(seconds_since(t0)) + " s");
+    rep.info(stage.stage + ": wrote " + out + " in " + shortest(t0.seconds()) + " s");
 }
 
 /// File name without directory and extensions ("cases/a.seg.h5" -> "a").

@@ -10,6 +10,7 @@
 
 #include <Eigen/Dense>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/geometry.hpp"
@@ -22,7 +23,6 @@ namespace aneu::pipeline {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 
 Eigen::Vector3d centroid(const SurfaceData& s, Eigen::Index f) {
     return (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;

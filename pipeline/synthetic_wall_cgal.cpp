@@ -11,6 +11,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
 
@@ -22,7 +23,6 @@ using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Point = K::Point_3;
 using Mesh = CGAL::Surface_mesh<Point>;
 namespace PMP = CGAL::Polygon_mesh_processing;
-constexpr double PI = 3.14159265358979323846;
 
 /// Closed cylinder around z of radius r over [z0, z1], outward faces, ~h edges. With `overhang`, it reaches
 /// half a ring spacing beyond both ends, so that no ring of it lies in the end planes of a cylinder made

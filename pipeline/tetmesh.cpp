@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // TetGen and Netgen volume meshing of the wall surface. Each mesher runs in a forked child process
-// (isolated.hpp): a mesher that aborts, crashes or loops forever on a bad surface becomes a MeshingError.
+// (child_process.hpp): a mesher that aborts, crashes or loops forever on a bad surface becomes a MeshingError.
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -17,18 +17,18 @@ namespace nglib {
 }
 #endif
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/fem/element.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
-#include "isolated.hpp"
+#include "child_process.hpp"
 
 namespace aneu::pipeline {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 
 
 std::string tetgen_error(int code) {
@@ -306,7 +306,7 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
         if (!d.empty()) {
             std::sort(d.begin(), d.end());
             q.emplace_back("layers_min", d.front());
-            q.emplace_back("layers_median", d[d.size() / 2]);
+            q.emplace_back("layers_median", percentile(d, 0.5));
             q.emplace_back("layers_max", d.back());
         }
     }

@@ -1,8 +1,11 @@
 // SPDX-License-Identifier: MIT
 // `wall`: the closed vessel-wall surface around a lumen surface. A signed distance field to the lumen in
 // the blocks of a regular grid that meet a narrow band around it (distances by CGAL AABB queries, OpenMP;
-// inside/outside by scan-line parity against the capped lumen), an iso-value that varies smoothly from the
-// artery to the sac thickness with the distances to the artery and sac parts of the lumen, the outer
+// inside/outside by scan-line parity against the capped lumen), an iso-value — the local wall thickness —
+// that goes from the artery's to the sac's thickness across the neck: with d_A, d_S the distances to the
+// lumen's artery and sac parts (split at the label border), the sac weight is the smoothstep of
+// (d_A − d_S)/(2·blend) + ½, which on the lumen is the signed distance to the border, so the change spans
+// ±blend/2 about it (the blend narrowed to half the sac's depth for a shallow sac; QA blend_used_mm). The outer
 // isosurface (VTK flying edges per block) cut at the end planes and remeshed, annular caps joining the inner
 // and outer loops, then checks (closed, manifold, oriented, no self-intersection).
 //
@@ -17,6 +20,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/geometry.hpp"
@@ -28,7 +32,6 @@ namespace aneu::pipeline {
 
 namespace {
 
-constexpr double PI = 3.14159265358979323846;
 
 /// Per-vertex signed geodesic (edge-graph) distance to the artery/sac label border [mm]: positive on the sac,
 /// negative on the artery, ±1e9 where no border is reachable.
@@ -320,7 +323,7 @@ void zip_annulus(const Eigen::MatrixX3d& V, std::vector<int> in, std::vector<int
 NamedValues stats(const std::string& prefix, std::vector<double> v) {
     if (v.empty()) return {};
     std::sort(v.begin(), v.end());
-    auto pct = [&](double q) { return v[static_cast<size_t>(q * static_cast<double>(v.size() - 1))]; };
+    auto pct = [&](double q) { return percentile(v, q); };
     double mean = 0;
     for (double x : v) mean += x;
     mean /= static_cast<double>(v.size());
@@ -335,8 +338,7 @@ NamedValues stats(const std::string& prefix, std::vector<double> v) {
 
 WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& planes, const WallParams& p, Reporter& rep) {
     validate(p);
-    using clock = std::chrono::steady_clock;
-    const auto t0 = clock::now();
+    const Stopwatch t0;
     WallResult r;
     if (lumen.loop_end_id.size() == 0) throw InputError("wall: the lumen surface has no labelled boundary loops (run `aneuprep surface`)");
     const double t_art = p.artery_thickness_mm, t_sac = p.aneurysm_thickness_mm > 0 ? p.aneurysm_thickness_mm : t_art / 3.0;
@@ -456,15 +458,11 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         }
     }
     r.qa.emplace_back("distance_queries", queries);
-    const double t_field = std::chrono::duration<double>(clock::now() - t0).count();
+    const double t_field = t0.seconds();
     r.qa.emplace_back("time_distance_field_s", t_field);
 
     // Outer surface: isosurface φ = 0 (outward = towards φ > 0), cut at the planes, remeshed.
-    auto lap = [&, last = clock::now()](const std::string& what) mutable {
-        const auto now = clock::now();
-        r.qa.emplace_back("time_" + what + "_s", std::chrono::duration<double>(now - last).count());
-        last = now;
-    };
+    auto lap = [&, step = Stopwatch()](const std::string& what) mutable { r.qa.emplace_back("time_" + what + "_s", step.lap()); };
     SurfaceData outer = isosurface_blocks(g, blocks, 0.0);
     blocks.clear();
     blocks.shrink_to_fit();
@@ -767,7 +765,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         r.qa.emplace_back("min_angle_caps_deg", amin[2]);
     }
     r.qa.emplace_back("enclosed_volume_mm3", enclosed_volume(wall));
-    r.qa.emplace_back("time_total_s", std::chrono::duration<double>(clock::now() - t0).count());
+    r.qa.emplace_back("time_total_s", t0.seconds());
     r.wall = std::move(wall);
     rep.info("wall: " + std::to_string(r.wall.F.rows()) + " triangles; thickness median artery " + (th[0].empty() ? "-" : shortest(stats("a", th[0])[0].second)) +
              " mm, aneurysm " + (th[1].empty() ? "-" : shortest(stats("a", th[1])[0].second)) + " mm");

@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: MIT
+#include "aneu/core/common.hpp"
 #include "aneu/sim/model.hpp"
 
 #include <algorithm>
@@ -294,7 +295,7 @@ SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi&
 }
 
 SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     BundleParts parts;
     parts.image = parts.surfaces = parts.fem = parts.condensed_W = false;
     Bundle b = read_bundle(bundle_path, parts);
@@ -398,7 +399,7 @@ SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
     const Eigen::VectorXi inner_set = inner == b.volume->node_sets.end() ? Eigen::VectorXi() : inner->second;
     m.surface.thickness = wall_thickness(m.surface, m.nodes, b.volume->tets, inner_set);
     m.surface.lumen = extract_lumen(m.surface, m.nodes, b.volume->tets, b.volume->tet_region, inner_set);
-    m.load_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    m.load_seconds = t0.seconds();
     return m;
 }
 

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 // `aneusim plan`: a scene with a clip across the detected neck (plan.hpp).
+#include "aneu/core/common.hpp"
 #include "aneu/sim/plan.hpp"
 
 #include <algorithm>
@@ -15,7 +16,6 @@
 namespace aneu::sim {
 
 namespace {
-constexpr double PI = 3.14159265358979323846;
 nlohmann::json vec(const Eigen::Vector3d& x) {
     auto r = [](double v) { return std::round(v * 1e4) / 1e4; };
     return nlohmann::json::array({r(x.x()), r(x.y()), r(x.z())});

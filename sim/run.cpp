@@ -19,6 +19,7 @@
 #include <H5Cpp.h>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
@@ -28,14 +29,6 @@ namespace aneu::sim {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string part_name(const std::string& final_path) { return final_path + ".part-" + std::to_string(::getpid()); }
-
-void commit(const std::string& tmp, const std::string& final_path) {
-    std::error_code ec;
-    fs::rename(tmp, final_path, ec);
-    if (ec) throw IoError(final_path + ": cannot rename the finished output into place: " + ec.message());
-}
 
 std::string g(double x) {
     char b[32];
@@ -67,9 +60,9 @@ public:
     Series(std::string base, const SimSurface& s) : m_base(std::move(base)), m_S(s.size()) {
         if (m_base.empty()) return;
         m_h5 = m_base + ".h5";
-        m_tmp = part_name(m_h5);
+        m_out.emplace(m_h5);
         try {
-            m_file = H5::H5File(m_tmp, H5F_ACC_TRUNC);
+            m_file = H5::H5File(m_out->tmp(), H5F_ACC_TRUNC);
             std::vector<int> tri(static_cast<size_t>(3 * s.F.rows()));
             for (Eigen::Index f = 0; f < s.F.rows(); ++f)
                 for (int k = 0; k < 3; ++k) tri[static_cast<size_t>(3 * f + k)] = s.F(f, k);
@@ -83,12 +76,11 @@ public:
         }
     }
     ~Series() {
-        if (!m_tmp.empty() && !m_done) {
+        if (m_out && !m_done) {
             try {
-                m_file.close();
-            } catch (...) {
+                m_file.close();  // before m_out removes the unfinished file
+            } catch (const H5::Exception&) {
             }
-            std::remove(m_tmp.c_str());
         }
     }
     bool on() const { return !m_base.empty(); }
@@ -126,7 +118,7 @@ public:
     void finish() {
         if (!on()) return;
         m_file.close();
-        commit(m_tmp, m_h5);
+        m_out->commit();
         m_done = true;
         const std::string h5name = fs::path(m_h5).filename().string();
         TextOut x(m_base + ".xdmf");
@@ -176,7 +168,8 @@ private:
         double t;
         size_t jaws;
     };
-    std::string m_base, m_h5, m_tmp;
+    std::string m_base, m_h5;
+    std::optional<AtomicPath> m_out;  // declared before m_file: the file is closed before its temporary is removed
     Eigen::Index m_S = 0, m_F = 0;
     H5::H5File m_file;
     std::vector<Step> m_steps;
@@ -273,11 +266,11 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             }
             F = sim.haptic_step(t);
             hlog.line(t, F);
-            const auto to = std::chrono::steady_clock::now();
+            const Stopwatch to;
             if (n % log_every == 0) log.line(last, t, F, sim.clips());
             if (series.on() && series_every && n % series_every == 0) {
                 series.add(t, sim.deformed_surface(), sim.model().surface.X, all_jaws(sim));
-                htime.output_s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - to).count());
+                htime.output_s.push_back(to.seconds());
             }
             flush_messages();
             ++n;
@@ -310,8 +303,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         // exchanged under one mutex that the solve never holds.
         std::mutex mx;
         std::atomic<bool> running{true};
-        const auto start = std::chrono::steady_clock::now();
-        auto now = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
+        const Stopwatch start;
+        auto now = [&] { return start.seconds(); };
         std::vector<std::pair<double, std::vector<Eigen::Vector3d>>> hbuf;
         std::vector<FrameStats> fbuf;
         std::mutex fmx;
@@ -432,7 +425,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         double sum = 0;
         for (double x : v) sum += x;
         j["mean_ms"] = sum / static_cast<double>(v.size());
-        j["p95_ms"] = v[std::min(v.size() - 1, static_cast<size_t>(0.95 * static_cast<double>(v.size())))];
+        j["p95_ms"] = percentile(v, 0.95);
         j["max_ms"] = v.back();
         return j;
     };
@@ -481,7 +474,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         double sum = 0;
         for (double x : v) sum += x;
         j["time_split"]["output_series_frame"] = {{"mean_ms", sum / static_cast<double>(v.size())},
-                                                  {"p95_ms", v[std::min(v.size() - 1, static_cast<size_t>(0.95 * static_cast<double>(v.size())))]},
+                                                  {"p95_ms", percentile(v, 0.95)},
                                                   {"max_ms", v.back()}};
     }
     std::string haptic_line;
@@ -489,10 +482,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         std::vector<double> period, step = haptic->step_s;
         for (size_t k = 1; k < haptic->tick_s.size(); ++k) period.push_back(1e3 * (haptic->tick_s[k] - haptic->tick_s[k - 1]));
         for (double& x : step) x *= 1e3;
-        auto pct = [](std::vector<double> v, double q) {
-            std::sort(v.begin(), v.end());
-            return v[std::min(v.size() - 1, static_cast<size_t>(q * static_cast<double>(v.size())))];
-        };
+        auto pct = [](const std::vector<double>& v, double q) { return percentile(v, q); };
         const double span = haptic->tick_s.back() - haptic->tick_s.front();
         const double rate = span > 0 ? static_cast<double>(haptic->tick_s.size() - 1) / span : 0.0;
         j["haptic_loop"] = {{"target_hz", scene.haptic_hz}, {"rate_hz", rate},

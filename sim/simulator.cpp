@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: MIT
+#include "aneu/core/common.hpp"
 #include "aneu/sim/simulator.hpp"
 
 #include <algorithm>
@@ -15,9 +16,6 @@
 namespace aneu::sim {
 namespace {
 
-double since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 enum class NodeState : unsigned char { FREE, CONTACT, NEIGHBOUR, STUCK, RELAX, HELD };
 
@@ -34,7 +32,7 @@ struct Area {
 }  // namespace
 
 std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening_deg) {
-    const double half = 0.5 * std::clamp(opening_deg, 0.0, m.max_opening_deg) * M_PI / 180.0;
+    const double half = 0.5 * std::clamp(opening_deg, 0.0, m.max_opening_deg) * DEG;
     const Eigen::Vector3d a = p.axis, b = p.up, c = a.cross(b);
     std::array<Shape, 2> jaws;
     for (int j = 0; j < 2; ++j) {
@@ -295,7 +293,7 @@ struct Simulator::Impl {
         if (mx) lock = std::unique_lock<std::mutex>(*mx);
         FrameStats fs;
         fs.t = t;
-        const auto t0 = std::chrono::steady_clock::now();
+        const Stopwatch t0;
         const double dt = t_phys > 0 || t > 0 ? std::max(t - t_phys, 0.0) : dt_phys;
         const double alpha = scene.displacement_fraction;
         const SimSurface& sf = model.surface;
@@ -446,7 +444,7 @@ struct Simulator::Impl {
                 u[s] = d.row(w).transpose() + push[s] / cnt[s];
             }
         }
-        fs.collision_s = since(t0);
+        fs.collision_s = t0.seconds();
 
         // Prescribed list (sorted by vertex) and groups of deposited clips.
         std::vector<Prescribed> p;

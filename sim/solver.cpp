@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: MIT
+#include "aneu/core/common.hpp"
 #include "aneu/sim/solver.hpp"
 
 #include <algorithm>
@@ -15,9 +16,6 @@
 namespace aneu::sim {
 namespace {
 
-double since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // A factored W_CC for one node set (plus, for groups, the Schur complement S = Bᵀ W⁻¹ B and W⁻¹ B). The factor
 // keeps its own node order: when the set changes by a few nodes it is updated instead of recomputed (a removed
@@ -367,11 +365,11 @@ struct ContactSolver::Impl {
         const bool two = method == GroupMethod::TWO_SOLVE && n_groups > 0;
         Factor<T>& fac = facs[0];
         Vec f;
-        auto t0 = std::chrono::steady_clock::now();
+        Stopwatch t0;
         if (!two) {
             res.refactored = prepare(&res.factor_updated, fac, p, all, n_groups);
-            res.factor_s = since(t0);
-            t0 = std::chrono::steady_clock::now();
+            res.factor_s = t0.seconds();
+            t0 = Stopwatch();
             f = forces(fac, rhs(all, nullptr), n_groups, &res.group_shift);
         } else {
             // Solve 1 without the deposited clips; their nodes' mean displacement shifts each clip.
@@ -400,17 +398,17 @@ struct ContactSolver::Impl {
                 if (count[static_cast<size_t>(g)]) res.group_shift[static_cast<size_t>(g)] /= count[static_cast<size_t>(g)];
             const bool r2 = prepare(&res.factor_updated, fac, p, all, 0);
             res.refactored = r1 || r2;
-            res.factor_s = since(t0);
-            t0 = std::chrono::steady_clock::now();
+            res.factor_s = t0.seconds();
+            t0 = Stopwatch();
             f = forces(fac, rhs(all, &res.group_shift), 0, nullptr);
         }
-        res.solve_s = since(t0);
-        t0 = std::chrono::steady_clock::now();
+        res.solve_s = t0.seconds();
+        t0 = Stopwatch();
         last_cols = fac.cols;
         last_f = f.template cast<double>();
         res.f = last_f;
         res.d = smvm<T>(fac.cols, f, rows);
-        res.smvm_s = since(t0);
+        res.smvm_s = t0.seconds();
         // The prescribed rows of d must reproduce u (W_CC f = u): a free residual check when they were computed.
         // An updated factor that drifted past the tolerance is recomputed and the frame solved again.
         double r_max = 0, u_max = 0;

@@ -6,6 +6,7 @@
 //          below a supernode form one contiguous range and its update W[r,r] += Y_sᵀY_s is a SYRK into a
 //          contiguous block of tiles (no scatter).
 //  DENSE:  S = K_MM − K_MI K_II⁻¹ K_IM formed densely, then W = S⁻¹ by LAPACK dpotrf + dpotri.
+#include "aneu/core/common.hpp"
 #include "aneu/fem/condense.hpp"
 
 #include <cblas.h>
@@ -33,8 +34,6 @@ namespace aneu::fem {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 std::string gb(double bytes) {
     std::ostringstream o;
@@ -292,7 +291,7 @@ void pivot_order(const cholmod_factor* L, const std::vector<int>& kept_free, std
 template <class T>
 TiledSymmetric<T> sparse_w(Cholmod& ch, const std::vector<int>& piv, int tile, Timing& tm, Reporter& rep) {
     const Supernodes sn(ch.L);  // after the numeric factorization: its values are set
-    const auto t0 = Clock::now();
+    const Stopwatch t0;
     const int m = static_cast<int>(piv.size());
     TiledSymmetric<T> W(m, tile);
     std::vector<std::vector<double>> Y(static_cast<size_t>(sn.nsuper));
@@ -349,7 +348,7 @@ TiledSymmetric<T> sparse_w(Cholmod& ch, const std::vector<int>& piv, int tile, T
         if (k % 64 == 0) rep.progress("condense", k, sn.nsuper);
     }
     W.symmetrize_diagonal_tiles();
-    tm.solve_s = since(t0);
+    tm.solve_s = t0.seconds();
     rep.progress("condense", sn.nsuper, sn.nsuper);
     return W;
 }
@@ -369,7 +368,7 @@ TiledSymmetric<double> dense_w(const Eigen::SparseMatrix<double, Eigen::RowMajor
         to_i[static_cast<size_t>(free_dofs[static_cast<size_t>(f)])] = ipos[static_cast<size_t>(f)];
         to_m[static_cast<size_t>(free_dofs[static_cast<size_t>(f)])] = kpos[static_cast<size_t>(f)];
     }
-    const auto t0 = Clock::now();
+    const Stopwatch t0;
     // K_MM dense (it becomes S, then W); K_IM sparse: only its nonzeros enter the products.
     Eigen::MatrixXd S = Eigen::MatrixXd::Zero(m, m);
     std::vector<Eigen::Triplet<double>> kim;
@@ -390,7 +389,7 @@ TiledSymmetric<double> dense_w(const Eigen::SparseMatrix<double, Eigen::RowMajor
         ch.A = lower_csc(K, to_i, ni, &ch.c);
         factorize(ch, "K_II");
         factorize_numeric(ch, "K_II (the interior block)");
-        tm.factor_s += since(t0);
+        tm.factor_s += t0.seconds();
         constexpr int BLOCK = 256;
         for (int c0 = 0; c0 < m; c0 += BLOCK) {
             const int nc = std::min(BLOCK, m - c0);
@@ -411,7 +410,7 @@ TiledSymmetric<double> dense_w(const Eigen::SparseMatrix<double, Eigen::RowMajor
     dpotri_("L", &m, S.data(), &m, &info);
     if (info != 0) throw NumericalError("condense: dpotri failed (info " + std::to_string(info) + ")");
     tm.flops += 1.0 * m * m * m;  // potrf m³/3 + potri 2m³/3
-    tm.solve_s = since(t0) - tm.factor_s;
+    tm.solve_s = t0.seconds() - tm.factor_s;
     return TiledSymmetric<double>::from_dense(S, tile);  // reads the lower triangle dpotri wrote
 }
 
@@ -441,7 +440,7 @@ std::uint64_t peak_memory_bytes() {
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
                        const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep) {
     validate(p);
-    const auto t_all = Clock::now();
+    const Stopwatch t_all;
     const Eigen::Index n = K.rows();
     if (K.cols() != n) throw InputError("condense: K is not square");
     std::vector<int> state(static_cast<size_t>(n), 0);  // 0 free, 1 fixed, 2 kept
@@ -472,13 +471,13 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     // Factor of K_ff: the SPARSE route's engine, and both routes' independent residual check.
     Cholmod ch(p.ordering);
     ch.A = lower_csc(K, newidx, nf, &ch.c);
-    auto t0 = Clock::now();
+    Stopwatch t0;
     bool triples = nf % 3 == 0;  // every node's three DOFs free together, in order
     for (int k = 0; k < nf && triples; k += 3)
         triples = free_dofs[static_cast<size_t>(k)] % 3 == 0 && free_dofs[static_cast<size_t>(k) + 1] == free_dofs[static_cast<size_t>(k)] + 1 &&
                   free_dofs[static_cast<size_t>(k) + 2] == free_dofs[static_cast<size_t>(k)] + 2;
     factorize(ch, "K", triples);
-    const double analyze_s = since(t0);
+    const double analyze_s = t0.seconds();
     Timing tm;
     const double nb = std::ceil(static_cast<double>(m) / p.tile_size);
     const double w_bytes = (p.precision == Precision::FLOAT32 ? 4.0 : 8.0) * nb * (nb + 1) / 2 * p.tile_size * p.tile_size;
@@ -504,7 +503,7 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     }
     rep.info("condense: " + std::to_string(nf) + " free DOFs, " + std::to_string(m) + " kept; predicted peak " + gb(predicted));
     factorize_numeric(ch, "K (free DOFs)");
-    tm.factor_s = since(t0);
+    tm.factor_s = t0.seconds();
     // nnz(L) and its flops, for the report.
     const double nnzL = static_cast<double>(ch.c.lnz);
     const double fl_factor = ch.c.fl;
@@ -568,7 +567,7 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     }
     out.method = p.method == CondenseMethod::SPARSE ? "sparse: CHOLMOD supernodal LL^T (METIS), forward solve, SYRK per supernode"
                                                     : "dense: Schur complement, LAPACK dpotrf + dpotri";
-    const double total = since(t_all);
+    const double total = t_all.seconds();
     out.diagnostics = {{"n_free_dofs", nf},
                        {"n_kept_dofs", m},
                        {"nnz_K_free_lower", static_cast<double>(static_cast<const int*>(ch.A->p)[nf])},

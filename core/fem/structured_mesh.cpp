@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: MIT
+#include "aneu/core/common.hpp"
 #include "aneu/fem/structured_mesh.hpp"
 
 #include <algorithm>
@@ -47,7 +48,7 @@ StructuredMesh tube_mesh(double r_in, double r_out, double length, int n_r, int 
     if (!(r_in > 0 && r_out > r_in && length > 0 && n_r >= 1 && n_theta >= 3 && n_z >= 1 && theta_span > 0)) {
         throw InputError("tube_mesh: need 0 < r_in < r_out, length > 0, n_r >= 1, n_theta >= 3, n_z >= 1");
     }
-    const bool closed = std::abs(theta_span - 2.0 * M_PI) < 1e-12;
+    const bool closed = std::abs(theta_span - 2.0 * PI) < 1e-12;
     const int nt_nodes = closed ? n_theta : n_theta + 1;
     StructuredMesh m;
     m.V.resize((n_r + 1) * nt_nodes * (n_z + 1), 3);

@@ -24,8 +24,9 @@ class UnknownOptionError : public InputError {
 public:
     using InputError::InputError;
 };
-/// A file could not be read or written, or its content does not follow the schema (exit code 1, or 2
-/// when the file was a user input; the tools decide).
+/// The system failed an I/O operation on a file aneuclip reads or writes (a full disk, a failed rename, an
+/// HDF5 write error): exit code 1. A user's input that is missing, unreadable or malformed is an InputError
+/// (exit code 2) — the file readers (h5 open_bundle, image and mesh readers) throw that.
 class IoError : public Error {
 public:
     using Error::Error;

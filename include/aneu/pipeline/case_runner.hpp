@@ -103,7 +103,7 @@ struct CaseRunResult {
 /// @throws InputError bad config, --set, --stage/--from, or stage options (before anything runs)
 CaseRunResult run_case(const CaseRunOptions& o, const CaseEvents& events, Reporter& stage_reporter);
 
-/// Removes "<output>.part-<pid>" leftovers of writers that no longer run. Returns how many.
+/// Removes "<output>.part-<pid>[<ext>]" leftovers (AtomicPath) of writers that no longer run. Returns how many.
 int remove_stale_parts(const std::string& output);
 
 }  // namespace aneu::pipeline

@@ -231,7 +231,7 @@ void surface_file(const std::string& in, const std::string& out, const SurfacePa
 struct WallParams {
     double artery_thickness_mm = 0.4;
     double aneurysm_thickness_mm = 0.0;  ///< 0 = one third of the artery's (as published)
-    double blend_mm = 1.0;               ///< the thickness changes across the neck at most 1.5·Δt/blend per mm (over ±blend about the label border)
+    double blend_mm = 1.0;               ///< width of the thickness change across the neck: ±blend/2 about the label border, at most 1.5·Δt/blend per mm
     double grid_spacing_mm = 0.0;        ///< narrow-band distance-field grid; 0 = min(thinnest wall, outer edge / 2)
     double edge_mm = 0.0;                ///< target edge of the outer surface; 0 = the lumen's mean edge
     std::string remesher = "cgal";       ///< cgal or netgen, for the outer surface

@@ -2,8 +2,8 @@
 #pragma once
 /// @file
 /// Triangle-surface operations of the geometry stages: VTK (isosurface, clip, smoothing,
-/// file readers, voxelisation; surface_vtk.cpp), CGAL and Netgen (remeshing, distance queries;
-/// remesh.cpp, geometry_cgal.cpp) and plain mesh topology (mesh_topology.cpp). Standard/Eigen types only.
+/// file readers, voxelisation; surface_ops_vtk.cpp), CGAL and Netgen (remeshing, distance queries;
+/// remesh.cpp, surface_ops_cgal.cpp) and plain mesh topology (surface_topology.cpp). Standard/Eigen types only.
 #include <array>
 #include <string>
 #include <utility>

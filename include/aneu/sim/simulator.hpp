@@ -93,10 +93,11 @@ public:
     /// With `mx`, the state is changed under that lock and the solve runs without it, so a haptic thread
     /// that takes the same lock around set_input/haptic_step is never held up by a solve.
     FrameStats physics_step(double t, std::mutex* mx = nullptr);
+    /// Threads of the deformation SMVM (default 2; used only when a product has at least 200,000 entries).
+    /// The threaded runner (sim/run.cpp) sets hardware threads − 1, leaving a core to the haptic loop.
+    void set_solver_threads(int n);
     /// Haptic force on each instrument at time t by the contact-plane method (cheap; the haptic rate).
     /// Also accumulates the force/velocity assessment.
-    /// Threads of the deformation SMVM (default 2). The threaded runner leaves a core to the haptic loop.
-    void set_solver_threads(int n);
     const std::vector<Eigen::Vector3d>& haptic_step(double t);
 
     /// Deformed positions of the simulated surface: region rows from the last physics step; the rest

@@ -7,6 +7,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -141,7 +142,7 @@ NamedValues triangle_quality(const SurfaceData& s) {
             hi = std::max(hi, L);
             ++ne;
             const Eigen::Vector3d u = x[(k + 1) % 3] - x[k], w = x[(k + 2) % 3] - x[k];
-            const double ang = std::atan2(u.cross(w).norm(), u.dot(w)) * 180.0 / 3.14159265358979323846;
+            const double ang = std::atan2(u.cross(w).norm(), u.dot(w))  / DEG;
             fmin = std::min(fmin, ang);
         }
         min_angle = std::min(min_angle, fmin);
@@ -187,7 +188,7 @@ double min_angle_of(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Ei
 }  // namespace
 
 int improve_min_angle(SurfaceData& s, double max_dihedral_deg, int passes) {
-    const double cos_max = std::cos(max_dihedral_deg * 3.14159265358979323846 / 180.0);
+    const double cos_max = std::cos(max_dihedral_deg * DEG);
     int total = 0;
     for (int pass = 0; pass < passes; ++pass) {
         // Directed edge → face, to find each interior edge's two faces.
@@ -230,7 +231,7 @@ int improve_min_angle(SurfaceData& s, double max_dihedral_deg, int passes) {
 }
 
 int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
-    const double limit = min_angle_deg * 3.14159265358979323846 / 180.0;
+    const double limit = min_angle_deg * DEG;
     int total = 0;
     for (int pass = 0; pass < 5; ++pass) {
         std::map<std::pair<int, int>, int> face_of;

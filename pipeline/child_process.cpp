@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Child-process isolation of third-party meshers: a mesher that aborts, crashes or loops forever on a bad
 // input becomes a MeshingError in the parent, never a dead or hung tool.
-#include "isolated.hpp"
+#include "child_process.hpp"
 
 #include <fcntl.h>
 #include <poll.h>

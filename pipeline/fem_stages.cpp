@@ -1,4 +1,5 @@
 // SPDX-License-Identifier: MIT
+#include "aneu/core/common.hpp"
 #include "aneu/pipeline/stages.hpp"
 
 #include <algorithm>
@@ -103,7 +104,7 @@ std::vector<int> kept_nodes(const VolumeData& v, const CondenseStageParams& p) {
 
 void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord stage, Reporter& rep) {
     validate(p);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b;
     b.meta.case_id = case_id_of(out);
     if (p.sac_radius_mm > 0) {
@@ -117,7 +118,7 @@ void tubewall_file(const TubeWallParams& p, const std::string& out, StageRecord 
 
 void tetmesh_file(const std::string& in, const std::string& out, const TetMeshParams& p, StageRecord stage, Reporter& rep) {
     validate(p);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b = read_bundle(in);
     const auto it = b.surfaces.find("wall");
     if (it == b.surfaces.end()) throw InputError(in + ": no /surface/wall (run `aneuprep wall` or `aneuprep tubewall` first)");
@@ -129,7 +130,7 @@ void tetmesh_file(const std::string& in, const std::string& out, const TetMeshPa
 
 void assemble_file(const std::string& in, const std::string& out, const AssembleParams& p, StageRecord stage, Reporter& rep) {
     validate(p);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b = read_bundle(in);
     if (!b.volume) throw InputError(in + ": no /volume (run `aneuprep tetmesh` first)");
     VolumeData& v = *b.volume;
@@ -212,7 +213,7 @@ void assemble_file(const std::string& in, const std::string& out, const Assemble
 
 void condense_file(const std::string& in, const std::string& out, const CondenseStageParams& p, StageRecord stage, Reporter& rep) {
     validate(p);
-    const auto t0 = std::chrono::steady_clock::now();
+    const Stopwatch t0;
     Bundle b = read_bundle(in);
     if (!b.volume || !b.fem) throw InputError(in + ": needs /volume and /fem (run `aneuprep assemble` first)");
     const std::vector<int> nodes = kept_nodes(*b.volume, p);
