@@ -15,13 +15,20 @@
 // Errors, per closure: clip force (the y force one blade applies, mean of both) |F_lin − F_nl| / |F_nl|, and the
 // clip-region displacement (outer nodes within `--region-mm` of the centre) ‖u_lin − u_nl‖ / ‖u_nl‖ (RMS over the
 // nodes). Output: one JSON line per closure on stdout, a summary line last.
+//
+// With --patch-mm m > 0 a third model runs beside them (issue #15, item 2): the nonlinear patch (fem::PatchModel) —
+// the tetrahedra whose centroid lies within m of the blades' footprint (|x − cx| ≤ width/2 + m, |z − cz| ≤
+// length/2 + m, any y) are the neo-Hookean solid, the rest stays linear, condensed exactly onto the patch's
+// interface — with its errors against the same reference.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
 //                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
+//                           [--patch-mm 0] [--no-reference]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -33,6 +40,7 @@
 #include "bench_util.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/patch.hpp"
 #include "aneu/fem/static_solve.hpp"
 
 using namespace aneu;
@@ -88,10 +96,23 @@ int main(int argc, char** argv) {
     double max_seconds = 900;    // for the neo-Hookean solves in all: past it the reference stops at that closure
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
-    for (int a = 2; a + 1 < argc; a += 2) {
+    double patch_mm = 0;
+    bool reference = true;
+    for (int a = 2; a < argc; a += 2) {
         const std::string k = argv[a];
+        if (k == "--no-reference") {
+            reference = false;
+            --a;
+            continue;
+        }
+        if (a + 1 >= argc) {
+            std::fprintf(stderr, "option %s needs a value\n", k.c_str());
+            return 2;
+        }
         const char* v = argv[a + 1];
-        if (k == "--centre") {
+        if (k == "--patch-mm") {
+            patch_mm = std::atof(v);
+        } else if (k == "--centre") {
             have_centre = std::sscanf(v, "%lf,%lf,%lf", &clip.centre.x(), &clip.centre.y(), &clip.centre.z()) == 3;
         } else if (k == "--blade-width-mm") {
             clip.width = std::atof(v);
@@ -169,13 +190,46 @@ int main(int argc, char** argv) {
     for (Eigen::Index k = 0; k < outer.size(); ++k)
         if ((X.row(outer[k]).transpose() - clip.centre).norm() <= region) probe.push_back(outer[k]);
 
+    std::unique_ptr<fem::PatchModel> patch;
+    if (patch_mm > 0) {
+        std::vector<int> tets;
+        for (Eigen::Index t = 0; t < vol.tets.rows(); ++t) {
+            Eigen::Vector3d c = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 4; ++k) c += X.row(vol.tets(t, k)).transpose() / 4.0;
+            if (std::abs(c.x() - clip.centre.x()) <= 0.5 * clip.width + patch_mm && std::abs(c.z() - clip.centre.z()) <= 0.5 * clip.length + patch_mm)
+                tets.push_back(static_cast<int>(t));
+        }
+        patch = std::make_unique<fem::PatchModel>(vol, fem, tets);
+        std::fprintf(stderr, "patch: %zu of %lld tetrahedra, %zu nodes, %lld on the interface, made in %.2f s\n", tets.size(),
+                     static_cast<long long>(vol.tets.rows()), patch->nodes().size(), static_cast<long long>(patch->interface_nodes()),
+                     patch->setup_seconds());
+    }
+    enum class Model { LINEAR, NONLINEAR, PATCH };
     // Solve one model at the current gap, iterating the contact set; returns false if it cannot be solved.
-    auto solve = [&](Track& t, bool nonlinear) {
+    auto solve = [&](Track& t, Model model) {
+        const bool nonlinear = model != Model::LINEAR;
         const Stopwatch ts;
         for (int round = 0; round < 30; ++round) {
             const auto pres = prescribed_of(t, Xc, clip);
             Eigen::VectorXd reaction;
-            if (nonlinear) {
+            if (model == Model::PATCH) {
+                std::vector<std::pair<int, double>> lp;
+                lp.reserve(pres.size());
+                for (const auto& [d, v] : pres) {
+                    const int a = patch->local(d / 3);
+                    if (a < 0 || patch->on_interface(a)) throw NumericalError("a blade contact (node " + std::to_string(d / 3) + ") outside the patch's interior: widen --patch-mm");
+                    lp.emplace_back(3 * a + d % 3, v);
+                }
+                fem::NewtonOptions no;
+                no.max_total_iterations = max_newton;
+                const fem::NewtonResult r = fem::solve_neo_hookean(*patch, patch->fixed_dofs(), lp, patch->restrict_to_patch(t.u), no);
+                t.u = patch->full_displacement(r.u);
+                reaction = r.reaction;
+                t.iterations += r.iterations;
+                t.substeps += r.substeps;
+                t.shifted += r.shifted;
+                t.min_J = r.min_J;
+            } else if (nonlinear) {
                 fem::NewtonOptions no;
                 no.max_total_iterations = max_newton;
                 const fem::NewtonResult r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u, no);
@@ -225,21 +279,50 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "contact set did not settle in 30 rounds\n");
     };
 
-    Track lin, nl;
-    lin.u = nl.u = Eigen::VectorXd::Zero(solid.dofs());
+    Track lin, nl, pt;
+    lin.u = nl.u = pt.u = Eigen::VectorXd::Zero(solid.dofs());
+    bool patch_alive = patch != nullptr;
+    std::string reference_failed;
     nlohmann::json summary;
     double cross_force = -1, cross_disp = -1;
     double prev_c = 0, prev_ef = 0, prev_eu = 0;
     for (double c : closures) {
         clip.gap = gap0 - c * (gap0 - full_gap);
-        solve(lin, false);
-        try {
-            solve(nl, true);
-        } catch (const Error& e) {
-            nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", e.what()}};
+        solve(lin, Model::LINEAR);
+        std::string patch_failed;
+        if (patch_alive) {
+            try {
+                solve(pt, Model::PATCH);
+            } catch (const Error& e) {
+                patch_failed = e.what();
+                patch_alive = false;
+            }
+        }
+        if (reference && !reference_failed.empty()) {  // the reference stopped earlier: linear and patch only
+            nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", "the reference stopped at an earlier closure"},
+                                {"force_linear_N", lin.force}};
+            if (patch_alive) j["force_patch_N"] = pt.force;
+            if (!patch_failed.empty()) j["patch_failed"] = patch_failed;
             std::printf("%s\n", j.dump().c_str());
             std::fflush(stdout);
-            break;
+            if (!patch_alive) break;
+            continue;
+        }
+        if (reference) {
+            try {
+                solve(nl, Model::NONLINEAR);
+            } catch (const Error& e) {
+                reference_failed = e.what();
+                nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", e.what()}, {"force_linear_N", lin.force}};
+                if (patch_alive) j["force_patch_N"] = pt.force;
+                if (!patch_failed.empty()) j["patch_failed"] = patch_failed;
+                std::printf("%s\n", j.dump().c_str());
+                std::fflush(stdout);
+                if (!patch_alive) break;
+                continue;
+            }
+        } else {
+            nl = pt;  // no reference: errors are against the patch model
         }
         double num = 0, den = 0, umax = 0;
         for (int v : probe) {
@@ -249,6 +332,8 @@ int main(int argc, char** argv) {
         }
         const double ef = std::abs(lin.force - nl.force) / std::abs(nl.force);
         const double eu = std::sqrt(num / den);
+        double num_p = 0;
+        for (int v : probe) num_p += (pt.u.segment<3>(3 * v) - nl.u.segment<3>(3 * v)).squaredNorm();
         if (cross_force < 0 && ef > 0.1) cross_force = prev_c + (c - prev_c) * (0.1 - prev_ef) / (ef - prev_ef);
         if (cross_disp < 0 && eu > 0.1) cross_disp = prev_c + (c - prev_c) * (0.1 - prev_eu) / (eu - prev_eu);
         prev_c = c;
@@ -271,6 +356,20 @@ int main(int argc, char** argv) {
                             {"rounds_nonlinear", nl.rounds},
                             {"seconds_linear", lin.seconds},
                             {"seconds_nonlinear", nl.seconds}};
+        if (patch) {
+            j["reference"] = reference;
+            if (patch_failed.empty() && (patch_alive || reference)) {
+                j["force_patch_N"] = pt.force;
+                j["force_error_patch"] = std::abs(pt.force - nl.force) / std::abs(nl.force);
+                j["u_error_patch"] = std::sqrt(num_p / den);
+                j["contacts_patch"] = pt.active.size();
+                j["newton_iterations_patch"] = pt.iterations;
+                j["seconds_patch"] = pt.seconds;
+                j["min_J_patch"] = pt.min_J;
+            } else {
+                j["patch_failed"] = patch_failed;
+            }
+        }
         // A cross-section through the clip (nodes within 0.15 mm of the plane z = centre.z): reference and both
         // deformed positions, for the report's picture.
         if (std::abs(c - 0.2) < 1e-9 || std::abs(c - 0.5) < 1e-9 || std::abs(c - 0.9) < 1e-9 || std::abs(c - 1.0) < 1e-9) {
@@ -307,6 +406,13 @@ int main(int argc, char** argv) {
                {"closure_u_error_10pct", cross_disp},
                {"seconds_linear", lin.seconds},
                {"seconds_nonlinear", nl.seconds}};
+    if (patch) {
+        summary["patch_mm"] = patch_mm;
+        summary["patch_nodes"] = patch->nodes().size();
+        summary["patch_interface_nodes"] = patch->interface_nodes();
+        summary["patch_setup_s"] = patch->setup_seconds();
+        summary["seconds_patch"] = pt.seconds;
+    }
     for (const auto& m : fem.materials) summary["materials"].push_back({{"region", m.region}, {"E_mpa", m.E_mpa}, {"nu", m.nu}});
     std::printf("%s\n", summary.dump().c_str());
     return 0;

@@ -61,7 +61,7 @@ bool parse_bool(const std::string& text, const std::string& what) {
     throw InputError(what + " '" + text + "': expected true or false");
 }
 
-std::vector<double> parse_numbers(const std::vector<std::string>& values, std::size_t n, const std::string& what) {
+std::vector<std::string> split_commas(const std::vector<std::string>& values) {
     std::vector<std::string> words;
     for (const auto& s : values) {
         std::size_t pos = 0;
@@ -72,6 +72,11 @@ std::vector<double> parse_numbers(const std::vector<std::string>& values, std::s
             pos = c + 1;
         }
     }
+    return words;
+}
+
+std::vector<double> parse_numbers(const std::vector<std::string>& values, std::size_t n, const std::string& what) {
+    const std::vector<std::string> words = split_commas(values);
     if (words.size() != n) {
         throw InputError(what + ": expected " + std::to_string(n) + " comma-separated numbers, got " + std::to_string(words.size()));
     }

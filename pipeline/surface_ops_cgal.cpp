@@ -8,10 +8,9 @@
 #include <CGAL/AABB_triangle_primitive.h>
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
-#include <CGAL/Polygon_mesh_processing/remesh.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
-#include <CGAL/Surface_mesh.h>
+
+#include "cgal_types.hpp"
 
 #include "aneu/core/error.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
@@ -20,10 +19,7 @@
 namespace aneu::pipeline {
 
 namespace {
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Point = K::Point_3;
-using Mesh = CGAL::Surface_mesh<Point>;
-namespace PMP = CGAL::Polygon_mesh_processing;
+using namespace cgal;  // K, Point, Mesh, PMP (cgal_types.hpp)
 
 Mesh to_cgal(const SurfaceData& s, const std::string& what) {
     Mesh m;

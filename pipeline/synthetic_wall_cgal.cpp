@@ -2,10 +2,9 @@
 // A closed wall surface of a tube with a spherical sac, by CGAL corefinement: (outer tube ∪ outer sphere)
 // minus (inner tube ∪ inner sphere), then isotropic remeshing with the cap borders protected, then labels
 // from the analytic geometry. CGAL lives in this translation unit only.
-#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/corefinement.h>
-#include <CGAL/Polygon_mesh_processing/remesh.h>
-#include <CGAL/Surface_mesh.h>
+
+#include "cgal_types.hpp"
 
 #include <cmath>
 
@@ -19,10 +18,7 @@ namespace aneu::pipeline {
 
 namespace {
 
-using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-using Point = K::Point_3;
-using Mesh = CGAL::Surface_mesh<Point>;
-namespace PMP = CGAL::Polygon_mesh_processing;
+using namespace cgal;  // K, Point, Mesh, PMP (cgal_types.hpp)
 
 /// Closed cylinder around z of radius r over [z0, z1], outward faces, ~h edges. With `overhang`, it reaches
 /// half a ring spacing beyond both ends, so that no ring of it lies in the end planes of a cylinder made

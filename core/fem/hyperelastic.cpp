@@ -313,7 +313,7 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
     return K;
 }
 
-NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::VectorXi& fixed_dofs,
+NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& fixed_dofs,
                                const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd& u0,
                                const NewtonOptions& opt) {
     const Eigen::Index n = solid.dofs();

@@ -78,6 +78,8 @@ double parse_number(const std::string& text, const std::string& what);
 long long parse_integer(const std::string& text, const std::string& what);
 /// Parses true/false/1/0/yes/no/on/off. @throws InputError
 bool parse_bool(const std::string& text, const std::string& what);
+/// The words of the values split at commas ("a,b" and {"a", "b"} give the same).
+std::vector<std::string> split_commas(const std::vector<std::string>& values);
 /// Splits the values at commas ("1,2,3" and {"1","2","3"} give the same) and parses `n` numbers.
 std::vector<double> parse_numbers(const std::vector<std::string>& values, std::size_t n, const std::string& what);
 /// Numbers joined by `sep` in shortest form.
@@ -201,10 +203,7 @@ public:
         o.type_name = "REAL";
         const std::string what = flag_name(o.key);
         return add(std::move(o),
-                   [field, what](P& p, const std::vector<std::string>& v) {
-                       const auto x = parse_numbers(v, N, what);
-                       std::copy(x.begin(), x.end(), ref(p, field).begin());
-                   },
+                   [field, what](P& p, const std::vector<std::string>& v) { ref(p, field) = parse_array<N>(v, what); },
                    [field](const P& p) { return join_numbers(cref(p, field)); }, {});
     }
     /// N numbers or none (std::optional<std::array<double, N>>); `none_text` in provenance.
@@ -215,12 +214,7 @@ public:
         o.type_name = "REAL";
         const std::string what = flag_name(o.key);
         return add(std::move(o),
-                   [field, what](P& p, const std::vector<std::string>& v) {
-                       const auto x = parse_numbers(v, N, what);
-                       std::array<double, N> a{};
-                       std::copy(x.begin(), x.end(), a.begin());
-                       ref(p, field) = a;
-                   },
+                   [field, what](P& p, const std::vector<std::string>& v) { ref(p, field) = parse_array<N>(v, what); },
                    [field, none_text](const P& p) { return cref(p, field) ? join_numbers(*cref(p, field)) : none_text; }, {});
     }
     /// Repeatable N-tuples (std::vector<std::array<double, N>>), ';' between tuples in provenance.
@@ -234,12 +228,7 @@ public:
                    [field, what](P& p, const std::vector<std::string>& v) {
                        auto& out = ref(p, field);
                        out.clear();
-                       for (const auto& s : v) {
-                           const auto x = parse_numbers({s}, N, what + " '" + s + "'");
-                           std::array<double, N> a{};
-                           std::copy(x.begin(), x.end(), a.begin());
-                           out.push_back(a);
-                       }
+                       for (const auto& s : v) out.push_back(parse_array<N>({s}, what + " '" + s + "'"));
                    },
                    [field, none_text](const P& p) {
                        std::string s;
@@ -255,18 +244,11 @@ public:
         o.choices = choices;
         const std::string what = flag_name(o.key);
         return add(std::move(o),
-                   [field, what](P& p, const std::vector<std::string>& v) {
+                   [field](P& p, const std::vector<std::string>& v) {
                        auto& out = ref(p, field);
                        out.clear();
-                       for (const auto& s : v) {
-                           std::size_t pos = 0;
-                           while (pos <= s.size()) {
-                               const std::size_t c = s.find(',', pos);
-                               const std::string w = s.substr(pos, c == std::string::npos ? std::string::npos : c - pos);
-                               if (!w.empty()) out.push_back(w);
-                               if (c == std::string::npos) break;
-                               pos = c + 1;
-                           }
+                       for (auto& w : split_commas(v)) {
+                           if (!w.empty()) out.push_back(std::move(w));
                        }
                    },
                    [field](const P& p) {
@@ -279,7 +261,34 @@ public:
                        for (const auto& w : cref(p, field)) check_choice(stage, what, w, choices);
                    });
     }
-    /// An option with its own parsing and provenance text (planes, enums).
+    /// One of named values of an enum: {{"sparse", SPARSE}, {"dense", DENSE}}.
+    template <class E, class A>
+    Spec& choice(std::string key, A field, std::vector<std::pair<std::string, E>> values, std::string help) {
+        Option o = base(std::move(key), "", std::move(help), Form::VALUE);
+        for (const auto& [w, e] : values) o.choices.push_back(w);
+        const std::string what = flag_name(o.key);
+        const std::string stage = m_stage;
+        const auto words = o.choices;
+        return add(std::move(o),
+                   [field, what, values, stage, words](P& p, const std::vector<std::string>& v) {
+                       const std::string& w = one(v, what);
+                       for (const auto& [name, e] : values) {
+                           if (name == w) {
+                               ref(p, field) = e;
+                               return;
+                           }
+                       }
+                       check_choice(stage, what, w, words);
+                   },
+                   [field, values](const P& p) {
+                       for (const auto& [name, e] : values) {
+                           if (cref(p, field) == e) return name;
+                       }
+                       return std::string("?");
+                   },
+                   {});
+    }
+    /// An option with its own parsing and provenance text (planes, flags that clear a field).
     Spec& custom(Option o, Setter set, Shower show, Checker check = {}) {
         if (o.name.empty()) o.name = snake(o.key);
         return add(std::move(o), std::move(set), std::move(show), std::move(check));
@@ -352,6 +361,13 @@ private:
     template <class Q>
     friend class Spec;
 
+    template <std::size_t N>
+    static std::array<double, N> parse_array(const std::vector<std::string>& v, const std::string& what) {
+        const auto x = parse_numbers(v, N, what);
+        std::array<double, N> a{};
+        std::copy(x.begin(), x.end(), a.begin());
+        return a;
+    }
     static std::string snake(std::string k) {
         for (auto& c : k) c = c == '-' ? '_' : c;
         return k;

@@ -35,34 +35,10 @@ inline const opt::Spec<CondenseParams>& condense_numeric_spec() {
     using P = CondenseParams;
     static const Spec<P> spec = [] {
         Spec<P> s("condense");
-        Option method;
-        method.key = "method";
-        method.name = "method";
-        method.choices = {"sparse", "dense"};
-        method.help = "sparse (CHOLMOD + SYRK) or dense (Schur complement + LAPACK)";
-        s.custom(
-            method,
-            [](P& p, const std::vector<std::string>& v) {
-                if (v.size() != 1 || (v[0] != "sparse" && v[0] != "dense")) {
-                    throw InputError("condense: --method '" + (v.empty() ? std::string() : v[0]) + "': expected sparse or dense");
-                }
-                p.method = v[0] == "dense" ? CondenseMethod::DENSE : CondenseMethod::SPARSE;
-            },
-            [](const P& p) { return std::string(p.method == CondenseMethod::SPARSE ? "sparse" : "dense"); });
-        Option precision;
-        precision.key = "precision";
-        precision.name = "precision";
-        precision.choices = {"float32", "float64"};
-        precision.help = "storage precision of W (computed in double)";
-        s.custom(
-            precision,
-            [](P& p, const std::vector<std::string>& v) {
-                if (v.size() != 1 || (v[0] != "float32" && v[0] != "float64")) {
-                    throw InputError("condense: --precision '" + (v.empty() ? std::string() : v[0]) + "': expected float32 or float64");
-                }
-                p.precision = v[0] == "float64" ? Precision::FLOAT64 : Precision::FLOAT32;
-            },
-            [](const P& p) { return std::string(p.precision == Precision::FLOAT32 ? "float32" : "float64"); });
+        s.choice<CondenseMethod>("method", &P::method, {{"sparse", CondenseMethod::SPARSE}, {"dense", CondenseMethod::DENSE}},
+                                 "sparse (CHOLMOD + SYRK) or dense (Schur complement + LAPACK)")
+            .choice<Precision>("precision", &P::precision, {{"float32", Precision::FLOAT32}, {"float64", Precision::FLOAT64}},
+                               "storage precision of W (computed in double)");
         s.integer("tile-size", &P::tile_size, closed(8, 4096), "tile edge of W")
             .text("ordering", &P::ordering, {"metis", "nesdis", "amd"}, "fill-reducing ordering of K")
             .real("memory-limit-gb", &P::memory_limit_gb, "GB", ge(0), "refuse above this predicted peak (0 = 90 % of available)")

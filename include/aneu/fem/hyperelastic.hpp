@@ -18,29 +18,45 @@
 
 namespace aneu::fem {
 
+/// What the Newton solve needs of an elastic body: its energy, internal force and tangent on a fixed pattern.
+/// NeoHookeanSolid is one; fem::PatchModel (patch.hpp), a neo-Hookean patch on a linear exterior, another.
+class ElasticBody {
+public:
+    virtual ~ElasticBody() = default;
+    virtual Eigen::Index dofs() const = 0;
+    /// +∞ when inverted.
+    virtual double energy(const Eigen::VectorXd& u) const = 0;
+    /// @throws NumericalError when inverted
+    virtual Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const = 0;
+    /// Both triangles, on pattern(); `project`: positive semidefinite element tangents. @throws NumericalError
+    virtual Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const = 0;
+    virtual const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const = 0;
+    virtual double min_jacobian(const Eigen::VectorXd& u) const = 0;
+};
+
 /// Ψ(F) = μ/2 (tr FᵀF − 3) − μ ln J + λ/2 (ln J)² per unit reference volume (Bonet & Wood's compressible
 /// neo-Hookean), μ and λ the Lamé constants of each region's E and ν. Total Lagrangian: first Piola stress
 /// P = μ (F − F⁻ᵀ) + λ ln J F⁻ᵀ. Units: mm, N, MPa; energy in N·mm.
-class NeoHookeanSolid {
+class NeoHookeanSolid final : public ElasticBody {
 public:
     /// @param[in] V #N×3 reference nodes [mm]; T #T×4 or #T×10 (element.hpp ordering); region #T → materials
     /// @throws InputError bad sizes, indices or materials; MeshingError a reference element with Jacobian ≤ 0
     NeoHookeanSolid(const Eigen::MatrixX3d& V, const Eigen::MatrixXi& T, const Eigen::VectorXi& region,
                     const std::vector<Material>& materials);
 
-    Eigen::Index dofs() const { return 3 * n_nodes_; }
+    Eigen::Index dofs() const override { return 3 * n_nodes_; }
     /// Stored strain energy at displacement u (3#N); +∞ when J ≤ 0 at some integration point (inverted).
-    double energy(const Eigen::VectorXd& u) const;
+    double energy(const Eigen::VectorXd& u) const override;
     /// Internal nodal forces ∂Ψ/∂u [N] (3#N). @throws NumericalError when an element is inverted
-    Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const;
+    Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override;
     /// Tangent stiffness ∂²Ψ/∂u² [N/mm], both triangles, on a fixed pattern (the element graph). With `project`,
     /// each element's tangent loses its negative eigenvalues (positive semidefinite: projected Newton).
     /// @throws NumericalError when an element is inverted
-    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const;
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const override;
     /// The tangent's sparsity pattern (values zero).
-    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const { return pattern_; }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return pattern_; }
     /// Smallest J = det F over the integration points (≤ 0: inverted).
-    double min_jacobian(const Eigen::VectorXd& u) const;
+    double min_jacobian(const Eigen::VectorXd& u) const override;
 
 private:
     template <int NN>
@@ -90,7 +106,7 @@ struct NewtonResult {
 /// increment when a substep does not converge.
 /// @throws InputError bad DOF indices; NumericalError when no substep of the allowed size converges (names the
 ///         residual and the smallest J reached)
-NewtonResult solve_neo_hookean(const NeoHookeanSolid& solid, const Eigen::VectorXi& fixed_dofs,
+NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& fixed_dofs,
                                const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd& u0,
                                const NewtonOptions& options = {});
 
