@@ -198,9 +198,7 @@ public:
     /// N numbers (std::array<double, N>).
     template <std::size_t N, class A>
     Spec& numbers(std::string key, A field, std::string unit, std::string help) {
-        Option o = base(std::move(key), std::move(unit), std::move(help), Form::NUMBERS);
-        o.count = static_cast<int>(N);
-        o.type_name = "REAL";
+        Option o = numbers_option(std::move(key), std::move(unit), std::move(help), N);
         const std::string what = flag_name(o.key);
         return add(std::move(o),
                    [field, what](P& p, const std::vector<std::string>& v) { ref(p, field) = parse_array<N>(v, what); },
@@ -209,9 +207,7 @@ public:
     /// N numbers or none (std::optional<std::array<double, N>>); `none_text` in provenance.
     template <std::size_t N, class A>
     Spec& optional_numbers(std::string key, A field, std::string unit, std::string none_text, std::string help) {
-        Option o = base(std::move(key), std::move(unit), std::move(help), Form::NUMBERS);
-        o.count = static_cast<int>(N);
-        o.type_name = "REAL";
+        Option o = numbers_option(std::move(key), std::move(unit), std::move(help), N);
         const std::string what = flag_name(o.key);
         return add(std::move(o),
                    [field, what](P& p, const std::vector<std::string>& v) { ref(p, field) = parse_array<N>(v, what); },
@@ -410,6 +406,12 @@ private:
         o.unit = std::move(unit);
         o.help = std::move(help);
         o.form = form;
+        return o;
+    }
+    Option numbers_option(std::string key, std::string unit, std::string help, std::size_t n) {
+        Option o = base(std::move(key), std::move(unit), std::move(help), Form::NUMBERS);
+        o.count = static_cast<int>(n);
+        o.type_name = "REAL";
         return o;
     }
     Spec& add(Option o, Setter set, Shower show, Checker check) {

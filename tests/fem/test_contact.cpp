@@ -1,0 +1,121 @@
+// SPDX-License-Identifier: MIT
+// Wall-on-wall contact (fem::ContactBody, issue #15 item 4): two plates pressed together touch and do not
+// pass through each other, and the force through them is that of the two plates in series.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "aneu/core/error.hpp"
+#include "aneu/fem/contact.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/static_solve.hpp"
+#include "aneu/fem/structured_mesh.hpp"
+
+using namespace aneu;
+
+namespace {
+
+/// Two 1 × 1 × 0.5 mm plates, one above the other with a 0.05 mm gap (different grids, so the facing nodes
+/// do not coincide). The bottom plate's base is held; the top plate's top is pushed down by `push`.
+struct Plates {
+    static constexpr double H = 0.5, GAP = 0.05;
+    Eigen::MatrixX3d V;
+    Eigen::MatrixXi T;
+    Eigen::VectorXi fixed;
+    std::vector<int> top;  // top plate's top nodes
+    Eigen::MatrixX3i faces;
+    Plates() {
+        const fem::StructuredMesh a = fem::box_mesh(1, 1, H, 4, 4, 2), b = fem::box_mesh(1, 1, H, 5, 5, 2);
+        V.resize(a.V.rows() + b.V.rows(), 3);
+        V << a.V, b.V;
+        V.bottomRows(b.V.rows()).col(2).array() += H + GAP;
+        T.resize(a.T.rows() + b.T.rows(), 4);
+        T << a.T, b.T.array() + static_cast<int>(a.V.rows());
+        std::vector<int> fd, facing;
+        for (Eigen::Index i = 0; i < V.rows(); ++i) {
+            const double z = V(i, 2);
+            if (z < 1e-9)
+                for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+            if (z > 2 * H + GAP - 1e-9) top.push_back(static_cast<int>(i));
+            if (std::abs(z - H) < 1e-9 || std::abs(z - H - GAP) < 1e-9) facing.push_back(static_cast<int>(i));
+        }
+        fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+        const Eigen::VectorXi set = Eigen::Map<Eigen::VectorXi>(facing.data(), static_cast<Eigen::Index>(facing.size()));
+        const Eigen::MatrixXi F = fem::boundary_faces_in_set(V, T, set);  // outward: +z below, −z above: towards each other
+        faces = F.leftCols(3);
+    }
+    std::vector<std::pair<int, double>> push(double depth) const {
+        std::vector<std::pair<int, double>> p;
+        for (int v : top)
+            for (int k = 0; k < 3; ++k) p.emplace_back(3 * v + k, k == 2 ? -depth : 0.0);
+        return p;
+    }
+};
+
+double pushing_force(const fem::NewtonResult& r) {
+    double f = 0;
+    for (Eigen::Index k = 2; k < r.reaction.size(); k += 3) f += r.reaction[k];
+    return -f;
+}
+
+}  // namespace
+
+TEST(WallContact, TwoPlatesPressedTogetherTouchAndDoNotPassThrough) {
+    const Plates p;
+    ASSERT_EQ(p.faces.rows(), 2 * (4 * 4 + 5 * 5) * 1);  // two triangles per grid square on both facing sides
+    const std::vector<Material> mats = {{"plate", 1.0, 0.0}};  // ν = 0: each plate in uniaxial compression
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), mats);
+    constexpr double PUSH = 0.08;
+    const auto pres = p.push(PUSH);
+    const Eigen::VectorXd u0 = Eigen::VectorXd::Zero(solid.dofs());
+
+    // Without contact the top plate sinks into the bottom one by push − gap.
+    fem::ContactParams cp;
+    const fem::NewtonResult free = fem::solve_neo_hookean(solid, p.fixed, pres, u0);
+    const fem::ContactBody probe(solid, p.V, p.faces, free.u, cp);
+    EXPECT_LT(probe.min_distance(free.u), -0.025);
+
+    // With contact: held about gap_mm apart, no interpenetration, and the force of two plates in series.
+    const fem::ContactBody body(solid, p.V, p.faces, u0, cp);
+    ASSERT_GT(body.candidates(), 0u);
+    const fem::NewtonResult r = fem::solve_neo_hookean(body, p.fixed, pres, u0);
+    EXPECT_LT(r.residual, 1e-9);
+    const double dmin = body.min_distance(r.u);
+    EXPECT_GT(body.active(r.u), 20u);
+    EXPECT_GT(dmin, -0.02);   // the issue's interpenetration limit
+    EXPECT_LT(dmin, cp.gap_mm);
+    // Compression shared by the plates: push − (gap − final separation); each plate's nominal stress in
+    // uniaxial compression at stretch λ is μ (λ − 1/λ) (neo-Hookean, λ = 0: ν = 0).
+    const double closed = PUSH - (Plates::GAP - std::max(dmin, 0.0));
+    const double lambda = 1 - 0.5 * closed / Plates::H, mu = 0.5;
+    const double expected = -mu * (lambda - 1 / lambda) * 1.0;  // × the 1 mm² area
+    const double f = pushing_force(r);
+    std::printf("plates: force %.5f N (two plates in series %.5f N), separation %.4f mm, %zu pairs in contact of %zu, κ %.3g N/mm\n", f,
+                expected, dmin, body.active(r.u), body.candidates(), body.stiffness());
+    EXPECT_NEAR(f, expected, 0.05 * expected);
+}
+
+TEST(WallContact, NeighboursAreNotPairs) {
+    // A flat face never pushes on itself: with the whole 4 × 4 grid in reach, the pairs are exactly those more
+    // than two edges apart on the surface (and none of them is in contact, all lying in the face's plane...
+    // measured as d = 0 < gap, which is why neighbours must be excluded, not merely found harmless).
+    const fem::StructuredMesh a = fem::box_mesh(1, 1, 0.5, 4, 4, 2);
+    const fem::NeoHookeanSolid solid(a.V, a.T, Eigen::VectorXi::Zero(a.T.rows()), {{"plate", 1.0, 0.3}});
+    std::vector<int> topn;
+    for (Eigen::Index i = 0; i < a.V.rows(); ++i)
+        if (a.V(i, 2) > 0.5 - 1e-9) topn.push_back(static_cast<int>(i));
+    const Eigen::VectorXi set = Eigen::Map<Eigen::VectorXi>(topn.data(), static_cast<Eigen::Index>(topn.size()));
+    const Eigen::MatrixX3i faces = fem::boundary_faces_in_set(a.V, a.T, set).leftCols(3);
+    fem::ContactParams cp;
+    cp.search_mm = 0.6;  // the whole face is within reach; only the neighbourhood rule keeps pairs out
+    cp.exclude_rings = 8;  // more than the grid's diameter: every vertex is a neighbour of every face
+    const fem::ContactBody all_near(solid, a.V, faces, Eigen::VectorXd::Zero(solid.dofs()), cp);
+    EXPECT_EQ(all_near.candidates(), 0u);
+    cp.exclude_rings = 2;
+    const fem::ContactBody body(solid, a.V, faces, Eigen::VectorXd::Zero(solid.dofs()), cp);
+    EXPECT_GT(body.candidates(), 0u);
+    // In the plane of the faces, d = 0 < gap: a coplanar vertex far along the same wall would be pushed, so a
+    // flat wall's own far vertices must not count as being in front of it: their projections fall outside.
+    EXPECT_EQ(body.active(Eigen::VectorXd::Zero(solid.dofs())), 0u);
+    EXPECT_THROW(fem::ContactBody(solid, a.V.topRows(3), faces, Eigen::VectorXd::Zero(solid.dofs()), cp), InputError);
+}
