@@ -22,11 +22,14 @@
 // interface — with its errors against the same reference.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
 //                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
-//                           [--patch-mm 0] [--no-reference]
+//                           [--patch-mm 0] [--no-reference] [--wall-contact]
+// --wall-contact: the nonlinear models (reference and patch) also keep the lumen's opposite inner walls apart
+// (fem::ContactBody on the corner nodes of the inner surface, gap 0.01 mm); the linear model cannot.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <map>
 #include <memory>
 #include <sstream>
@@ -39,6 +42,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "bench_util.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/contact.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 #include "aneu/fem/patch.hpp"
 #include "aneu/fem/static_solve.hpp"
@@ -68,6 +72,8 @@ struct Track {
     double force = 0;               // mean y force of the two blades on the wall [N], > 0 squeezing
     int rounds = 0, iterations = 0, substeps = 0, shifted = 0;
     double min_J = 1, seconds = 0;
+    double wall_gap = std::numeric_limits<double>::infinity();  // smallest inner-wall distance among pairs in contact
+    std::size_t wall_pairs = 0;
 };
 
 std::vector<std::pair<int, double>> prescribed_of(const Track& t, const Eigen::MatrixX3d& X, const Clip& clip) {
@@ -97,11 +103,11 @@ int main(int argc, char** argv) {
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     double patch_mm = 0;
-    bool reference = true;
+    bool reference = true, wall_contact = false;
     for (int a = 2; a < argc; a += 2) {
         const std::string k = argv[a];
-        if (k == "--no-reference") {
-            reference = false;
+        if (k == "--no-reference" || k == "--wall-contact") {
+            (k == "--no-reference" ? reference : wall_contact) = k == "--wall-contact";
             --a;
             continue;
         }
@@ -204,6 +210,27 @@ int main(int argc, char** argv) {
                      static_cast<long long>(vol.tets.rows()), patch->nodes().size(), static_cast<long long>(patch->interface_nodes()),
                      patch->setup_seconds());
     }
+    // The inner surface's triangles (corner nodes), for wall-on-wall contact: whole model and patch numbering.
+    Eigen::MatrixX3i inner_faces, patch_faces;
+    Eigen::MatrixX3d patch_X;
+    if (wall_contact) {
+        inner_faces = fem::boundary_faces_in_set(X, vol.tets, vol.node_sets.at("inner")).leftCols(3);
+        if (patch) {
+            std::vector<Eigen::Vector3i> pf;
+            for (Eigen::Index f = 0; f < inner_faces.rows(); ++f) {
+                const Eigen::Vector3i l(patch->local(inner_faces(f, 0)), patch->local(inner_faces(f, 1)), patch->local(inner_faces(f, 2)));
+                if (l.minCoeff() >= 0) pf.push_back(l);
+            }
+            patch_faces.resize(static_cast<Eigen::Index>(pf.size()), 3);
+            for (size_t f = 0; f < pf.size(); ++f) patch_faces.row(static_cast<Eigen::Index>(f)) = pf[f].transpose();
+            patch_X.resize(static_cast<Eigen::Index>(patch->nodes().size()), 3);
+            for (size_t a = 0; a < patch->nodes().size(); ++a) patch_X.row(static_cast<Eigen::Index>(a)) = X.row(patch->nodes()[a]);
+        }
+        std::fprintf(stderr, "wall contact: %lld inner faces (%lld in the patch)\n", static_cast<long long>(inner_faces.rows()),
+                     static_cast<long long>(patch_faces.rows()));
+    }
+    fem::ContactParams contact;
+    contact.search_mm = 1.0;  // walls approach by up to ~0.5 mm per closure step
     enum class Model { LINEAR, NONLINEAR, PATCH };
     // Solve one model at the current gap, iterating the contact set; returns false if it cannot be solved.
     auto solve = [&](Track& t, Model model) {
@@ -222,7 +249,16 @@ int main(int argc, char** argv) {
                 }
                 fem::NewtonOptions no;
                 no.max_total_iterations = max_newton;
-                const fem::NewtonResult r = fem::solve_neo_hookean(*patch, patch->fixed_dofs(), lp, patch->restrict_to_patch(t.u), no);
+                const Eigen::VectorXd start = patch->restrict_to_patch(t.u);
+                fem::NewtonResult r;
+                if (wall_contact) {
+                    const fem::ContactBody body(*patch, patch_X, patch_faces, start, contact);
+                    r = fem::solve_neo_hookean(body, patch->fixed_dofs(), lp, start, no);
+                    t.wall_gap = body.min_distance(r.u);
+                    t.wall_pairs = body.active(r.u);
+                } else {
+                    r = fem::solve_neo_hookean(*patch, patch->fixed_dofs(), lp, start, no);
+                }
                 t.u = patch->full_displacement(r.u);
                 reaction = r.reaction;
                 t.iterations += r.iterations;
@@ -232,7 +268,15 @@ int main(int argc, char** argv) {
             } else if (nonlinear) {
                 fem::NewtonOptions no;
                 no.max_total_iterations = max_newton;
-                const fem::NewtonResult r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u, no);
+                fem::NewtonResult r;
+                if (wall_contact) {
+                    const fem::ContactBody body(solid, X, inner_faces, t.u, contact);
+                    r = fem::solve_neo_hookean(body, fem.fixed_dofs, pres, t.u, no);
+                    t.wall_gap = body.min_distance(r.u);
+                    t.wall_pairs = body.active(r.u);
+                } else {
+                    r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u, no);
+                }
                 t.u = r.u;
                 reaction = r.reaction;
                 t.iterations += r.iterations;
@@ -298,14 +342,17 @@ int main(int argc, char** argv) {
                 patch_alive = false;
             }
         }
-        if (reference && !reference_failed.empty()) {  // the reference stopped earlier: linear and patch only
-            nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", "the reference stopped at an earlier closure"},
-                                {"force_linear_N", lin.force}};
+        // A closure without the reference (it stopped here or earlier): linear and patch only; false: stop.
+        auto without_reference = [&](const std::string& why) {
+            nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", why}, {"force_linear_N", lin.force}};
             if (patch_alive) j["force_patch_N"] = pt.force;
             if (!patch_failed.empty()) j["patch_failed"] = patch_failed;
             std::printf("%s\n", j.dump().c_str());
             std::fflush(stdout);
-            if (!patch_alive) break;
+            return patch_alive;
+        };
+        if (reference && !reference_failed.empty()) {
+            if (!without_reference("the reference stopped at an earlier closure")) break;
             continue;
         }
         if (reference) {
@@ -313,12 +360,7 @@ int main(int argc, char** argv) {
                 solve(nl, Model::NONLINEAR);
             } catch (const Error& e) {
                 reference_failed = e.what();
-                nlohmann::json j = {{"closure", c}, {"gap_mm", clip.gap}, {"failed", e.what()}, {"force_linear_N", lin.force}};
-                if (patch_alive) j["force_patch_N"] = pt.force;
-                if (!patch_failed.empty()) j["patch_failed"] = patch_failed;
-                std::printf("%s\n", j.dump().c_str());
-                std::fflush(stdout);
-                if (!patch_alive) break;
+                if (!without_reference(e.what())) break;
                 continue;
             }
         } else {
@@ -356,6 +398,10 @@ int main(int argc, char** argv) {
                             {"rounds_nonlinear", nl.rounds},
                             {"seconds_linear", lin.seconds},
                             {"seconds_nonlinear", nl.seconds}};
+        if (wall_contact && reference) {
+            j["wall_pairs"] = nl.wall_pairs;
+            j["wall_gap_mm"] = std::isfinite(nl.wall_gap) ? nl.wall_gap : -1.0;
+        }
         if (patch) {
             j["reference"] = reference;
             if (patch_failed.empty() && (patch_alive || reference)) {
@@ -366,6 +412,10 @@ int main(int argc, char** argv) {
                 j["newton_iterations_patch"] = pt.iterations;
                 j["seconds_patch"] = pt.seconds;
                 j["min_J_patch"] = pt.min_J;
+                if (wall_contact) {
+                    j["wall_pairs_patch"] = pt.wall_pairs;
+                    j["wall_gap_patch_mm"] = std::isfinite(pt.wall_gap) ? pt.wall_gap : -1.0;
+                }
             } else {
                 j["patch_failed"] = patch_failed;
             }
@@ -406,6 +456,7 @@ int main(int argc, char** argv) {
                {"closure_u_error_10pct", cross_disp},
                {"seconds_linear", lin.seconds},
                {"seconds_nonlinear", nl.seconds}};
+    summary["wall_contact"] = wall_contact;
     if (patch) {
         summary["patch_mm"] = patch_mm;
         summary["patch_nodes"] = patch->nodes().size();
