@@ -32,7 +32,8 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
         m_kappa = 100.0 * dmax;
     }
     if (p.exclude_rings < 0) throw InputError("contact: exclude_rings must be >= 0");
-    if (m_p.depth_mm <= 0) m_p.depth_mm = p.search_mm;
+    if (m_p.depth_mm <= 0) m_p.depth_mm = 0.25;
+    constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration a step may end with (the limit)
 
     // Candidates: a surface vertex and a face without it, apart in the reference shape (opposite walls), near in
     // the starting state.
@@ -69,6 +70,11 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
         for (int v : verts) {
             if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
             if ((x(u0, v) - centre).norm() > r + p.search_mm) continue;
+            // A vertex already behind the face where the solve starts did not come through it (a crease of
+            // the wall, the other side of a fold): not a pair. One in contact from the last step is.
+            double d;
+            Eigen::Vector3d bc, n;
+            if (project(u0, {v, static_cast<int>(f)}, d, bc, n) && d < -BEHIND_AT_START) continue;
             m_pairs.push_back({v, static_cast<int>(f)});
         }
     }
@@ -109,13 +115,16 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
 }
 
 bool ContactBody::measure(const Eigen::VectorXd& u, const Pair& q, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const {
+    return project(u, q, d, b, n) && d < m_p.gap_mm && d >= -m_p.depth_mm;
+}
+
+bool ContactBody::project(const Eigen::VectorXd& u, const Pair& q, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const {
     const Eigen::Vector3d p = x(u, q.v), a = x(u, m_F(q.f, 0)), e1 = x(u, m_F(q.f, 1)) - a, e2 = x(u, m_F(q.f, 2)) - a;
     n = e1.cross(e2);
     const double area2 = n.norm();
     if (area2 <= 0) return false;
     n /= area2;
     d = (p - a).dot(n);
-    if (d >= m_p.gap_mm || d < -m_p.depth_mm) return false;
     // Barycentrics of the projection onto the face's plane.
     const Eigen::Vector3d w = p - a - d * n;
     const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2);

@@ -8,8 +8,9 @@
 /// ½ κ (gap − d)² when the vertex comes nearer than `gap_mm` to the face. It decorates an ElasticBody (the
 /// neo-Hookean solid or the nonlinear patch), so the contact is solved in the same Newton problem as the
 /// blades' prescribed displacements. Candidate pairs are collected when the decorator is made (within
-/// `search_mm` of each other in the state it starts from), which fixes the tangent's pattern for one solve;
-/// make a new one for the next load step.
+/// `search_mm` of each other in the state it starts from, and not already behind the face there: a crease of
+/// the wall or the far side of a fold), which fixes the tangent's pattern for one solve; make a new one for the
+/// next load step.
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -26,7 +27,7 @@ struct ContactParams {
     double stiffness = 0;        ///< κ [N/mm] per pair; 0 = 100 × the largest diagonal entry of the body's tangent at rest
     double search_mm = 0.6;      ///< candidate pairs: nearer than this in the starting state
     int exclude_rings = 2;       ///< a vertex within this many surface edges of a face's corners is its neighbour, never its pair
-    double depth_mm = 0.0;       ///< a vertex more than this behind a face is on the far side, not in contact (0 = search_mm)
+    double depth_mm = 0.0;       ///< a vertex more than this behind a face is on the far side, not in contact (0 = 0.25 mm)
 };
 
 class ContactBody final : public ElasticBody {
@@ -58,6 +59,8 @@ private:
     /// Distance of the pair at u: d, barycentrics and the face normal; false when the vertex does not project
     /// onto the face or lies beyond `depth` behind it.
     bool measure(const Eigen::VectorXd& u, const Pair& p, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const;
+    /// The same without the gap and depth limits: whether the vertex projects onto the face, and d.
+    bool project(const Eigen::VectorXd& u, const Pair& p, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const;
     Eigen::Vector3d x(const Eigen::VectorXd& u, int node) const { return m_X.row(node).transpose() + u.segment<3>(3 * node); }
 
     const ElasticBody& m_body;
