@@ -35,6 +35,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -414,15 +415,18 @@ SurfaceData read_mesh_file(const std::string& path, double weld) {
 
 void write_mesh_file(const std::string& path, const SurfaceData& s) {
     auto poly = to_vtk(s);
-    if (ends_with(path, ".stl")) {
+    const bool stl = ends_with(path, ".stl");
+    if (!stl && !ends_with(path, ".vtp")) throw InputError(path + ": unsupported surface format for writing (expected .vtp or .stl)");
+    AtomicPath out(path);
+    if (stl) {
         vtkNew<vtkSTLWriter> w;
-        w->SetFileName(path.c_str());
+        w->SetFileName(out.tmp().c_str());
         w->SetInputData(poly);
         w->SetFileTypeToBinary();
         if (!w->Write()) throw IoError(path + ": cannot write STL");
+        out.commit();
         return;
     }
-    if (!ends_with(path, ".vtp")) throw InputError(path + ": unsupported surface format for writing (expected .vtp or .stl)");
     vtkNew<vtkIntArray> lab;
     lab->SetName("label");
     for (Eigen::Index f = 0; f < s.F.rows(); ++f) lab->InsertNextValue(s.face_label.size() ? s.face_label[f] : 0);
@@ -434,9 +438,10 @@ void write_mesh_file(const std::string& path, const SurfaceData& s) {
         poly->GetCellData()->AddArray(reg);
     }
     vtkNew<vtkXMLPolyDataWriter> w;
-    w->SetFileName(path.c_str());
+    w->SetFileName(out.tmp().c_str());
     w->SetInputData(poly);
     if (!w->Write()) throw IoError(path + ": cannot write VTP");
+    out.commit();
 }
 
 Volume<std::uint8_t> voxelize(const SurfaceData& closed, double spacing, double margin) {
