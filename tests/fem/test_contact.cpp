@@ -100,9 +100,9 @@ TEST(WallContact, TwoPlatesPressedTogetherTouchAndDoNotPassThrough) {
 }
 
 TEST(WallContact, NeighboursAreNotPairs) {
-    // A flat face never pushes on itself: with the whole 4 × 4 grid in reach, the pairs are exactly those more
-    // than two edges apart on the surface (and none of them is in contact, all lying in the face's plane...
-    // measured as d = 0 < gap, which is why neighbours must be excluded, not merely found harmless).
+    // A flat face never pushes on itself. With the whole 4 × 4 grid in reach, a ring count wider than the grid
+    // leaves no pair; two rings leave the far vertices as candidates, and none of them is in contact, since a
+    // coplanar vertex does not project onto another face.
     const fem::StructuredMesh a = fem::box_mesh(1, 1, 0.5, 4, 4, 2);
     const fem::NeoHookeanSolid solid(a.V, a.T, Eigen::VectorXi::Zero(a.T.rows()), {{"plate", 1.0, 0.3}});
     std::vector<int> topn;
@@ -118,8 +118,6 @@ TEST(WallContact, NeighboursAreNotPairs) {
     cp.exclude_rings = 2;
     const fem::ContactBody body(solid, a.V, faces, Eigen::VectorXd::Zero(solid.dofs()), cp);
     EXPECT_GT(body.candidates(), 0u);
-    // In the plane of the faces, d = 0 < gap: a coplanar vertex far along the same wall would be pushed, so a
-    // flat wall's own far vertices must not count as being in front of it: their projections fall outside.
     EXPECT_EQ(body.active(Eigen::VectorXd::Zero(solid.dofs())), 0u);
     EXPECT_THROW(fem::ContactBody(solid, a.V.topRows(3), faces, Eigen::VectorXd::Zero(solid.dofs()), cp), InputError);
 }
