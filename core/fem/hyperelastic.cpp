@@ -440,7 +440,11 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             dp[prescribed[k].first] = start[kk] + s1 * (target[kk] - start[kk]) - u[prescribed[k].first];
         }
         Eigen::VectorXd g = solid.internal_force(u);
-        Eigen::VectorXd v = u + newton_step(u, g, &dp);  // predictor: moves the prescribed DOFs
+        // Predictor: moves the prescribed DOFs. Without a prescribed increment (a load that is all free: a
+        // released clip's spring) it would be a full Newton step without the line search, which can jump
+        // through a contact; the corrector's line-searched iterations start from u instead.
+        const bool moves = dp.cwiseAbs().maxCoeff() > 0;
+        Eigen::VectorXd v = moves ? Eigen::VectorXd(u + newton_step(u, g, &dp)) : u;
         double E = solid.energy(v);
         if (!std::isfinite(E)) {
             last_failure = "the predictor inverts elements";

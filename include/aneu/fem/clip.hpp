@@ -1,0 +1,132 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// A clip as a spring (issue #15, item 3). Two flat rigid blades hinged at one point open symmetrically by the
+/// angle θ between them; a torsion spring closes them with the torque
+///
+///     τ(θ) = k (θ + θ₀)        [N·mm], θ in radians, θ = 0: closed (the blades' inner faces `closed_gap` apart)
+///
+/// so the force one blade applies at distance r from the hinge is τ / r: the hyperbola along the blade that Ooka
+/// 1997 measured on aneurysm clips, and the label convention of ISO 9713 (the closing force at 1 mm opening, a
+/// third of the blade from the tip) fixes one point of it. ClipBody adds the blades to an ElasticBody as one more
+/// unknown, θ, and the blade faces as a penalty on the body's surface nodes: the total potential
+///
+///     Π(u, θ) = Ψ(u) + Σ ½ κ (g − d_i(u, θ))²  [d_i < g]  + k (θ²/2 + θ₀ θ)
+///
+/// is minimised by the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
+/// released clip (θ free) stops where the tissue pushes back as hard as its spring; a clip held open by the
+/// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include "aneu/fem/hyperelastic.hpp"
+
+namespace aneu::fem {
+
+/// τ(θ) = k (θ + θ₀): a linear torsion spring with a preload.
+struct ClipSpring {
+    double k_nmm_per_rad = 0;  ///< stiffness [N·mm/rad]
+    double preload_rad = 0;    ///< θ₀ > 0: the torque at θ = 0 is k θ₀
+    double torque(double theta) const { return k_nmm_per_rad * (theta + preload_rad); }
+    double energy(double theta) const { return k_nmm_per_rad * (0.5 * theta * theta + preload_rad * theta); }
+    /// Closing force at distance r [mm] from the hinge at opening θ (a point load there balancing the spring).
+    double force_at(double r_mm, double theta) const { return torque(theta) / r_mm; }
+    /// From two closing forces at the same distance r from the hinge: f1 at opening θ1 and f2 at θ2 (θ2 > θ1).
+    /// @throws InputError unless 0 < f1 < f2 and 0 <= θ1 < θ2 (a spring that closes harder when opened, with a preload)
+    static ClipSpring from_forces(double r_mm, double theta1, double f1, double theta2, double f2);
+};
+
+/// Opening angle [rad] at which a point at distance r from the hinge has its blades `opening_mm` apart, for
+/// blades whose inner faces are `closed_gap_mm` apart when closed: 2 r sin(θ/2) + closed_gap = opening.
+double opening_angle(double r_mm, double opening_mm, double closed_gap_mm);
+
+/// Where the blades are: hinge, the blades' direction when closed (`axis`), the direction they open in (`up`,
+/// perpendicular to axis); blade +1 opens towards +up, blade −1 towards −up. The blades are `length` long from
+/// the hinge, `width` wide (across axis and up), `thickness` thick behind their inner face (for display; contact
+/// is with the inner faces).
+struct ClipBlades {
+    Eigen::Vector3d hinge = Eigen::Vector3d::Zero();
+    Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+    Eigen::Vector3d up = Eigen::Vector3d::UnitY();
+    double length_mm = 7.0, width_mm = 1.0, thickness_mm = 0.5, closed_gap_mm = 0.0;
+    /// Blade s (±1) at opening θ: its direction t, inner-face normal n (towards the other blade) and the
+    /// across-blade direction w.
+    void frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d& n, Eigen::Vector3d& w) const;
+};
+
+struct ClipContactParams {
+    double gap_mm = 0.01;      ///< a node is held at about this distance in front of a blade face
+    double stiffness = 0;      ///< κ [N/mm] per node; 0 = 100 × the largest diagonal entry of the body's tangent at rest
+};
+
+/// Loads on the blades at a state.
+struct BladeLoads {
+    std::array<double, 2> force_n{0, 0};     ///< Σ normal force on blade +1 / −1 [N] (the tissue pushing it open)
+    std::array<double, 2> moment_nmm{0, 0};  ///< Σ force × distance from the hinge [N·mm]
+    std::array<int, 2> contacts{0, 0};       ///< nodes pressing on each blade
+    double opening_rad = 0;
+    double spring_torque_nmm = 0;
+};
+
+/// An ElasticBody with a clip: DOFs are the body's then θ (the last, index dofs() − 1, in radians).
+class ClipBody final : public ElasticBody {
+public:
+    /// @param X          reference positions of the body's nodes
+    /// @param candidates nodes that can touch a blade (the outer surface near the clip); the tangent's pattern
+    ///                   couples each to θ
+    /// @param v0         the state the solve starts from (body DOFs and θ): a candidate is pushed by a blade only if
+    ///                   it lies in front of that blade's face there (not more than 0.02 mm behind it: tissue
+    ///                   outside the clip stays outside), and then however deep it goes, so that no step can
+    ///                   tunnel through a blade. Make a new ClipBody for the next load step.
+    /// @throws InputError bad sizes, a non-positive spring or blade dimension, axis and up not orthonormal
+    ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std::vector<int>& candidates, const Eigen::VectorXd& v0,
+             const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p = {});
+    Eigen::Index dofs() const override { return m_body.dofs() + 1; }
+    Eigen::Index theta_dof() const { return m_body.dofs(); }
+    double energy(const Eigen::VectorXd& v) const override;
+    Eigen::VectorXd internal_force(const Eigen::VectorXd& v) const override;
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& v, bool project = false) const override;
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_pattern; }
+    double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
+    BladeLoads loads(const Eigen::VectorXd& v) const;
+    double stiffness() const { return m_kappa; }
+    const ClipBlades& blades() const { return m_blades; }
+
+private:
+    /// Candidate k against blade s at v: true when it presses on it (within the blade, d < gap, and in front of it at v0);
+    /// d, the distance along the inner normal, r the distance from the hinge along the blade, t and n.
+    bool measure(const Eigen::VectorXd& v, size_t k, int s, double& d, double& r, Eigen::Vector3d& t, Eigen::Vector3d& n) const;
+    const ElasticBody& m_body;
+    Eigen::MatrixX3d m_X;
+    std::vector<int> m_nodes;
+    std::vector<std::array<bool, 2>> m_front;  // per candidate: in front of blade +1 / −1 at v0
+    ClipBlades m_blades;
+    ClipSpring m_spring;
+    ClipContactParams m_p;
+    double m_kappa = 0, m_stop = 0;  // node penalty; the closed stop's penalty on θ < 0 [N·mm/rad]
+    Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
+    std::vector<std::int64_t> m_body_to_pattern;
+    std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
+};
+
+/// A linear elastic body: Ψ = ½ uᵀ K u (K symmetric, both triangles). The linear model in the same contact
+/// problems as the nonlinear ones, and a known stiffness for tests.
+class LinearBody final : public ElasticBody {
+public:
+    explicit LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K);
+    Eigen::Index dofs() const override { return m_K.rows(); }
+    double energy(const Eigen::VectorXd& u) const override { return 0.5 * u.dot(m_K * u); }
+    Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override { return m_K * u; }
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd&, bool = false) const override { return m_K; }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_K; }
+    double min_jacobian(const Eigen::VectorXd&) const override { return 1.0; }
+
+private:
+    Eigen::SparseMatrix<double, Eigen::RowMajor> m_K;
+};
+
+}  // namespace aneu::fem

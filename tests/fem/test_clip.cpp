@@ -1,0 +1,201 @@
+// SPDX-License-Identifier: MIT
+// The clip as a spring (fem::ClipBody, issue #15 item 3): a released clip closes on a block of known stiffness
+// and stops at the angle where the block pushes back as hard as the spring (the moment balance, solved here
+// independently by bisection); held open, the forceps holds the spring's torque less the tissue's moment.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "aneu/core/common.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/structured_mesh.hpp"
+
+using namespace aneu;
+
+namespace {
+
+/// Two block nodes at (A, ±H, 0), each tied to a fixed ground node at the same place by an isotropic spring of
+/// stiffness K: a block of known stiffness between the blades of a clip hinged at the origin (axis x, opening
+/// along y).
+struct Block {
+    static constexpr double A = 4.0, H = 0.5, K = 20.0;
+    Eigen::MatrixX3d X{4, 3};
+    Eigen::VectorXi fixed{6};
+    std::unique_ptr<fem::LinearBody> body;
+    Block() {
+        X << A, H, 0, A, -H, 0, A, H, 0, A, -H, 0;
+        for (int k = 0; k < 6; ++k) fixed[k] = k;
+        std::vector<Eigen::Triplet<double>> t;
+        for (int pair = 0; pair < 2; ++pair)
+            for (int ax = 0; ax < 3; ++ax) {
+                const int g = 3 * pair + ax, b = 3 * (pair + 2) + ax;
+                t.emplace_back(g, g, K);
+                t.emplace_back(b, b, K);
+                t.emplace_back(g, b, -K);
+                t.emplace_back(b, g, -K);
+            }
+        Eigen::SparseMatrix<double, Eigen::RowMajor> Km(12, 12);
+        Km.setFromTriplets(t.begin(), t.end());
+        body = std::make_unique<fem::LinearBody>(Km);
+    }
+};
+
+fem::ClipSpring test_spring() {
+    // 1.5 N at 1 mm opening a third of a 7 mm blade from its tip, 2.5 N there at 40°: the label convention.
+    const double r = 7.0 * 2.0 / 3.0;
+    return fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, 0.0), 1.5, 40 * DEG, 2.5);
+}
+
+/// The moment balance of blade +1 on the block, independently of ClipBody: the node moves along the blade's
+/// normal only (its ground spring is isotropic, the blade frictionless), so its force is that of the ground
+/// spring and the penalty in series, F = Kκ/(K+κ) (g − d₀), acting at r = its distance along the blade.
+double block_residual(double theta, const fem::ClipSpring& s, double kappa, double gap) {
+    const double phi = 0.5 * theta;
+    const double d0 = Block::A * std::sin(phi) - Block::H * std::cos(phi);
+    const double r = Block::A * std::cos(phi) + Block::H * std::sin(phi);
+    const double F = gap > d0 ? Block::K * kappa / (Block::K + kappa) * (gap - d0) : 0.0;
+    return s.torque(theta) - F * r;
+}
+
+}  // namespace
+
+TEST(ClipSpring, TwoLabelForcesGiveTheHyperbola) {
+    const fem::ClipSpring s = test_spring();
+    const double r = 7.0 * 2.0 / 3.0;
+    EXPECT_NEAR(s.force_at(r, fem::opening_angle(r, 1.0, 0.0)), 1.5, 1e-12);
+    EXPECT_NEAR(s.force_at(r, 40 * DEG), 2.5, 1e-12);
+    // Along the blade the force is τ/r: half as far from the hinge, twice the force.
+    EXPECT_NEAR(s.force_at(0.5 * r, 0.3), 2.0 * s.force_at(r, 0.3), 1e-12);
+    EXPECT_GT(s.preload_rad, 0.0);
+    // 2 r sin(θ/2) + closed gap = opening.
+    EXPECT_NEAR(2 * 3.0 * std::sin(0.5 * fem::opening_angle(3.0, 1.2, 0.2)) + 0.2, 1.2, 1e-12);
+    EXPECT_THROW(fem::ClipSpring::from_forces(r, 0.1, 2.0, 0.5, 1.0), InputError);   // weaker when opened
+    EXPECT_THROW(fem::ClipSpring::from_forces(r, 0.1, 0.1, 0.5, 10.0), InputError);  // no preload
+    EXPECT_THROW(fem::opening_angle(0.2, 1.0, 0.0), InputError);                     // beyond reach
+}
+
+TEST(ClipBody, ReleasedOnABlockItStopsAtTheAnalyticAngle) {
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    fem::ClipBlades blades;  // hinge at the origin, axis x, up y, 7 mm × 1 mm
+    // Released open (40°, clear of the block): θ is free.
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, blades, spring);
+    EXPECT_DOUBLE_EQ(clip.stiffness(), 100 * Block::K);
+    fem::NewtonOptions no;
+    no.tolerance = 1e-12;
+    const fem::NewtonResult r = fem::solve_neo_hookean(clip, b.fixed, {}, v0, no);
+    const double theta = r.u[clip.theta_dof()];
+    // The analytic angle: bisection on the balance between the touching angle and closed.
+    double lo = 0, hi = 2 * std::atan(Block::H / Block::A);
+    ASSERT_LT(block_residual(lo, spring, clip.stiffness(), 0.01), 0);  // the block stops the clip before it closes
+    ASSERT_GT(block_residual(hi, spring, clip.stiffness(), 0.01), 0);
+    for (int it = 0; it < 200; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (block_residual(mid, spring, clip.stiffness(), 0.01) < 0 ? lo : hi) = mid;
+    }
+    EXPECT_NEAR(theta, 0.5 * (lo + hi), 1e-9) << "clip at " << theta / DEG << "°";
+    // Moment balance of both blades and the hyperbola: each blade's force × its lever = the spring's torque.
+    const fem::BladeLoads L = clip.loads(r.u);
+    EXPECT_EQ(L.contacts[0], 1);
+    EXPECT_EQ(L.contacts[1], 1);
+    EXPECT_NEAR(L.moment_nmm[0], L.spring_torque_nmm, 1e-9 * L.spring_torque_nmm);
+    EXPECT_NEAR(L.moment_nmm[1], L.spring_torque_nmm, 1e-9 * L.spring_torque_nmm);
+    EXPECT_NEAR(L.force_n[0], L.force_n[1], 1e-9);
+    // The block nodes moved towards each other along the blades' normals, symmetrically.
+    EXPECT_LT(r.u[7], 0);
+    EXPECT_NEAR(r.u[7], -r.u[10], 1e-12);
+}
+
+TEST(ClipBody, HeldOpenTheForcepsHoldsTheSpringLessTheTissue) {
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, fem::ClipBlades{}, spring);
+    for (const double held : {30 * DEG, 0.2}) {  // clear of the block; pressing on it
+        const fem::NewtonResult r =
+            fem::solve_neo_hookean(clip, b.fixed, {{static_cast<int>(clip.theta_dof()), held}}, v0);
+        EXPECT_NEAR(r.reaction[0], block_residual(held, spring, clip.stiffness(), 0.01), 1e-8) << "held at " << held;
+    }
+}
+
+TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
+    const Block b;
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;  // open: both nodes in front of their blade
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, fem::ClipBlades{}, test_spring());
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(clip.dofs());
+    v.segment<3>(6) << 0.01, -0.03, 0.02;   // node 2 pressing on blade +1
+    v.segment<3>(9) << -0.02, 0.01, 0.01;   // node 3 pressing on blade −1
+    v[clip.theta_dof()] = 0.2;
+    const Eigen::VectorXd g = clip.internal_force(v);
+    const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
+    const fem::BladeLoads L = clip.loads(v);
+    ASSERT_EQ(L.contacts[0] + L.contacts[1], 2);
+    const double h = 1e-6;
+    for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
+        Eigen::VectorXd p = v, m = v;
+        p[i] += h;
+        m[i] -= h;
+        EXPECT_NEAR(g[i], (clip.energy(p) - clip.energy(m)) / (2 * h), 1e-5 * (1 + std::abs(g[i]))) << "dof " << i;
+        const Eigen::VectorXd col = (clip.internal_force(p) - clip.internal_force(m)) / (2 * h);
+        for (Eigen::Index j = 6; j < clip.dofs(); ++j)
+            EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
+    }
+    // Past closed, the stop pushes back: the torque turns steeply opening-wards below θ = 0.
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(clip.dofs());
+    c[clip.theta_dof()] = -1e-3;
+    EXPECT_LT(clip.internal_force(c)[clip.theta_dof()], 0.0);
+}
+
+TEST(ClipBody, ReleasedOnANeoHookeanBlockTheBladesBalanceTheSpringWithoutPassingThrough) {
+    // A 2 × 1 × 1 mm neo-Hookean block (1 MPa) between the blades, 3 … 5 mm from the hinge, its far face held.
+    const fem::StructuredMesh m = fem::box_mesh(2.0, 1.0, 1.0, 8, 4, 4);
+    Eigen::MatrixX3d X = m.V;
+    X.col(0).array() += 3.0;
+    X.col(1).array() -= 0.5;
+    X.col(2).array() -= 0.5;
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(m.T.rows());
+    const fem::NeoHookeanSolid solid(X, m.T, region, {Material{"wall", 1.0, 0.45}});
+    std::vector<int> fd, surface;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+        if (X(i, 0) > 5.0 - 1e-9)
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        if (std::abs(std::abs(X(i, 1)) - 0.5) < 1e-9) surface.push_back(static_cast<int>(i));
+    }
+    fem::ClipBlades blades;
+    blades.width_mm = 2.0;
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(solid.dofs() + 1);
+    v0[solid.dofs()] = 40 * DEG;
+    const fem::ClipBody clip(solid, X, surface, v0, blades, test_spring());
+    Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    const fem::NewtonResult r = fem::solve_neo_hookean(clip, fixed, {}, v0);
+    const double theta = r.u[clip.theta_dof()];
+    // It closed onto the block and stopped open: 1 mm apart where the block's near face is, less the squeeze.
+    EXPECT_GT(theta, 0.0);
+    EXPECT_LT(theta, 2 * std::atan(0.5 / 3.0));
+    const fem::BladeLoads L = clip.loads(r.u);
+    EXPECT_GT(L.contacts[0], 3);
+    // One angle for both blades: their mean moment balances the spring (the tetrahedra are not mirror-symmetric,
+    // so each blade's own moment differs from it by a little).
+    EXPECT_NEAR(0.5 * (L.moment_nmm[0] + L.moment_nmm[1]), L.spring_torque_nmm, 1e-6 * L.spring_torque_nmm);
+    EXPECT_NEAR(L.moment_nmm[0], L.spring_torque_nmm, 0.01 * L.spring_torque_nmm);
+    EXPECT_NEAR(L.moment_nmm[1], L.spring_torque_nmm, 0.01 * L.spring_torque_nmm);
+    // No node passes through a blade face by more than 0.02 mm.
+    for (int node : surface) {
+        const Eigen::Vector3d x = X.row(node).transpose() + r.u.segment<3>(3 * node);
+        for (int s : {1, -1}) {
+            Eigen::Vector3d t, n, w;
+            blades.frame(s, theta, t, n, w);
+            const double along = (x - blades.hinge).dot(t), d = (x - blades.hinge).dot(n);
+            if (along >= 0 && along <= blades.length_mm && std::abs(x.dot(w)) <= 1.0) {
+                EXPECT_GT(d, -0.02) << "node " << node;
+            }
+        }
+    }
+    EXPECT_GT(r.min_J, 0.0);
+}
