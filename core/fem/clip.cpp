@@ -107,16 +107,74 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     }
 }
 
-bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, double& d, double& r, Eigen::Vector3d& t, Eigen::Vector3d& n) const {
+namespace {
+
+/// 1 at s ≤ 0, 0 at s ≥ 1, C1 between (a smoothstep), and its derivative.
+void fade(double s, double& w, double& dw) {
+    if (s <= 0) {
+        w = 1;
+        dw = 0;
+    } else if (s >= 1) {
+        w = 0;
+        dw = 0;
+    } else {
+        w = 1 - s * s * (3 - 2 * s);
+        dw = -6 * s * (1 - s);
+    }
+}
+
+}  // namespace
+
+bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const {
     if (!m_front[k][s > 0 ? 0 : 1]) return false;
     const int node = m_nodes[k];
     const double theta = v[theta_dof()];
-    Eigen::Vector3d w;
-    m_blades.frame(s, theta, t, n, w);
+    m_blades.frame(s, theta, c.t, c.n, c.w);
+    const Eigen::Vector3d& w = c.w;
     const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
-    r = rel.dot(t);
-    d = 0.5 * m_blades.closed_gap_mm + rel.dot(n);
-    return r >= 0 && r <= m_blades.length_mm && std::abs(rel.dot(w)) <= 0.5 * m_blades.width_mm && d < m_p.gap_mm;
+    c.r = rel.dot(c.t);
+    c.d = 0.5 * m_blades.closed_gap_mm + rel.dot(c.n);
+    if (c.d >= m_p.gap_mm) return false;
+    // Rounded edges: the penalty fades out over EDGE_MM beyond the blade's sides, tip and hinge end, so that the
+    // energy stays C1 when tissue squeezed past an edge slides off the blade (a step edge stops the line search).
+    const double across = rel.dot(w);
+    c.a = across;
+    double ww, dww, wr, dwr;
+    fade((std::abs(across) - 0.5 * m_blades.width_mm) / EDGE_MM, ww, dww);
+    const double beyond = std::max(-c.r, c.r - m_blades.length_mm);  // > 0 outside [0, L]
+    fade(beyond / EDGE_MM, wr, dwr);
+    c.omega = ww * wr;
+    if (c.omega <= 0) return false;
+    const double sign_r = c.r < 0 ? -1.0 : 1.0;  // d(beyond)/dr where it matters
+    c.domega_dx = (wr * dww / EDGE_MM * (across < 0 ? -1.0 : 1.0)) * w + (ww * dwr / EDGE_MM * sign_r) * c.t;
+    c.domega_dtheta = ww * dwr / EDGE_MM * sign_r * (-0.5 * (c.d - 0.5 * m_blades.closed_gap_mm));  // ∂r/∂θ = −(d − c/2)/2
+    return true;
+}
+
+bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
+                          bool project) const {
+    if (!measure(v, k, s, c)) return false;
+    const double P = m_p.gap_mm - c.d;  // > 0: pressing
+    // Normal: ½ κ ω P². ∂P/∂x = −n, ∂P/∂θ = −r/2.
+    Eigen::Vector4d dP;
+    dP << -c.n, -0.5 * c.r;
+    Eigen::Vector4d dw;
+    dw << c.domega_dx, c.domega_dtheta;
+    e = 0.5 * m_kappa * c.omega * P * P;
+    grad = m_kappa * c.omega * P * dP + 0.5 * m_kappa * P * P * dw;
+    if (H) {
+        // κ ω ∇P ∇Pᵀ (Gauss–Newton) + κ ω P ∇²P, with ∂²P/∂x∂θ = −t/2, ∂²P/∂θ² = (d − closed_gap/2)/4; the second
+        // part is dropped for a projected (semidefinite) tangent. The fade's own derivatives (nonzero only within
+        // EDGE_MM of an edge) are left out of the tangent.
+        *H = m_kappa * c.omega * dP * dP.transpose();
+        if (!project) {
+            const double q = m_kappa * c.omega * P;
+            H->block<3, 1>(0, 3) -= q * 0.5 * c.t;
+            H->block<1, 3>(3, 0) -= q * 0.5 * c.t.transpose();
+            (*H)(3, 3) += q * 0.25 * (c.d - 0.5 * m_blades.closed_gap_mm);
+        }
+    }
+    return true;
 }
 
 double ClipBody::energy(const Eigen::VectorXd& v) const {
@@ -125,12 +183,12 @@ double ClipBody::energy(const Eigen::VectorXd& v) const {
     const double theta = v[theta_dof()];
     e += m_spring.energy(theta);
     if (theta < 0) e += 0.5 * m_stop * theta * theta;
+    Touch c;
+    double ek;
+    Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
-        for (int s : {1, -1}) {
-            double d, r;
-            Eigen::Vector3d t, n;
-            if (measure(v, k, s, d, r, t, n)) e += 0.5 * m_kappa * (m_p.gap_mm - d) * (m_p.gap_mm - d);
-        }
+        for (int s : {1, -1})
+            if (pair_terms(v, k, s, c, ek, gk, nullptr, false)) e += ek;
     return e;
 }
 
@@ -140,14 +198,14 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
     const double theta = v[theta_dof()];
     double& gt = g[theta_dof()];
     gt = m_spring.torque(theta) + (theta < 0 ? m_stop * theta : 0.0);
+    Touch c;
+    double ek;
+    Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            double d, r;
-            Eigen::Vector3d t, n;
-            if (!measure(v, k, s, d, r, t, n)) continue;
-            const double q = -m_kappa * (m_p.gap_mm - d);  // ∂E/∂d
-            g.segment<3>(3 * m_nodes[k]) += q * n;                   // ∂d/∂x = n
-            gt += q * 0.5 * r;                               // ∂d/∂θ = r/2
+            if (!pair_terms(v, k, s, c, ek, gk, nullptr, false)) continue;
+            g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
+            gt += gk[3];
         }
     return g;
 }
@@ -160,22 +218,13 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
     const double theta = v[theta_dof()];
     const auto th = theta_dof();
     val[m_pattern.outerIndexPtr()[th + 1] - 1] += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
+    Touch c;
+    double ek;
+    Eigen::Vector4d gk;
+    Eigen::Matrix4d H;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            double d, r;
-            Eigen::Vector3d t, n;
-            if (!measure(v, k, s, d, r, t, n)) continue;
-            // ½ κ (g − d)²: κ ∇d ∇dᵀ (Gauss–Newton) − κ (g − d) ∇²d, with ∇d = (n, r/2), ∂²d/∂x∂θ = t/2,
-            // ∂²d/∂θ² = −(d − closed_gap/2)/4. The second part is dropped for a projected (semidefinite) tangent.
-            Eigen::Vector4d gd;
-            gd << n, 0.5 * r;
-            Eigen::Matrix4d H = m_kappa * gd * gd.transpose();
-            if (!project) {
-                const double q = -m_kappa * (m_p.gap_mm - d);
-                H.block<3, 1>(0, 3) += q * 0.5 * t;
-                H.block<1, 3>(3, 0) += q * 0.5 * t.transpose();
-                H(3, 3) += q * -0.25 * (d - 0.5 * m_blades.closed_gap_mm);
-            }
+            if (!pair_terms(v, k, s, c, ek, gk, &H, project)) continue;
             for (int i = 0; i < 4; ++i)
                 for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
         }
@@ -186,15 +235,14 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
     BladeLoads b;
     b.opening_rad = v[theta_dof()];
     b.spring_torque_nmm = m_spring.torque(b.opening_rad);
+    Touch c;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            double d, r;
-            Eigen::Vector3d t, n;
-            if (!measure(v, k, s, d, r, t, n)) continue;
+            if (!measure(v, k, s, c)) continue;
             const size_t i = s > 0 ? 0 : 1;
-            const double f = m_kappa * (m_p.gap_mm - d);
+            const double f = m_kappa * c.omega * (m_p.gap_mm - c.d);
             b.force_n[i] += f;
-            b.moment_nmm[i] += f * r;
+            b.moment_nmm[i] += f * c.r;
             ++b.contacts[i];
         }
     return b;

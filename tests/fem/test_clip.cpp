@@ -146,6 +146,20 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
         for (Eigen::Index j = 6; j < clip.dofs(); ++j)
             EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
     }
+    // Over a rounded edge (node 2 just beyond the blade's side, node 3 just beyond its tip): the fade's part of the
+    // force is the energy's derivative too.
+    Eigen::VectorXd e = v;
+    e.segment<3>(6) << 0.01, -0.03, 0.55;
+    e[9] = 7.0 - Block::A + 0.04;
+    e[10] = -0.25;
+    ASSERT_EQ(clip.loads(e).contacts[0] + clip.loads(e).contacts[1], 2);
+    const Eigen::VectorXd ge = clip.internal_force(e);
+    for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
+        Eigen::VectorXd p = e, m = e;
+        p[i] += h;
+        m[i] -= h;
+        EXPECT_NEAR(ge[i], (clip.energy(p) - clip.energy(m)) / (2 * h), 1e-5 * (1 + std::abs(ge[i]))) << "edge, dof " << i;
+    }
     // Past closed, the stop pushes back: the torque turns steeply opening-wards below θ = 0.
     Eigen::VectorXd c = Eigen::VectorXd::Zero(clip.dofs());
     c[clip.theta_dof()] = -1e-3;

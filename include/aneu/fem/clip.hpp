@@ -11,9 +11,10 @@
 /// third of the blade from the tip) fixes one point of it. ClipBody adds the blades to an ElasticBody as one more
 /// unknown, θ, and the blade faces as a penalty on the body's surface nodes: the total potential
 ///
-///     Π(u, θ) = Ψ(u) + Σ ½ κ (g − d_i(u, θ))²  [d_i < g]  + k (θ²/2 + θ₀ θ)
+///     Π(u, θ) = Ψ(u) + Σ ½ κ ω_i (g − d_i(u, θ))²  [d_i < g]  + k (θ²/2 + θ₀ θ)
 ///
-/// is minimised by the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
+/// (ω_i: 1 on the blade, fading to 0 within 0.1 mm beyond its edges: rounded edges keep Π C1) is minimised by
+/// the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
 /// released clip (θ free) stops where the tissue pushes back as hard as its spring; a clip held open by the
 /// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
 #include <array>
@@ -97,9 +98,19 @@ public:
     const ClipBlades& blades() const { return m_blades; }
 
 private:
-    /// Candidate k against blade s at v: true when it presses on it (within the blade, d < gap, and in front of it at v0);
-    /// d, the distance along the inner normal, r the distance from the hinge along the blade, t and n.
-    bool measure(const Eigen::VectorXd& v, size_t k, int s, double& d, double& r, Eigen::Vector3d& t, Eigen::Vector3d& n) const;
+    /// A candidate against a blade: d, the distance along the blade's inner normal n; r, along the blade t from
+    /// the hinge; ω, the edge fade (1 on the blade, 0 beyond EDGE_MM of its sides, tip and hinge end) and its
+    /// derivatives.
+    struct Touch {
+        double d = 0, r = 0, a = 0, omega = 0, domega_dtheta = 0;  // a: across the blade, along w
+        Eigen::Vector3d t, n, w, domega_dx;
+    };
+    static constexpr double EDGE_MM = 0.1;
+    /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
+    bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
+                    bool project) const;
+    /// Candidate k against blade s at v: true when it presses on it (d < gap, ω > 0, and in front of it at v0).
+    bool measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const;
     const ElasticBody& m_body;
     Eigen::MatrixX3d m_X;
     std::vector<int> m_nodes;
