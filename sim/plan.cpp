@@ -143,7 +143,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     nlohmann::ordered_json j;
     j["bundle"] = bundle_ref;
     j["clip_models"][std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm"] = {
-        {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", o.max_opening_deg}};
+        {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", o.max_opening_deg},
+        // The standard permanent clip's closing spring of configs/clips (placeholder figures: configs/clips/README.md).
+        {"spring", {{"label_force_n", 1.5}, {"open_force_n", 2.5}, {"placeholder", true},
+                    {"source", "configs/clips/README.md: placeholder within the 1-2.5 N of issue #15"}}}};
     const std::string model = std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm";
     j["outputs"] = {{"log", stem + "_log.csv"}, {"series", stem + "_series"}, {"report", stem + "_report.json"}};
     nlohmann::ordered_json ap;

@@ -211,7 +211,7 @@ struct Logger {
             const Clip& c = clips[k];
             if (c.model.empty()) continue;
             o << (k ? " " : "") << "clip" << c.id << ':' << (c.state == Clip::State::HELD ? "held" : "deposited") << ':'
-              << g(c.net_force.norm()) << ':' << g(c.grip_force_n);
+              << g(c.net_force.norm()) << ':' << g(c.grip_force_n) << ':' << g(c.opening_deg);
         }
         o << '\n';
     }
@@ -453,6 +453,17 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
+    j["clips"] = nlohmann::json::array();
+    for (const auto& c : a.clip_ends) {
+        nlohmann::json cj = {{"id", c.id}, {"model", c.model}, {"state", c.deposited ? "deposited" : "held"}, {"opening_deg", c.opening_deg},
+                             {"grip_force_n", c.grip_force_n}};
+        if (c.spring) {
+            cj["spring_torque_nmm"] = c.spring_torque_nmm;
+            cj["tissue_moment_nmm"] = c.tissue_moment_nmm;
+            cj["spring_placeholder"] = c.placeholder;
+        }
+        j["clips"].push_back(cj);
+    }
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;
     j["haptic_ticks"] = a.haptic_ticks;

@@ -11,6 +11,7 @@
 #include <set>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 #include "aneu/sim/assessment.hpp"
 
 namespace aneu::sim {
@@ -199,7 +200,9 @@ struct Simulator::Impl {
         if (I.clip >= 0) {
             Clip& c = clips[static_cast<size_t>(I.clip)];
             c.pose = k.pose;
-            c.opening_deg = std::min(k.opening_deg, scene.clip_models.at(c.model).max_opening_deg);
+            const ClipModel& cm = scene.clip_models.at(c.model);
+            c.forceps_deg = std::min(k.opening_deg, cm.max_opening_deg);
+            c.opening_deg = cm.spring ? std::max(c.forceps_deg, c.spring_deg) : c.forceps_deg;
         }
         if (k.release) release(i, t);
     }
@@ -578,6 +581,7 @@ struct Simulator::Impl {
             }
         }
         a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, vessel);
+        balance_springs();
         std::vector<int> touching(static_cast<size_t>(S), -1);
         for (size_t q = 0; q < static_cast<size_t>(S); ++q) {
             if (hit[q] >= 0) touching[q] = hit[q];
@@ -587,6 +591,52 @@ struct Simulator::Impl {
         t_phys = t;
         ++a.frames;
         return fs;
+    }
+
+    // Held clips with a spring: the applier can only hold the clip open. The opening at which the tissue's moment
+    // about the hinge (Σ ½ r f·n over the jaws' contact nodes, f the force on the vessel, r along the jaw, n the
+    // jaw's inner normal) balances the spring's torque is found over the physics frames by Newton steps on
+    // R(θ) = τ(θ) − M(θ), with the tissue's stiffness −dM/dθ from the secant of the last two frames (at most 2° a
+    // frame). The jaws then open to max(what the applier holds, that balance).
+    void balance_springs() {
+        const SimSurface& sf = model.surface;
+        std::vector<double> moment(clips.size(), 0.0);
+        for (size_t k = 0; k < last_vertices.size(); ++k) {
+            const size_t s = static_cast<size_t>(last_vertices[k]);
+            if (st[s] != NodeState::CONTACT && st[s] != NodeState::NEIGHBOUR) continue;
+            const int i = owner[s] / 2;
+            if (scene.instruments[static_cast<size_t>(i)].kind != InstrumentSpec::Kind::CLIP_APPLIER) continue;
+            const int cid = ins[static_cast<size_t>(i)].clip;
+            if (cid < 0) continue;
+            const Clip& c = clips[static_cast<size_t>(cid)];
+            fem::ClipBlades bl;
+            bl.hinge = c.pose.position;
+            bl.axis = c.pose.axis;
+            bl.up = c.pose.up;
+            Eigen::Vector3d t, n, w;
+            bl.frame(owner[s] % 2 == 0 ? 1 : -1, c.opening_deg * DEG, t, n, w);
+            const Eigen::Vector3d x = sf.X.row(static_cast<Eigen::Index>(s)).transpose() + d.row(static_cast<Eigen::Index>(s)).transpose();
+            const Eigen::Vector3d f = last.f.segment<3>(3 * static_cast<Eigen::Index>(k));
+            moment[static_cast<size_t>(cid)] += 0.5 * (x - bl.hinge).dot(t) * f.dot(n);
+        }
+        for (Clip& c : clips) {
+            if (c.state != Clip::State::HELD || c.model.empty()) continue;
+            const ClipModel& cm = scene.clip_models.at(c.model);
+            if (!cm.spring) continue;
+            const double theta = c.opening_deg * DEG, M = moment[static_cast<size_t>(c.id)];
+            if (c.spring_torque_nmm != 0 && std::abs(theta - c.prev_theta) > 1e-4) {
+                const double k = (M - c.tissue_moment_nmm) / (c.prev_theta - theta);
+                c.tissue_k_nmm_per_rad = std::clamp(k, 0.0, 1e4);
+            }
+            c.prev_theta = theta;
+            c.tissue_moment_nmm = M;
+            c.spring_torque_nmm = cm.spring->torque(theta);
+            const double R = c.spring_torque_nmm - M;
+            double step = -R / (cm.spring->k_nmm_per_rad + c.tissue_k_nmm_per_rad);
+            step = std::clamp(step, -2.0 * DEG, 2.0 * DEG);
+            c.spring_deg = std::clamp((theta + step) / DEG, 0.0, cm.max_opening_deg);
+            c.opening_deg = std::max(c.forceps_deg, c.spring_deg);
+        }
     }
 
     // Contact areas per part: connected patches of nodes touching the part (penetrating, held within the
@@ -821,6 +871,13 @@ struct Simulator::Impl {
         out.clips_deposited = 0;
         for (const Clip& c : clips)
             if (c.state == Clip::State::DEPOSITED && !c.model.empty()) ++out.clips_deposited;
+        out.clip_ends.clear();
+        for (const Clip& c : clips) {
+            if (c.model.empty()) continue;
+            const ClipModel& cm = scene.clip_models.at(c.model);
+            out.clip_ends.push_back({c.id, c.model, c.state == Clip::State::DEPOSITED, cm.spring.has_value(), cm.spring_placeholder, c.opening_deg,
+                                     c.grip_force_n, c.spring_torque_nmm, c.tissue_moment_nmm});
+        }
         const Eigen::MatrixX3d x = deformed();
         const SimLumen& lumen = model.surface.lumen;
         const NeckOcclusion occ = neck_occlusion(lumen, lumen.deformed(x, model.surface.X), scene.neck_gap_mm, lumen.wall_mm);

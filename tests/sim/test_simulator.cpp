@@ -391,6 +391,15 @@ TEST(SimulatorInput, BadScenesAreClearErrors) {
     j = good;
     j["clip_models"]["straight"]["jaw_mesh"] = "missing_jaw.stl";
     expect_error(j, "missing_jaw.stl: cannot open");
+    j = good;
+    j["clip_models"]["straight"]["spring"] = {{"label_force_n", 2.0}, {"open_force_n", 1.0}};
+    expect_error(j, "clip_models.straight: spring: clip spring: need two closing forces 0 < f1 < f2");
+    j = good;
+    j["clip_models"]["straight"]["spring"] = {{"label_force_n", 1.0}, {"open_force_n", 2.0}, {"stiffness", 3}};
+    expect_error(j, "clip_models.straight.spring: unknown key \"stiffness\"");
+    j = good;
+    j["clip_models"]["straight"] = {{"file", "no_such_clip.json"}};
+    expect_error(j, "no_such_clip.json: cannot open the clip file");
     put(d.file("broken.json"), "{ \"bundle\": ");
     EXPECT_THROW(sim::read_scene(d.file("broken.json")), InputError);
 
@@ -456,4 +465,87 @@ TEST(SimulatorInput, PoseStreamSkipsGarbageAndNaN) {
             EXPECT_NEAR(a.total_time_s, 0.06, 1e-9);
         }
     }
+}
+
+namespace {
+
+// One clip across the tube's side (as in two_clip_scene), its applier relaxed to 0° and then held there: with a
+// spring the clip stops where the tissue's moment balances it.
+json spring_scene(const std::string& bundle, double label_n, bool spring) {
+    json keys = json::array();
+    const std::array<double, 3> ax{-1, 0, 0}, up{0, 0, 1};
+    auto k = [&](double t, double x, double open) { return key(t, {x, 0, 4.0}, ax, up, open); };
+    json k0 = k(0.00, 5.0, 40);
+    k0["load"] = "straight";
+    keys.push_back(k0);
+    keys.push_back(k(0.05, 2.6, 40));
+    keys.push_back(k(0.10, 2.6, 0));
+    keys.push_back(k(0.40, 2.6, 0));
+    json model = {{"jaw_length_mm", 4.0}, {"jaw_width_mm", 1.2}, {"jaw_thickness_mm", 0.5}, {"closed_gap_mm", 0.0}, {"max_opening_deg", 45}};
+    if (spring) model["spring"] = {{"label_force_n", label_n}, {"open_force_n", 1.6 * label_n}, {"placeholder", true}};
+    return json{{"bundle", bundle},
+                {"clip_models", {{"straight", model}}},
+                {"rates_hz", {{"haptic", 1000}, {"physics", 250}, {"log", 250}, {"series", 50}}},
+                {"instruments", json::array({{{"name", "applier"}, {"kind", "clip_applier"}, {"keyframes", keys}}})}};
+}
+
+}  // namespace
+
+TEST(Simulator, ASpringClipStopsWhereTheTissueBalancesItsSpring) {
+    test::TempDir d("spring");
+    struct Out {
+        double opening = 0, torque = 0, moment = 0, grip = 0;
+    };
+    auto run = [&](double label_n, bool spring, const std::string& name) {
+        sim::Simulator s = make(spring_scene(tube_bundle(Precision::FLOAT64), label_n, spring), d.file(""), name);
+        sim::run_scene(s, {});
+        const sim::Clip& c = s.clips().at(0);
+        EXPECT_EQ(c.state, sim::Clip::State::HELD);
+        EXPECT_DOUBLE_EQ(c.forceps_deg, 0.0);
+        return Out{c.opening_deg, c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n};
+    };
+    const Out none = run(0, false, "none.json");
+    const Out weak = run(0.3, true, "weak.json");
+    const Out strong = run(1.0, true, "strong.json");
+    // Without a spring the jaws follow the applier shut. A weak spring is held open by the tissue where its
+    // moment about the hinge balances the spring's torque; a strong one closes the clip (the blades meet, its
+    // torque still above the tissue's moment).
+    EXPECT_DOUBLE_EQ(none.opening, 0.0);
+    EXPECT_GT(weak.opening, 1.0);
+    EXPECT_LT(weak.opening, 44.0);
+    EXPECT_NEAR(weak.moment, weak.torque, 0.01 * weak.torque);
+    EXPECT_DOUBLE_EQ(strong.opening, 0.0);
+    EXPECT_GT(strong.torque, strong.moment);
+    EXPECT_GT(strong.grip, weak.grip);
+    std::printf("applier shut: no spring 0 deg (grip %.3f N); spring 0.3 N label: %.2f deg (grip %.3f N, torque %.4f, moment %.4f N mm); "
+                "1 N: %.2f deg (grip %.3f N, torque %.4f > moment %.4f N mm)\n",
+                none.grip, weak.opening, weak.grip, weak.torque, weak.moment, strong.opening, strong.grip, strong.torque, strong.moment);
+}
+
+TEST(ClipFiles, ShippedClipModelsReadWithTheirLabelForce) {
+    // configs/clips: every file reads, its spring gives back its label force at the ISO 9713 point (1 mm opening,
+    // a third of the blade from its tip), and its values are flagged as placeholders (configs/clips/README.md).
+    int n = 0;
+    for (const auto& e : std::filesystem::directory_iterator(std::string(ANEU_SOURCE_DIR) + "/configs/clips")) {
+        if (e.path().extension() != ".json") continue;
+        const sim::ClipModel c = sim::read_clip_file(e.path().string());
+        ASSERT_TRUE(c.spring) << e.path();
+        const double r = 2.0 * c.jaw_length_mm / 3.0;
+        EXPECT_NEAR(c.spring->force_at(r, 2 * std::asin(0.5 / r)), c.label_force_n, 1e-9) << e.path();
+        EXPECT_NEAR(c.spring->force_at(r, c.max_opening_deg * M_PI / 180), c.open_force_n, 1e-9) << e.path();
+        EXPECT_TRUE(c.spring_placeholder) << e.path();
+        EXPECT_EQ(c.name, e.path().stem().string());
+        ++n;
+    }
+    EXPECT_GE(n, 5);
+    // A scene's clip model may name a clip file and override its keys.
+    test::TempDir d("clipfile");
+    json j = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
+    j["clip_models"]["straight"] = {{"file", std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_7mm.json"}, {"jaw_length_mm", 4.0}};
+    put(d.file("s.json"), j.dump());
+    const sim::Scene sc = sim::read_scene(d.file("s.json"));
+    const sim::ClipModel& c = sc.clip_models.at("straight");
+    EXPECT_DOUBLE_EQ(c.jaw_length_mm, 4.0);
+    EXPECT_DOUBLE_EQ(c.label_force_n, 1.5);
+    ASSERT_TRUE(c.spring);
 }

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include "aneu/fem/clip.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "aneu/sim/solver.hpp"
@@ -39,7 +40,19 @@ struct ClipModel {
     double max_opening_deg = 40.0;
     std::string mesh_file;          ///< set: the jaw is this mesh instead of a box
     std::optional<TriMesh> jaw_mesh;
+    /// The closing spring (configs/clips/README.md): the applier can only hold the clip open; below what it
+    /// holds, the clip's opening is where the tissue's moment balances τ(θ) = k (θ + θ₀). None: the jaws follow
+    /// the applier's opening exactly (a clip without a modelled spring).
+    std::optional<fem::ClipSpring> spring;
+    double label_force_n = 0, open_force_n = 0;  ///< what the spring was made from (ISO 9713 label point, 2/3 of the blade)
+    bool spring_placeholder = false;             ///< the two forces are placeholders, not a clip's published figures
+    std::string spring_source;
+    std::string file;                            ///< the clip file it came from ("" = defined in the scene)
 };
+
+/// Reads a clip model file (configs/clips/*.json: the clip_models keys plus "name", "kind"; docs/scene_format.md).
+/// @throws InputError naming the file and key
+ClipModel read_clip_file(const std::string& path);
 
 /// One keyframe of a scripted instrument.
 struct Keyframe {

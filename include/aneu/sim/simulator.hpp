@@ -27,7 +27,16 @@ struct Clip {
     int holder = -1;                ///< instrument holding it (HELD)
     Pose pose;                      ///< hinge frame now (deposited: at release, moved by `shift`)
     Pose release_pose;
-    double opening_deg = 0.0;
+    double opening_deg = 0.0;       ///< the jaws' opening now
+    double forceps_deg = 0.0;       ///< what the applier holds (the jaws' opening unless the clip has a spring)
+    /// Clips with a spring (ClipModel::spring), while held: the opening at which the tissue's moment balances the
+    /// spring's torque, updated each physics frame; the jaws open to max(forceps_deg, spring_deg). A deposited
+    /// clip keeps the opening it had when released.
+    double spring_deg = 0.0;
+    double spring_torque_nmm = 0.0;  ///< τ(opening) [N·mm]
+    double tissue_moment_nmm = 0.0;  ///< Σ ½ r f·n of its contact forces about the hinge, last frame [N·mm]
+    double tissue_k_nmm_per_rad = 0.0;  ///< the tissue's rotational stiffness, by the secant of the last two frames
+    double prev_theta = 0.0;         ///< the opening [rad] of the frame before (for the secant)
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< translation since release (moves with the vessel)
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();  ///< Σ contact forces on the vessel [N]
     double grip_force_n = 0.0;      ///< ½ Σ |f_i| over its nodes [N]
@@ -69,6 +78,14 @@ struct Assessment {
     double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
     int skipped_inputs = 0;         ///< live lines refused
+    /// Each clip at the end: its opening and, with a spring, the spring's torque against the tissue's moment.
+    struct ClipEnd {
+        int id = 0;
+        std::string model;
+        bool deposited = false, spring = false, placeholder = false;
+        double opening_deg = 0, grip_force_n = 0, spring_torque_nmm = 0, tissue_moment_nmm = 0;
+    };
+    std::vector<ClipEnd> clip_ends;
     long frames = 0, haptic_ticks = 0;
 };
 
