@@ -86,6 +86,9 @@ struct Simulator::Impl {
     std::vector<NodeState> st;
     std::vector<int> owner;                         // part (CONTACT/NEIGHBOUR/STUCK) or clip (HELD)
     std::vector<Eigen::Vector3d> u, stick_u, stick_p;
+    /// CONTACT nodes a clip jaw took from the space between the jaws: they are pushed back towards it (along the
+    /// jaw's inner normal, as deep as they lag behind its inner face), never out through the jaw's back.
+    std::vector<char> gap_side;
     Eigen::MatrixX3d d;                             // current displacement of every surface vertex
     std::vector<char> in_region;
     PointGrid grid;
@@ -121,6 +124,7 @@ struct Simulator::Impl {
         owner.assign(static_cast<size_t>(S), -1);
         u.assign(static_cast<size_t>(S), Eigen::Vector3d::Zero());
         stick_u = stick_p = u;
+        gap_side.assign(static_cast<size_t>(S), 0);
         d.setZero(S, 3);
         in_region.assign(static_cast<size_t>(S), 0);
         for (Eigen::Index v = 0; v < S; ++v)
@@ -285,6 +289,7 @@ struct Simulator::Impl {
             const size_t s = static_cast<size_t>(clip_nodes[static_cast<size_t>(best)][q]);
             st[s] = NodeState::CONTACT;
             owner[s] = 2 * i;
+            gap_side[s] = 1;  // they were squeezed between its jaws
             u[s] = d.row(static_cast<Eigen::Index>(s)).transpose();
         }
         clip_nodes[static_cast<size_t>(best)].clear();
@@ -314,6 +319,32 @@ struct Simulator::Impl {
         // solver belong to this thread (d is written under the lock, for the output thread).
         const std::vector<NodeState> st_seen = st;
         const std::vector<int> owner_seen = owner;
+        const std::vector<char> gap_seen = gap_side;
+        // The held clips' jaws as blades, at this frame's opening and the last frame's.
+        struct Jaws {
+            bool on = false;
+            fem::ClipBlades blades;
+            double theta = 0, theta_prev = 0;
+        };
+        std::vector<Jaws> jaws(ins.size());
+        for (size_t i = 0; i < ins.size(); ++i) {
+            if (ins[i].clip < 0) continue;
+            Clip& c = clips[static_cast<size_t>(ins[i].clip)];
+            const ClipModel& cm = scene.clip_models.at(c.model);
+            if (cm.jaw_mesh) continue;  // a jaw mesh keeps the shape push
+            Jaws& J = jaws[i];
+            J.on = true;
+            J.blades.hinge = c.pose.position;
+            J.blades.axis = c.pose.axis;
+            J.blades.up = c.pose.up;
+            J.blades.length_mm = cm.jaw_length_mm;
+            J.blades.width_mm = cm.jaw_width_mm;
+            J.blades.thickness_mm = cm.jaw_thickness_mm;
+            J.blades.closed_gap_mm = cm.closed_gap_mm;
+            J.theta = std::clamp(c.opening_deg, 0.0, cm.max_opening_deg) * DEG;
+            J.theta_prev = c.collided_deg < 0 ? J.theta : c.collided_deg * DEG;
+            c.collided_deg = J.theta / DEG;
+        }
         if (mx) lock.unlock();
         std::vector<int> cand;
         if (update_margin > 0 && !fresh.empty()) {
@@ -348,13 +379,42 @@ struct Simulator::Impl {
         std::vector<double> depth(static_cast<size_t>(S), 0.0);
         std::vector<Eigen::Vector3d> push_dir(static_cast<size_t>(S), Eigen::Vector3d::Zero());
         std::vector<int> hit(static_cast<size_t>(S), -1);
-        std::vector<char> kept(static_cast<size_t>(S), 0);
+        std::vector<char> kept(static_cast<size_t>(S), 0), from_gap(static_cast<size_t>(S), 0);
         for (size_t i = 0; i < ins.size(); ++i) {
             for (const auto& [part, shape] : parts[i]) {
-                grid.query(shape.bounds().grown(scene.release_tolerance_mm), cand);
+                const Jaws& J = jaws[i];
+                // A jaw also finds the gap-side nodes that lag behind its inner face by more than its thickness.
+                grid.query(shape.bounds().grown(J.on ? scene.release_tolerance_mm + J.blades.thickness_mm + 0.5 : scene.release_tolerance_mm), cand);
                 for (int v : cand) {
                     const size_t s = static_cast<size_t>(v);
                     const Eigen::Vector3d p = x.row(v);
+                    if (J.on) {
+                        // Behind the jaw's inner face, within its length and width: a node that was between the jaws
+                        // (last frame's opening) or that this jaw already pushes from there is pushed back along the
+                        // inner normal. A jaw that closes faster than half its thickness per frame (the lag of a
+                        // displacement fraction of ½) would otherwise carry the wall out through its back.
+                        const int sgn = part % 2 == 0 ? 1 : -1;
+                        Eigen::Vector3d t, n, w;
+                        J.blades.frame(sgn, J.theta, t, n, w);
+                        const Eigen::Vector3d rel = p - J.blades.hinge;
+                        const double r = rel.dot(t), dn = 0.5 * J.blades.closed_gap_mm + rel.dot(n);
+                        if (r >= 0 && r <= J.blades.length_mm && std::abs(rel.dot(w)) <= 0.5 * J.blades.width_mm && dn < 0) {
+                            Eigen::Vector3d tp, np, wp;
+                            J.blades.frame(sgn, J.theta_prev, tp, np, wp);
+                            const bool was_between = 0.5 * J.blades.closed_gap_mm + rel.dot(np) >= 0;
+                            const bool pushed_back = gap_seen[s] && owner_seen[s] == part &&
+                                                     (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::NEIGHBOUR);
+                            if (was_between || pushed_back) {
+                                if (-dn > depth[s]) {
+                                    depth[s] = -dn;
+                                    push_dir[s] = n;
+                                    hit[s] = part;
+                                    from_gap[s] = 1;
+                                }
+                                continue;
+                            }
+                        }
+                    }
                     const double sd = shape.sdf(p);
                     if (sd < 0) {
                         const Eigen::Vector3d n = sf.N.row(v);
@@ -376,6 +436,7 @@ struct Simulator::Impl {
                             depth[s] = dep;
                             push_dir[s] = dir;
                             hit[s] = part;
+                            from_gap[s] = 0;
                         }
                     } else if (sd < scene.release_tolerance_mm && (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::STUCK) &&
                                owner_seen[s] == part) {
@@ -397,10 +458,12 @@ struct Simulator::Impl {
                 if (hit[s] >= 0) ++fs.contact_nodes;
                 continue;
             }
+            gap_side[s] = 0;
             if (hit[s] >= 0) {
                 const int i = hit[s] / 2;
                 st[s] = NodeState::CONTACT;
                 owner[s] = hit[s];
+                gap_side[s] = from_gap[s];
                 u[s] = dv + alpha * depth[s] * push_dir[s];
                 ++fs.contact_nodes;
                 const auto& spec = scene.instruments[static_cast<size_t>(i)];
@@ -410,6 +473,7 @@ struct Simulator::Impl {
                     stick_p[s] = tips[static_cast<size_t>(i)];
                 }
             } else if (kept[s]) {
+                gap_side[s] = gap_seen[s];
                 // stays in contact at its displacement; a suction tube with its button held holds it
                 const int i = owner[s] / 2;
                 if (scene.instruments[static_cast<size_t>(i)].kind == InstrumentSpec::Kind::SUCTION && ins[static_cast<size_t>(i)].in.button) {

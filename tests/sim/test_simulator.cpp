@@ -549,3 +549,49 @@ TEST(ClipFiles, ShippedClipModelsReadWithTheirLabelForce) {
     EXPECT_DOUBLE_EQ(c.label_force_n, 1.5);
     ASSERT_TRUE(c.spring);
 }
+
+TEST(Simulator, AFastClosingJawKeepsTheWallBetweenTheJaws) {
+    // A clip across the whole tube (hinge 6 mm off its axis, 8 mm jaws along −x, opening along y) snaps shut from
+    // 60° in 3 physics frames: the jaws cross the tube's wall at up to 1.3 mm a frame, more than their 0.5 mm
+    // thickness. The wall nodes that were between the jaws must stay on the jaws' inner side, not be carried out
+    // through their backs (behind a jaw's inner face by more than its thickness).
+    test::TempDir d("fastjaw");
+    json keys = json::array();
+    const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
+    json k0 = key(0.0, {9.0, 0, 4.0}, ax, up, 60);
+    k0["load"] = "straight";
+    keys.push_back(k0);
+    keys.push_back(key(0.05, {6.0, 0, 4.0}, ax, up, 60));
+    keys.push_back(key(0.06, {6.0, 0, 4.0}, ax, up, 60));
+    keys.push_back(key(0.072, {6.0, 0, 4.0}, ax, up, 0));
+    keys.push_back(key(0.12, {6.0, 0, 4.0}, ax, up, 0));
+    json j = {{"bundle", tube_bundle(Precision::FLOAT64)},
+              {"clip_models", {{"straight", {{"jaw_length_mm", 8.0}, {"jaw_width_mm", 1.2}, {"jaw_thickness_mm", 0.5}, {"max_opening_deg", 60}}}}},
+              {"rates_hz", {{"haptic", 1000}, {"physics", 250}, {"log", 250}, {"series", 50}}},
+              {"instruments", json::array({{{"name", "applier"}, {"kind", "clip_applier"}, {"keyframes", keys}}})}};
+    sim::Simulator s = make(j, d.file(""));
+    sim::run_scene(s, {});
+    const Eigen::MatrixX3d x = s.deformed_surface();
+    const Eigen::MatrixX3d& X = s.model().surface.X;
+    fem::ClipBlades bl;
+    bl.hinge = Eigen::Vector3d(6.0, 0, 4.0);
+    bl.axis = -Eigen::Vector3d::UnitX();
+    bl.up = Eigen::Vector3d::UnitY();
+    bl.length_mm = 8.0;
+    bl.width_mm = 1.2;
+    int between = 0, through = 0;
+    for (Eigen::Index v = 0; v < X.rows(); ++v) {
+        const Eigen::Vector3d rel0 = X.row(v).transpose() - bl.hinge;
+        if (std::abs(rel0.z()) > 0.4) continue;  // within the jaws' width, clear of their edges
+        ++between;
+        const Eigen::Vector3d rel = x.row(v).transpose() - bl.hinge;
+        for (int sg : {1, -1}) {
+            Eigen::Vector3d t, n, w;
+            bl.frame(sg, 0.0, t, n, w);
+            if (rel.dot(n) < -0.5) ++through;  // beyond the closed jaw's back face
+        }
+    }
+    std::printf("%d wall nodes between the jaws, %d went through\n", between, through);
+    EXPECT_GE(between, 40);
+    EXPECT_EQ(through, 0) << through << " of " << between << " wall nodes went through a jaw";
+}
