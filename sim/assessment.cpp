@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
+#include "simulator_impl.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -83,6 +84,53 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
         }
     }
     out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
+    return out;
+}
+
+Assessment Simulator::Impl::assess() {
+    Assessment out = a;
+    out.total_time_s = t_phys;
+    out.clips_deposited = 0;
+    for (const Clip& c : clips)
+        if (c.state == Clip::State::DEPOSITED && !c.model.empty()) ++out.clips_deposited;
+    out.clip_ends.clear();
+    for (const Clip& c : clips) {
+        if (c.model.empty()) continue;
+        const ClipModel& cm = scene.clip_models.at(c.model);
+        out.clip_ends.push_back({c.id, c.model, c.state == Clip::State::DEPOSITED, cm.spring.has_value(), cm.spring_placeholder, c.opening_deg,
+                                 c.grip_force_n, c.spring_torque_nmm, c.tissue_moment_nmm});
+    }
+    const Eigen::MatrixX3d x = deformed();
+    const SimLumen& lumen = model.surface.lumen;
+    const NeckOcclusion occ = neck_occlusion(lumen, lumen.deformed(x, model.surface.X), scene.neck_gap_mm, lumen.wall_mm);
+    out.neck_closed_fraction = occ.fraction;
+    out.neck_length_mm = occ.length_mm;
+    out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
+    out.neck_interpenetration_mm = occ.max_interpenetration_mm;
+    // The neck line lying between the jaws of a closed clip (where the clip is, not what it achieved).
+    double total = 0, closed = 0;
+    for (const auto& loop : model.surface.neck_loops) {
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const Eigen::Vector3d p = x.row(loop[k]), q = x.row(loop[(k + 1) % loop.size()]);
+            const double len = (q - p).norm();
+            total += len;
+            const Eigen::Vector3d mid = 0.5 * (p + q);
+            for (const Clip& c : clips) {
+                if (c.model.empty()) continue;
+                const ClipModel& cm = scene.clip_models.at(c.model);
+                if (c.opening_deg > 1.0) continue;  // not closed
+                const Eigen::Vector3d r = mid - c.pose.position;
+                const Eigen::Vector3d ax = c.pose.axis, up = c.pose.up, side = ax.cross(up);
+                const double along = r.dot(ax), across = std::abs(r.dot(up)), wide = std::abs(r.dot(side));
+                if (along >= 0 && along <= cm.jaw_length_mm && wide <= 0.5 * cm.jaw_width_mm + scene.neck_tolerance_mm &&
+                    across <= 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm) {
+                    closed += len;
+                    break;
+                }
+            }
+        }
+    }
+    out.neck_between_jaws_fraction = total > 0 ? closed / total : 0.0;
     return out;
 }
 

@@ -1,0 +1,168 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The simulator's state and steps, private to aneu_sim, split by concept:
+//   simulator.cpp    construction and the public interface;
+//   sim_frame.cpp    the physics frame, a sequence of named steps: contacts → node states → prescribed
+//                    displacements → solve → clips and contact areas;
+//   sim_clips.cpp    the instruments' actions (load, release, grasp, suction), clip jaws and clip springs;
+//   sim_haptics.cpp  contact areas and the contact-plane haptic force;
+//   assessment.cpp   the assessment (neck occlusion, the neck between closed jaws, the clips at the end).
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "aneu/core/common.hpp"
+#include "aneu/fem/clip.hpp"
+#include "aneu/sim/simulator.hpp"
+
+namespace aneu::sim {
+
+struct Simulator::Impl {
+    enum class NodeState : unsigned char { FREE, CONTACT, NEIGHBOUR, STUCK, RELAX, HELD };
+    // A contact area for the haptic force: one connected patch of nodes touched by one part.
+    struct Area {
+        int part = 0;                       // instrument·2 + jaw (jaw 0/1; suction 0)
+        std::vector<int> nodes;             // sorted
+        Eigen::Vector3d n0, n1;             // plane normal at the last two physics frames (interpolated between)
+        double o0 = 0, o1 = 0;              // plane offsets n·x = o
+        double r0 = 0, r1 = 1;              // ramp (0 → 1 at first contact, 1 → 0 when gone)
+        bool alive = true;
+    };
+    // A held clip's jaws as blades, at this frame's opening and the last frame's (collision detection).
+    struct Jaws {
+        bool on = false;
+        fem::ClipBlades blades;
+        double theta = 0, theta_prev = 0;
+    };
+    // What the steps of one physics frame share.
+    struct Frame {
+        Frame(double t_, std::mutex* m) : t(t_), mx(m) {
+            if (mx) lock = std::unique_lock<std::mutex>(*mx);
+            fs.t = t_;
+        }
+        double t;
+        std::mutex* mx;
+        std::unique_lock<std::mutex> lock;
+        FrameStats fs;
+        Stopwatch t0;
+        double dt = 0;
+        std::vector<std::vector<std::pair<int, Shape>>> parts;  // each instrument's parts (part ids i·2 + j)
+        std::vector<Eigen::Vector3d> tips;
+        std::vector<NodeState> st_seen;      // copies taken under the lock (begin_frame)
+        std::vector<int> owner_seen;
+        std::vector<char> gap_seen;
+        std::vector<Jaws> jaws;
+        std::vector<char> candidate;         // nodes the grid holds (in the region, not held by a clip)
+        std::vector<double> depth;           // per node: penetration, push direction, part hit (−1: none)
+        std::vector<Eigen::Vector3d> push_dir;
+        std::vector<int> hit;
+        std::vector<char> kept, from_gap;
+        std::vector<Prescribed> p;           // prescribed displacements, deposited clips' groups
+        std::map<int, int> group_of_clip;
+        std::vector<int> vertices;
+        GroupMethod method = GroupMethod::EXACT;
+    };
+
+    Scene scene;
+    SimModel model;
+    ContactSolver solver;
+    // Instruments.
+    struct Instrument {
+        Keyframe in;                    // current input
+        Eigen::Vector3d prev_pos = Eigen::Vector3d::Zero();
+        Eigen::Vector3d velocity = Eigen::Vector3d::Zero();
+        double prev_t = -1;
+        int clip = -1;                  // index into clips
+        bool over_force = false, over_speed = false;
+        Eigen::Vector3d force = Eigen::Vector3d::Zero();
+    };
+    std::vector<Instrument> ins;
+    std::vector<Clip> clips;
+    std::vector<std::vector<int>> clip_nodes;       // deposited: held vertices
+    std::vector<std::vector<Eigen::Vector3d>> clip_u;  // their relative displacement
+    // Nodes.
+    Eigen::Index S = 0;
+    std::vector<NodeState> st;
+    std::vector<int> owner;                         // part (CONTACT/NEIGHBOUR/STUCK) or clip (HELD)
+    std::vector<Eigen::Vector3d> u, stick_u, stick_p;
+    /// CONTACT nodes a clip jaw took from the space between the jaws: they are pushed back towards it (along the
+    /// jaw's inner normal, as deep as they lag behind its inner face), never out through the jaw's back.
+    std::vector<char> gap_side;
+    Eigen::MatrixX3d d;                             // current displacement of every surface vertex
+    std::vector<char> in_region;
+    PointGrid grid;
+    Eigen::MatrixX3d x_grid;  ///< the positions the grid holds (it keeps a pointer to them between frames)
+    double cell = 0.5;
+    double update_margin = 0;  ///< effective update margin [mm] (see Scene::update_margin_mm); 0 = whole region
+    double t_phys = 0, dt_phys = 0;
+    double t_region = -1;  ///< when the whole working region's deformation was last computed (-1: never)
+    double t_cond = -1;    ///< when W_CC's condition was last estimated
+    bool warned_condition = false;
+    bool warned_linear = false;
+
+    static std::string fmt_condition(double cond, int nodes, double eps) {
+        char b[320];
+        std::snprintf(b, sizeof b,
+                      "W_CC is ill-conditioned: cond estimate %.3g with %d prescribed nodes, so the contact forces keep about %.0f "
+                      "significant digits in this precision (crowded contact nodes; a float64 working precision keeps 9 more)",
+                      cond, nodes, std::max(0.0, -std::log10(cond * eps)));
+        return b;
+    }
+    std::vector<char> fresh;  ///< vertex's d is that of the last solve (updated by it); others lag, up to 1/region_hz
+    std::vector<Area> areas;
+    std::vector<Shape> obstacles;                   // the scene's obstacles as shapes, built once
+    std::vector<Eigen::Vector3d> forces;
+    Assessment a;
+    std::vector<std::string> messages;
+    SolveResult last;
+    std::vector<int> last_vertices;                 // vertex of each prescribed entry of the last solve
+
+    void warn(const std::string& m) { messages.push_back(m); }
+
+    Impl(Scene s, SimModel m);
+
+    // sim_clips.cpp
+    // Shapes of the parts of instrument i (suction: its tube; applier: the held clip's jaws). Part ids i·2+j.
+    std::vector<std::pair<int, Shape>> parts_of(size_t i) const;
+    void set_input(int i, const Keyframe& k, double t);
+    void unstick(int i);
+    void release(int i, double t);
+    void grasp(int i, double t);
+    // Held clips with a spring: the applier can only hold the clip open. The opening at which the tissue's moment
+    // about the hinge (Σ ½ r f·n over the jaws' contact nodes, f the force on the vessel, r along the jaw, n the
+    // jaw's inner normal) balances the spring's torque is found over the physics frames by Newton steps on
+    // R(θ) = τ(θ) − M(θ), with the tissue's stiffness −dM/dθ from the secant of the last two frames (at most 2° a
+    // frame). The jaws then open to max(what the applier holds, that balance).
+    void balance_springs();
+
+    // sim_frame.cpp: the physics frame (collision, solve, contact areas) and its steps, in order.
+    FrameStats physics_step(double t, std::mutex* mx);
+    void begin_frame(Frame& fr);
+    void refresh_lagging_rows(Frame& fr);
+    void detect_contacts(Frame& fr);
+    void update_node_states(Frame& fr);
+    void build_prescribed(Frame& fr);
+    void solve_frame(Frame& fr);
+    void update_clips_and_areas(Frame& fr);
+
+    // sim_haptics.cpp
+    // Contact areas per part: connected patches of nodes touching the part (penetrating, held within the
+    // release tolerance, or stuck). An area continues the area of the same part that shares a node or lies
+    // within 1.5 mm; an area that no node touches any more lives on while the part is still below its plane
+    // (the node set of a sliding tool flickers, its plane must not), and fades out over one physics period
+    // once the part is above it.
+    void update_areas(const std::vector<int>& touching, const std::vector<std::vector<std::pair<int, Shape>>>& parts);
+    const std::vector<Eigen::Vector3d>& haptic_step(double t);
+
+    // simulator.cpp: the deformed surface (region rows of the last frame; the rest from its forces unless region_only)
+    Eigen::MatrixX3d deformed(bool region_only = false);
+    // assessment.cpp
+    Assessment assess();
+};
+
+}  // namespace aneu::sim
