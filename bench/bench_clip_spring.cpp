@@ -102,15 +102,7 @@ int main(int argc, char** argv) {
     const Eigen::VectorXi& outer = vol.node_sets.at("outer");
 
     // The tube's outer radius (near its ends) and extent.
-    double zmin = 1e300, zmax = -1e300, rout = 0;
-    for (Eigen::Index k = 0; k < X.rows(); ++k) {
-        zmin = std::min(zmin, X(k, 2));
-        zmax = std::max(zmax, X(k, 2));
-    }
-    for (Eigen::Index k = 0; k < outer.size(); ++k) {
-        const Eigen::Vector3d p = X.row(outer[k]);
-        if (std::abs(p.z() - zmin) < 0.1 * (zmax - zmin)) rout = std::max(rout, std::hypot(p.x(), p.y()));
-    }
+    const double rout = bench::tube_extent(X, outer).outer_radius;
     fem::ClipBlades blades;
     blades.length_mm = length;
     blades.width_mm = width;

@@ -157,16 +157,8 @@ int main(int argc, char** argv) {
     if (!have_centre) {
         // Default: the tube-with-sac of bench/run_study.sh (tube along z, sac on +x): across the neck, 0.6 mm
         // outside the parent's outer wall, at the sac's mid-length.
-        double zmin = 1e300, zmax = -1e300, rmax = 0;
-        for (Eigen::Index k = 0; k < X.rows(); ++k) {
-            zmin = std::min(zmin, X(k, 2));
-            zmax = std::max(zmax, X(k, 2));
-        }
-        for (Eigen::Index k = 0; k < outer.size(); ++k) {
-            const Eigen::Vector3d p = X.row(outer[k]);
-            if (std::abs(p.z() - zmin) < 0.1 * (zmax - zmin)) rmax = std::max(rmax, std::hypot(p.x(), p.y()));
-        }
-        clip.centre = Eigen::Vector3d(rmax + 0.6, 0, 0.5 * (zmin + zmax));
+        const bench::TubeExtent te = bench::tube_extent(X, outer);
+        clip.centre = Eigen::Vector3d(te.outer_radius + 0.6, 0, 0.5 * (te.zmin + te.zmax));
     }
     // Outer width between the blades: the gap at closure 0.
     double half = 0;

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include "aneu/core/error.hpp"
+#include "merged_pattern.hpp"
 
 namespace aneu::fem {
 
@@ -68,43 +69,21 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     if (p.stiffness > 0) {
         m_kappa = p.stiffness;
     } else {
-        const RowSparse K0 = body.tangent(Eigen::VectorXd::Zero(body.dofs()));
-        double dmax = 0;
-        for (Eigen::Index r = 0; r < K0.rows(); ++r) dmax = std::max(dmax, K0.coeff(r, r));
-        m_kappa = 100.0 * dmax;
+        m_kappa = detail::default_penalty(body);
     }
     // The closed stop: blades that meet cannot close further. A penalty on θ < 0 stiff enough that the preload
     // pushes them past closed by 1e-4 of θ₀ at most.
     m_stop = 1e4 * spring.k_nmm_per_rad;
 
-    const RowSparse& bp = body.pattern();
     const auto th = static_cast<int>(body.dofs());
-    std::vector<Eigen::Triplet<double>> tp;
-    tp.reserve(static_cast<size_t>(bp.nonZeros()) + 16 * m_nodes.size() + 1);
-    for (Eigen::Index r = 0; r < bp.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(bp, r); it; ++it) tp.emplace_back(static_cast<int>(r), static_cast<int>(it.col()), 0.0);
-    auto dofs_of = [&](int c) { return std::array<int, 4>{3 * c, 3 * c + 1, 3 * c + 2, th}; };
-    for (int c : m_nodes)
-        for (int i : dofs_of(c))
-            for (int j : dofs_of(c)) tp.emplace_back(i, j, 0.0);
-    tp.emplace_back(th, th, 0.0);
-    m_pattern.resize(dofs(), dofs());
-    m_pattern.setFromTriplets(tp.begin(), tp.end());
-    m_pattern.makeCompressed();
-    auto position = [&](Eigen::Index r, Eigen::Index c) {
-        const int* cols = m_pattern.innerIndexPtr() + m_pattern.outerIndexPtr()[r];
-        const int* end = m_pattern.innerIndexPtr() + m_pattern.outerIndexPtr()[r + 1];
-        return static_cast<std::int64_t>(m_pattern.outerIndexPtr()[r] + (std::lower_bound(cols, end, static_cast<int>(c)) - cols));
-    };
-    for (Eigen::Index r = 0; r < bp.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(bp, r); it; ++it) m_body_to_pattern.push_back(position(r, it.col()));
-    for (int c : m_nodes) {
-        const auto d = dofs_of(c);
-        std::array<std::int64_t, 16> s{};
-        for (int i = 0; i < 4; ++i)
-            for (int j = 0; j < 4; ++j) s[static_cast<size_t>(4 * i + j)] = position(d[static_cast<size_t>(i)], d[static_cast<size_t>(j)]);
-        m_slots.push_back(s);
-    }
+    std::vector<std::array<int, 4>> groups;  // each candidate's DOFs and θ
+    groups.reserve(m_nodes.size() + 1);
+    for (int c : m_nodes) groups.push_back({3 * c, 3 * c + 1, 3 * c + 2, th});
+    groups.push_back({th, th, th, th});  // (θ, θ) even without candidates
+    detail::MergedPattern mp = detail::merge_pattern(body.pattern(), dofs(), groups);
+    for (size_t k = 0; k < m_nodes.size(); ++k) m_slots.push_back(mp.block(groups[k]));
+    m_pattern = std::move(mp.pattern);
+    m_body_to_pattern = std::move(mp.body_to_pattern);
 }
 
 namespace {

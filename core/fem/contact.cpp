@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include "aneu/core/error.hpp"
+#include "merged_pattern.hpp"
 
 namespace aneu::fem {
 
@@ -26,10 +27,7 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     if (p.stiffness > 0) {
         m_kappa = p.stiffness;
     } else {
-        const RowSparse K0 = body.tangent(Eigen::VectorXd::Zero(body.dofs()));
-        double dmax = 0;
-        for (Eigen::Index r = 0; r < K0.rows(); ++r) dmax = std::max(dmax, K0.coeff(r, r));
-        m_kappa = 100.0 * dmax;
+        m_kappa = detail::default_penalty(body);
     }
     if (p.exclude_rings < 0) throw InputError("contact: exclude_rings must be >= 0");
     if (m_p.depth_mm <= 0) m_p.depth_mm = 0.25;
@@ -79,10 +77,6 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
         }
     }
     // Pattern: the body's and a 12 × 12 block per pair.
-    std::vector<Eigen::Triplet<double>> tp;
-    tp.reserve(static_cast<size_t>(bp.nonZeros()) + 144 * m_pairs.size());
-    for (Eigen::Index r = 0; r < bp.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(bp, r); it; ++it) tp.emplace_back(static_cast<int>(r), static_cast<int>(it.col()), 0.0);
     auto dofs_of = [&](const Pair& q) {
         std::array<int, 12> d{};
         const int nodes[4] = {q.v, m_F(q.f, 0), m_F(q.f, 1), m_F(q.f, 2)};
@@ -90,28 +84,13 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             for (int ax = 0; ax < 3; ++ax) d[static_cast<size_t>(3 * i + ax)] = 3 * nodes[i] + ax;
         return d;
     };
-    for (const auto& q : m_pairs) {
-        const auto d = dofs_of(q);
-        for (int i : d)
-            for (int j : d) tp.emplace_back(i, j, 0.0);
-    }
-    m_pattern.resize(body.dofs(), body.dofs());
-    m_pattern.setFromTriplets(tp.begin(), tp.end());
-    m_pattern.makeCompressed();
-    auto position = [&](Eigen::Index r, Eigen::Index c) {
-        const int* cols = m_pattern.innerIndexPtr() + m_pattern.outerIndexPtr()[r];
-        const int* end = m_pattern.innerIndexPtr() + m_pattern.outerIndexPtr()[r + 1];
-        return static_cast<std::int64_t>(m_pattern.outerIndexPtr()[r] + (std::lower_bound(cols, end, static_cast<int>(c)) - cols));
-    };
-    for (Eigen::Index r = 0; r < bp.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(bp, r); it; ++it) m_body_to_pattern.push_back(position(r, it.col()));
-    for (const auto& q : m_pairs) {
-        const auto d = dofs_of(q);
-        std::array<std::int64_t, 144> slots{};
-        for (int i = 0; i < 12; ++i)
-            for (int j = 0; j < 12; ++j) slots[static_cast<size_t>(12 * i + j)] = position(d[static_cast<size_t>(i)], d[static_cast<size_t>(j)]);
-        m_pair_slots.push_back(slots);
-    }
+    std::vector<std::array<int, 12>> groups;
+    groups.reserve(m_pairs.size());
+    for (const auto& q : m_pairs) groups.push_back(dofs_of(q));
+    detail::MergedPattern mp = detail::merge_pattern(bp, body.dofs(), groups);
+    for (const auto& g : groups) m_pair_slots.push_back(mp.block(g));
+    m_pattern = std::move(mp.pattern);
+    m_body_to_pattern = std::move(mp.body_to_pattern);
 }
 
 bool ContactBody::measure(const Eigen::VectorXd& u, const Pair& q, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const {
