@@ -525,6 +525,17 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                   scene.neck_gap_mm, 100.0 * a.neck_between_jaws_fraction);
     o << buf;
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
+    for (const auto& c : a.clip_ends) {
+        std::snprintf(buf, sizeof buf, "  clip %-2d %-18s %s, open %.1f deg, grip %.3g N", c.id, c.model.c_str(), c.deposited ? "deposited" : "held",
+                      c.opening_deg, c.grip_force_n);
+        o << buf;
+        if (c.spring) {
+            std::snprintf(buf, sizeof buf, "; spring %.3g N mm against the tissue's %.3g N mm%s", c.spring_torque_nmm, c.tissue_moment_nmm,
+                          c.placeholder ? " (placeholder spring values)" : "");
+            o << buf;
+        }
+        o << '\n';
+    }
     if (a.max_displacement_to_thickness > 0) {
         std::snprintf(buf, sizeof buf, "  largest push / wall        %.3g mm on %.3g mm (%.2g x; linear model trusted to %.2g x)%s\n",
                       a.max_displacement_mm, a.max_displacement_thickness_mm, a.max_displacement_to_thickness, scene.linear_limit,
