@@ -22,8 +22,7 @@
 // interface — with its errors against the same reference.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
 //                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
-//                           [--patch-mm 0] [--no-reference] [--wall-contact] [--damped]
-// --damped: Levenberg–Marquardt damping in the Newton solves (fem::NewtonOptions::damped), for the sac's buckling.
+//                           [--patch-mm 0] [--no-reference] [--wall-contact]
 // --wall-contact: the nonlinear models (reference and patch) also keep the lumen's opposite inner walls apart
 // (fem::ContactBody on the corner nodes of the inner surface, gap 0.01 mm); the linear model cannot.
 #include <chrono>
@@ -104,14 +103,9 @@ int main(int argc, char** argv) {
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     double patch_mm = 0;
-    bool reference = true, wall_contact = false, damped = false;
+    bool reference = true, wall_contact = false;
     for (int a = 2; a < argc; a += 2) {
         const std::string k = argv[a];
-        if (k == "--damped") {
-            damped = true;
-            --a;
-            continue;
-        }
         if (k == "--no-reference" || k == "--wall-contact") {
             (k == "--no-reference" ? reference : wall_contact) = k == "--wall-contact";
             --a;
@@ -247,7 +241,6 @@ int main(int argc, char** argv) {
                 }
                 fem::NewtonOptions no;
                 no.max_total_iterations = max_newton;
-                no.damped = damped;
                 const Eigen::VectorXd start = patch->restrict_to_patch(t.u);
                 fem::NewtonResult r;
                 if (wall_contact) {
@@ -267,7 +260,6 @@ int main(int argc, char** argv) {
             } else if (nonlinear) {
                 fem::NewtonOptions no;
                 no.max_total_iterations = max_newton;
-                no.damped = damped;
                 fem::NewtonResult r;
                 if (wall_contact) {
                     const fem::ContactBody body(solid, X, inner_faces, t.u, contact);
@@ -457,7 +449,6 @@ int main(int argc, char** argv) {
                {"seconds_linear", lin.seconds},
                {"seconds_nonlinear", nl.seconds}};
     summary["wall_contact"] = wall_contact;
-    summary["damped"] = damped;
     if (patch) {
         summary["patch_mm"] = patch_mm;
         summary["patch_nodes"] = patch->nodes().size();

@@ -375,7 +375,6 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     llt.cholmod().print = 0;  // a tangent that is not positive definite is expected (buckling) and handled below
     if (m > 0) llt.analyzePattern(Kff);
     NewtonResult out;
-    double mu = 0;  // Levenberg–Marquardt damping (options.damped)
     // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp: the prescribed increments, zero in the corrector
     // iterations). A tangent that is not positive definite is replaced by the projected one (each element's
     // tangent without its negative eigenvalues), shifted by τ·diag if CHOLMOD still refuses it (singular).
@@ -400,24 +399,6 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         }
         if (m == 0) return du;
         fill_free();
-        if (opt.damped && !dp) {
-            // Levenberg–Marquardt: K + μ |diag K|, μ raised until it factorises (an indefinite tangent near
-            // buckling), and adapted to the line search's verdict on each step (below).
-            Eigen::VectorXd d0(m);
-            for (Eigen::Index a = 0; a < m; ++a) d0[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
-            for (;;) {
-                for (Eigen::Index a = 0; a < m; ++a) Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]] = d0[a] + mu * std::abs(d0[a]);
-                llt.factorize(Kff);
-                if (llt.info() == Eigen::Success) break;
-                if (mu > 1e8) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a damping of 1e8 times its diagonal");
-                ++out.shifted;
-                mu = mu < 1e-4 ? 1e-4 : 10 * mu;
-            }
-            const Eigen::VectorXd x = llt.solve(rhs);
-            for (Eigen::Index r = 0; r < n; ++r)
-                if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
-            return du;
-        }
         llt.factorize(Kff);
         if (llt.info() != Eigen::Success) {
             // Not positive definite (buckling, strong compression): project the element tangents instead.
@@ -496,8 +477,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 bool ok = Et <= E + 1e-4 * alpha * slope;
                 if (!ok && Et - E <= 1e-11 * std::abs(E)) ok = free_norm(solid.internal_force(trial)) < r;
                 if (ok) {
-                    if (opt.damped) mu = alpha == 1 ? (mu < 1e-6 ? 0 : mu / 3) : std::max(1e-4, mu * (alpha < 0.1 ? 10 : 3));
-                    if (trace) std::fprintf(stderr, "  alpha %g energy %.15e mu %g\n", alpha, Et, mu);
+                    if (trace) std::fprintf(stderr, "  alpha %g energy %.15e\n", alpha, Et);
                     v = trial;
                     E = Et;
                     accepted = true;

@@ -82,10 +82,6 @@ struct NewtonOptions {
     double tolerance = 1e-9;   ///< converged when ‖free residual‖ ≤ tolerance · ‖internal force‖ (all DOFs) + 1e-14
     int max_iterations = 30;   ///< per load substep
     int max_total_iterations = 0;  ///< over all substeps of one call (0: no limit); past it the solve stops (NumericalError)
-    /// Levenberg–Marquardt damping of the corrector iterations: the tangent plus μ |diag(tangent)|, μ raised until it
-    /// factorises and after a step the line search had to shorten, lowered after a full step (buckling: a
-    /// projected tangent that is nearly singular gives huge steps the line search cuts down one by one).
-    bool damped = false;
     int max_halvings = 10;     ///< smallest substep 2^−max_halvings of the prescribed increment (a substep that inverts
                                ///< elements or does not converge is halved)
 };
