@@ -61,24 +61,32 @@ here = os.path.dirname(os.path.abspath(__file__))
 out = os.path.join(here, "..", "results", "flow")
 os.makedirs(out, exist_ok=True)
 re_num = U * 2 * R / NU
-with open(os.path.join(out, "poiseuille.md"), "w") as f:
-    f.write(f"""# OpenFOAM on this machine: steady pipe flow against Hagen–Poiseuille (issue #17, solver feasibility)
+snappy = N == "snappy"
+if snappy:
+    title = "snappyHexMesh from a lumen surface"
+    how = (f"`bash bench/flow/poiseuille_snappy.sh {M} {NX}`: the pipe given as a closed STL surface with wall, inlet and outlet "
+           f"regions (as `aneuprep flow` would write it from a lumen), meshed by snappyHexMesh: {M} mm background cells, "
+           f"snapped to the surface, {NX} boundary layers at the wall (expansion 1.2)")
+    mesh = f"{cells:,} cells (hexahedra and the layers' prisms)"
+else:
+    title = "a structured blockMesh pipe"
+    how = (f"`bash bench/flow/poiseuille_openfoam.sh {N} {M} {NX}`: a structured O-grid pipe from blockMesh "
+           f"({N} × {N} core, 4 × {N} × {M} around, graded 3:1 towards the wall, {NX} along the pipe)")
+    mesh = f"{cells:,} hexahedra"
+with open(os.path.join(out, "poiseuille_snappy.md" if snappy else "poiseuille.md"), "w") as f:
+    f.write(f"""# OpenFOAM on this machine: steady pipe flow against Hagen–Poiseuille, {title} (issue #17)
 
-`bash bench/flow/poiseuille_openfoam.sh {N} {M} {NX}`: Debian's `openfoam` (v1912, binaries in /usr/bin), a structured
-O-grid pipe from blockMesh (not yet the product's own lumen mesh), R = {R*1e3:g} mm, L = {L*1e3:g} mm, blood
-ρ = {RHO:g} kg/m³, μ = {NU*RHO*1e3:.2f} mPa·s, plug inflow {U*100:g} cm/s (Re = {re_num:.0f}, entrance length ≈ 0.06 Re D =
-{0.06*re_num*2*R*1e3:.1f} mm), outlet p = 0, laminar simpleFoam (linearUpwind, consistent SIMPLE) to residuals 1e-7 (p) and 1e-8 (U).
+{how}. Debian's `openfoam` (v1912, binaries in /usr/bin). R = {R*1e3:g} mm, L = {L*1e3:g} mm, blood ρ = {RHO:g} kg/m³,
+μ = {NU*RHO*1e3:.2f} mPa·s, plug inflow {U*100:g} cm/s (Re = {re_num:.0f}, entrance length ≈ 0.06 Re D = {0.06*re_num*2*R*1e3:.1f} mm),
+outlet p = 0, laminar simpleFoam (linearUpwind, consistent SIMPLE) to residuals 1e-7 (p) and 1e-8 (U).
 
 | quantity | OpenFOAM | Hagen–Poiseuille | error |
 |---|---|---|---|
+| pressure gradient, developed (cells 20–38 mm) [Pa/mm] | {-slope*RHO*1e-3:.5f} | {-hp*RHO*1e-3:.5f} | {100*ep:.2f} % |
+| wall shear stress, mean over 20–38 mm [Pa] | {tw_mean*RHO:.5f} | {tw_hp*RHO:.5f} (4μU/R) | {100*ew:.2f} % |
+| mass balance: (inflow − outflow) / inflow | {em:.2e} | 0 | |
+
+- Mesh: {mesh}.
+- Time on this machine (1 core): meshing {float(t_mesh):.1f} s, simpleFoam {float(t_solve):.1f} s for {iters} iterations ({'converged to the residual controls' if converged else 'stopped at the iteration limit, NOT converged'}).
 """)
-    f.write(f"| pressure gradient, developed (cells 20–38 mm) [Pa/mm] | {-slope*RHO*1e-3:.5f} | {-hp*RHO*1e-3:.5f} | {100*ep:.2f} % |\n")
-    f.write(f"| wall shear stress, mean over 20–38 mm [Pa] | {tw_mean*RHO:.5f} | {tw_hp*RHO:.5f} (4μU/R) | {100*ew:.2f} % |\n")
-    f.write(f"| mass balance: (inflow − outflow) / inflow | {em:.2e} | 0 | |\n\n")
-    f.write(f"- Mesh: {cells:,} hexahedra ({N} × {N} core, 4 × {N} × {M} around, graded 3:1 towards the wall; {NX} along the pipe).\n")
-    f.write(f"- Time on this machine (1 core): blockMesh + checkMesh {float(t_mesh):.1f} s, simpleFoam {float(t_solve):.1f} s for {iters} iterations"
-            f" ({'converged to the residual controls' if converged else 'stopped at the iteration limit, NOT converged'}).\n")
-    f.write("- What it shows: the solver half of `aneuprep flow` is available as a Debian package and meets the issue's "
-            "pipe standards on a structured mesh. Still to build: the product's own fluid mesh from a (deformed) lumen, "
-            "where the 2 % / 5 % standards have to hold at the default mesh.\n")
 print(f"dp/dx error {100*ep:.2f} %, WSS error {100*ew:.2f} %, mass {em:.2e}, {cells} cells, {iters} iterations, converged {converged}, solve {float(t_solve):.1f} s")
