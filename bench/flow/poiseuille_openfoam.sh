@@ -87,11 +87,5 @@ boundaryField { inlet { type zeroGradient; } outlet { type fixedValue; value uni
 EOD
 t0=$(date +%s.%N)
 blockMesh > log.blockMesh 2>&1
-checkMesh > log.checkMesh 2>&1 || true
-t1=$(date +%s.%N)
-simpleFoam > log.simpleFoam 2>&1
-t2=$(date +%s.%N)
-simpleFoam -postProcess -latestTime -func wallShearStress > log.wss 2>&1
-postProcess -latestTime -func writeCellCentres > log.centres 2>&1
-postProcess -latestTime -func "patchIntegrate(name=inlet,phi)" > log.in 2>&1 || true
-python3 "$here/bench/flow/poiseuille_check.py" "$case" "$R" "$L" "$U" "$NU" "$(python3 -c "print($t1-$t0)")" "$(python3 -c "print($t2-$t1)")" "$N" "$M" "$NX"
+source "$here/bench/flow/solve_and_check.sh"
+solve_and_check "$N" "$M" "$NX"

@@ -82,10 +82,5 @@ cp "$here/build/flow/poiseuille/0/"{U,p} 0/
 t0=$(date +%s.%N)
 blockMesh > log.blockMesh 2>&1
 snappyHexMesh -overwrite > log.snappy 2>&1
-checkMesh > log.checkMesh 2>&1 || true
-t1=$(date +%s.%N)
-simpleFoam > log.simpleFoam 2>&1
-t2=$(date +%s.%N)
-simpleFoam -postProcess -latestTime -func wallShearStress > log.wss 2>&1
-postProcess -latestTime -func writeCellCentres > log.centres 2>&1
-python3 "$here/bench/flow/poiseuille_check.py" "$case" "$R" "$L" "$U" "$NU" "$(python3 -c "print($t1-$t0)")" "$(python3 -c "print($t2-$t1)")" snappy "$H" "$LAYERS"
+source "$here/bench/flow/solve_and_check.sh"
+solve_and_check snappy "$H" "$LAYERS"
