@@ -14,13 +14,15 @@
 namespace aneu::sim {
 
 std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening_deg) {
-    const double half = 0.5 * std::clamp(opening_deg, 0.0, m.max_opening_deg) * DEG;
-    const Eigen::Vector3d a = p.axis, b = p.up, c = a.cross(b);
+    fem::ClipBlades bl;  // the jaws' frame, shared with their contact rules and fem::ClipBody
+    bl.axis = p.axis;
+    bl.up = p.up;
     std::array<Shape, 2> jaws;
     for (int j = 0; j < 2; ++j) {
         const double s = j == 0 ? 1.0 : -1.0;
-        const Eigen::Vector3d d = std::cos(half) * a + s * std::sin(half) * b;  // along the jaw
-        const Eigen::Vector3d e = -s * std::sin(half) * a + std::cos(half) * b;  // jaw normal, +up side
+        Eigen::Vector3d d, n, c;  // along the jaw, its inner normal (towards the other jaw), across it
+        bl.frame(j == 0 ? 1 : -1, std::clamp(opening_deg, 0.0, m.max_opening_deg) * DEG, d, n, c);
+        const Eigen::Vector3d e = -s * n;  // the jaw normal on the +up side
         Shape& sh = jaws[static_cast<size_t>(j)];
         const Eigen::Vector3d base = p.position + s * 0.5 * m.closed_gap_mm * e;
         if (m.jaw_mesh) {
@@ -84,6 +86,7 @@ void Simulator::Impl::set_input(int i, const Keyframe& k, double t) {
             clips.push_back(c);
             clip_nodes.emplace_back();
             clip_u.emplace_back();
+            clip_track.emplace_back();
             I.clip = c.id;
             ++a.clips_used;
         }
@@ -210,15 +213,16 @@ void Simulator::Impl::balance_springs() {
         const ClipModel& cm = scene.clip_models.at(c.model);
         if (!cm.spring) continue;
         const double theta = c.opening_deg * DEG, M = moment[static_cast<size_t>(c.id)];
-        if (c.spring_torque_nmm != 0 && std::abs(theta - c.prev_theta) > 1e-4) {
-            const double k = (M - c.tissue_moment_nmm) / (c.prev_theta - theta);
-            c.tissue_k_nmm_per_rad = std::clamp(k, 0.0, 1e4);
+        ClipTrack& tr = clip_track[static_cast<size_t>(c.id)];
+        if (c.spring_torque_nmm != 0 && std::abs(theta - tr.prev_theta) > 1e-4) {
+            const double k = (M - c.tissue_moment_nmm) / (tr.prev_theta - theta);
+            tr.tissue_k = std::clamp(k, 0.0, 1e4);
         }
-        c.prev_theta = theta;
+        tr.prev_theta = theta;
         c.tissue_moment_nmm = M;
         c.spring_torque_nmm = cm.spring->torque(theta);
         const double R = c.spring_torque_nmm - M;
-        double step = -R / (cm.spring->k_nmm_per_rad + c.tissue_k_nmm_per_rad);
+        double step = -R / (cm.spring->k_nmm_per_rad + tr.tissue_k);
         step = std::clamp(step, -2.0 * DEG, 2.0 * DEG);
         c.spring_deg = std::clamp((theta + step) / DEG, 0.0, cm.max_opening_deg);
         c.opening_deg = std::max(c.forceps_deg, c.spring_deg);

@@ -61,8 +61,9 @@ void Simulator::Impl::begin_frame(Frame& fr) {
         J.blades.thickness_mm = cm.jaw_thickness_mm;
         J.blades.closed_gap_mm = cm.closed_gap_mm;
         J.theta = std::clamp(c.opening_deg, 0.0, cm.max_opening_deg) * DEG;
-        J.theta_prev = c.collided_deg < 0 ? J.theta : c.collided_deg * DEG;
-        c.collided_deg = J.theta / DEG;
+        double& collided = clip_track[static_cast<size_t>(c.id)].collided_deg;
+        J.theta_prev = collided < 0 ? J.theta : collided * DEG;
+        collided = J.theta / DEG;
     }
     if (fr.mx) fr.lock.unlock();
 }
@@ -128,6 +129,13 @@ void Simulator::Impl::detect_contacts(Frame& fr) {
     for (size_t i = 0; i < ins.size(); ++i) {
         for (const auto& [part, shape] : parts[i]) {
             const Jaws& J = jaws[i];
+            // This jaw's frame at this frame's opening (along, inner normal, across) and at the last frame's.
+            Eigen::Vector3d jt, jn, jw, jt_prev, jn_prev, jw_prev;
+            if (J.on) {
+                const int sgn = part % 2 == 0 ? 1 : -1;
+                J.blades.frame(sgn, J.theta, jt, jn, jw);
+                J.blades.frame(sgn, J.theta_prev, jt_prev, jn_prev, jw_prev);
+            }
             // A jaw also finds the gap-side nodes that lag behind its inner face by more than its thickness.
             grid.query(shape.bounds().grown(J.on ? scene.release_tolerance_mm + J.blades.thickness_mm + 0.5 : scene.release_tolerance_mm), cand);
             for (int v : cand) {
@@ -138,21 +146,16 @@ void Simulator::Impl::detect_contacts(Frame& fr) {
                     // (last frame's opening) or that this jaw already pushes from there is pushed back along the
                     // inner normal. A jaw that closes faster than half its thickness per frame (the lag of a
                     // displacement fraction of ½) would otherwise carry the wall out through its back.
-                    const int sgn = part % 2 == 0 ? 1 : -1;
-                    Eigen::Vector3d t, n, w;
-                    J.blades.frame(sgn, J.theta, t, n, w);
                     const Eigen::Vector3d rel = p - J.blades.hinge;
-                    const double r = rel.dot(t), dn = 0.5 * J.blades.closed_gap_mm + rel.dot(n);
-                    if (r >= 0 && r <= J.blades.length_mm && std::abs(rel.dot(w)) <= 0.5 * J.blades.width_mm && dn < 0) {
-                        Eigen::Vector3d tp, np, wp;
-                        J.blades.frame(sgn, J.theta_prev, tp, np, wp);
-                        const bool was_between = 0.5 * J.blades.closed_gap_mm + rel.dot(np) >= 0;
+                    const double r = rel.dot(jt), dn = 0.5 * J.blades.closed_gap_mm + rel.dot(jn);
+                    if (r >= 0 && r <= J.blades.length_mm && std::abs(rel.dot(jw)) <= 0.5 * J.blades.width_mm && dn < 0) {
+                        const bool was_between = 0.5 * J.blades.closed_gap_mm + rel.dot(jn_prev) >= 0;
                         const bool pushed_back = gap_seen[s] && owner_seen[s] == part &&
                                                  (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::NEIGHBOUR);
                         if (was_between || pushed_back) {
                             if (-dn > depth[s]) {
                                 depth[s] = -dn;
-                                push_dir[s] = n;
+                                push_dir[s] = jn;
                                 hit[s] = part;
                                 from_gap[s] = 1;
                             }

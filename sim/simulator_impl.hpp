@@ -85,6 +85,13 @@ struct Simulator::Impl {
     std::vector<Clip> clips;
     std::vector<std::vector<int>> clip_nodes;       // deposited: held vertices
     std::vector<std::vector<Eigen::Vector3d>> clip_u;  // their relative displacement
+    // Per clip, what the physics frames carry from one to the next (not part of the public Clip).
+    struct ClipTrack {
+        double collided_deg = -1;     // the opening its jaws had in the last collision detection (−1: none yet)
+        double prev_theta = 0;        // the opening [rad] of the last spring balance (for the secant)
+        double tissue_k = 0;          // the tissue's rotational stiffness from that secant [N·mm/rad]
+    };
+    std::vector<ClipTrack> clip_track;
     // Nodes.
     Eigen::Index S = 0;
     std::vector<NodeState> st;

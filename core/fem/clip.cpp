@@ -104,11 +104,16 @@ void fade(double s, double& w, double& dw) {
 
 }  // namespace
 
+std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const {
+    std::array<Touch, 2> c;
+    m_blades.frame(1, v[theta_dof()], c[0].t, c[0].n, c[0].w);
+    m_blades.frame(-1, v[theta_dof()], c[1].t, c[1].n, c[1].w);
+    return c;
+}
+
 bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const {
     if (!m_front[k][s > 0 ? 0 : 1]) return false;
     const int node = m_nodes[k];
-    const double theta = v[theta_dof()];
-    m_blades.frame(s, theta, c.t, c.n, c.w);
     const Eigen::Vector3d& w = c.w;
     const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
     c.r = rel.dot(c.t);
@@ -162,12 +167,12 @@ double ClipBody::energy(const Eigen::VectorXd& v) const {
     const double theta = v[theta_dof()];
     e += m_spring.energy(theta);
     if (theta < 0) e += 0.5 * m_stop * theta * theta;
-    Touch c;
+    auto tc = touches(v);
     double ek;
     Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1})
-            if (pair_terms(v, k, s, c, ek, gk, nullptr, false)) e += ek;
+            if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) e += ek;
     return e;
 }
 
@@ -177,12 +182,12 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
     const double theta = v[theta_dof()];
     double& gt = g[theta_dof()];
     gt = m_spring.torque(theta) + (theta < 0 ? m_stop * theta : 0.0);
-    Touch c;
+    auto tc = touches(v);
     double ek;
     Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            if (!pair_terms(v, k, s, c, ek, gk, nullptr, false)) continue;
+            if (!pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) continue;
             g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
             gt += gk[3];
         }
@@ -197,13 +202,13 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
     const double theta = v[theta_dof()];
     const auto th = theta_dof();
     val[m_pattern.outerIndexPtr()[th + 1] - 1] += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
-    Touch c;
+    auto tc = touches(v);
     double ek;
     Eigen::Vector4d gk;
     Eigen::Matrix4d H;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            if (!pair_terms(v, k, s, c, ek, gk, &H, project)) continue;
+            if (!pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project)) continue;
             for (int i = 0; i < 4; ++i)
                 for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
         }
@@ -214,9 +219,10 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
     BladeLoads b;
     b.opening_rad = v[theta_dof()];
     b.spring_torque_nmm = m_spring.torque(b.opening_rad);
-    Touch c;
+    auto tc = touches(v);
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
+            Touch& c = tc[s > 0 ? 0 : 1];
             if (!measure(v, k, s, c)) continue;
             const size_t i = s > 0 ? 0 : 1;
             const double f = m_kappa * c.omega * (m_p.gap_mm - c.d);

@@ -109,7 +109,10 @@ private:
     /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
     bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project) const;
-    /// Candidate k against blade s at v: true when it presses on it (d < gap, ω > 0, and in front of it at v0).
+    /// Both blades' frames at v's opening (index 0: blade +1), once per evaluation.
+    std::array<Touch, 2> touches(const Eigen::VectorXd& v) const;
+    /// Candidate k against blade s at v (c holds that blade's frame from touches()): true when it presses on it
+    /// (d < gap, ω > 0, and in front of it at v0).
     bool measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const;
     const ElasticBody& m_body;
     Eigen::MatrixX3d m_X;

@@ -35,9 +35,6 @@ struct Clip {
     double spring_deg = 0.0;
     double spring_torque_nmm = 0.0;  ///< τ(opening) [N·mm]
     double tissue_moment_nmm = 0.0;  ///< Σ ½ r f·n of its contact forces about the hinge, last frame [N·mm]
-    double tissue_k_nmm_per_rad = 0.0;  ///< the tissue's rotational stiffness, by the secant of the last two frames
-    double prev_theta = 0.0;         ///< the opening [rad] of the frame before (for the secant)
-    double collided_deg = -1.0;      ///< the opening its jaws had in the last collision detection (−1: none yet)
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< translation since release (moves with the vessel)
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();  ///< Σ contact forces on the vessel [N]
     double grip_force_n = 0.0;      ///< ½ Σ |f_i| over its nodes [N]
