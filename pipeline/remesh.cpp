@@ -20,7 +20,7 @@ namespace nglib {
 
 namespace aneu::pipeline {
 
-SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm);  // surface_ops_cgal.cpp
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm, const std::vector<char>* fine, double fine_edge_mm);  // surface_ops_cgal.cpp
 
 namespace {
 
@@ -148,7 +148,9 @@ void relax_tangentially(SurfaceData& s, const SurfaceData& reference, int iterat
 
 }  // namespace
 
-SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& method, double timeout_s) {
+SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& method, double timeout_s) { return remesh(in, edge_mm, method, timeout_s, nullptr); }
+
+SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& method, double timeout_s, const RemeshZone* zone) {
     if (!(edge_mm > 0)) throw InputError("remesh: target edge must be > 0 mm");
     if (method != "netgen" && method != "cgal") throw InputError("remesh: method = '" + method + "': expected netgen or cgal");
     const auto loops = boundary_loops(in);
@@ -164,8 +166,15 @@ SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& met
     const bool outward = enclosed_volume(capped) > 0;
 
     SurfaceData out;
+    if (zone != nullptr && method != "cgal") throw InputError("remesh: a finer zone needs the cgal remesher");
     if (method == "cgal") {
-        out = remesh_cgal(capped, edge_mm);
+        std::vector<char> fine;
+        if (zone != nullptr) {
+            if (zone->fine.size() != static_cast<size_t>(in.F.rows()) || !(zone->fine_edge_mm > 0)) throw InputError("remesh: the finer zone must give one flag per face and an edge > 0");
+            fine = zone->fine;
+            fine.resize(static_cast<size_t>(capped.F.rows()), 0);  // the caps are not in the zone
+        }
+        out = remesh_cgal(capped, edge_mm, zone != nullptr ? &fine : nullptr, zone != nullptr ? zone->fine_edge_mm : 0.0);
     } else {
 #ifdef ANEU_WITH_NETGEN
         out = remesh_netgen(capped, edge_mm, timeout_s);
@@ -231,17 +240,17 @@ std::string remesh_defect(const SurfaceData& s, size_t n_loops) {
 
 }  // namespace
 
-RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s) {
+RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s, const RemeshZone* zone) {
     const size_t n_loops = boundary_loops(s).size();
-    std::vector<std::string> order{method};
+    std::vector<std::string> order{zone != nullptr ? std::string("cgal") : method};
 #ifdef ANEU_WITH_NETGEN
-    order.push_back(method == "netgen" ? "cgal" : "netgen");
+    if (zone == nullptr) order.push_back(method == "netgen" ? "cgal" : "netgen");
 #endif
     std::string why;
     for (const auto& m : order) {
         std::string defect;
         try {
-            SurfaceData out = remesh(s, edge_mm, m, timeout_s);
+            SurfaceData out = remesh(s, edge_mm, m, timeout_s, zone);
             defect = remesh_defect(out, n_loops);
             if (defect.empty()) return {std::move(out), m, why};
         } catch (const Error& e) {  // the mesher failed, timed out or left a surface the clean-up cannot walk

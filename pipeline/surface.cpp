@@ -347,7 +347,21 @@ void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporte
         }
         how = "labelmap";
     } else {
-        m.face_label = label_aneurysm(m, r.image.centerline, p.aneurysm_ratio_high, p.aneurysm_ratio_low);
+        SacCandidates cand;
+        m.face_label = label_aneurysm(m, r.image.centerline, p.aneurysm_ratio_high, p.aneurysm_ratio_low, &cand);
+        r.qa.emplace_back("sac_candidates", static_cast<double>(cand.pieces.size()));
+        if (cand.pieces.size() > 1) {
+            const auto mm = [](const Eigen::Vector3d& x) { return vec3((x * 100).array().round().matrix() / 100); };
+            std::string others;
+            for (size_t i = 0; i < cand.pieces.size(); ++i)
+                if (static_cast<int>(i) != cand.kept)
+                    others += " " + mm(cand.pieces[i].centroid) + " (" + shortest(std::round(cand.pieces[i].area_mm2 * 10) / 10) + " mm², ratio " +
+                              shortest(std::round(cand.pieces[i].max_ratio * 100) / 100) + ");";
+            const auto& k = cand.pieces[static_cast<size_t>(cand.kept)];
+            rep.info("surface: " + std::to_string(cand.pieces.size()) + " sac candidates; kept the most prominent at " + mm(k.centroid) + " (" +
+                     shortest(std::round(k.area_mm2 * 10) / 10) + " mm², ratio " + shortest(std::round(k.max_ratio * 100) / 100) + "); artery:" + others +
+                     " (another sac: --aneurysm-sphere or --aneurysm-labelmap)");
+        }
     }
     m.label_names = {"artery", "aneurysm"};
     m.face_region = m.face_label;
@@ -369,7 +383,7 @@ void finish_lumen(LumenResult& r, SurfaceData s, const SurfaceParams& p, Reporte
 
 
 
-Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low) {
+Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double high, double low, SacCandidates* found) {
     const Eigen::Index nf = s.F.rows();
     // The radius of each centerline point is raised to the largest within ±2 mm of arc length on its branch
     // (about one parent radius): where a path runs off the axis — at a junction, where a branch path cuts across
@@ -443,6 +457,33 @@ Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double
         if (!touches)
             for (int f : piece) label[f] = 1;
     }
+    // One sac: the most prominent connected piece.
+    SacCandidates cand;
+    std::vector<int> piece_of(static_cast<size_t>(nf), -1);
+    for (Eigen::Index f0 = 0; f0 < nf; ++f0) {
+        if (!label[f0] || piece_of[static_cast<size_t>(f0)] >= 0) continue;
+        const int id = static_cast<int>(cand.pieces.size());
+        SacCandidates::Piece pc;
+        std::vector<int> piece{static_cast<int>(f0)};
+        piece_of[static_cast<size_t>(f0)] = id;
+        for (size_t i = 0; i < piece.size(); ++i) {
+            const int f = piece[i];
+            pc.area_mm2 += area(s, f);
+            pc.centroid += area(s, f) * centroid(s, f);
+            pc.max_ratio = std::max(pc.max_ratio, ratio[f]);
+            for (int g : adj[static_cast<size_t>(f)])
+                if (label[g] && piece_of[static_cast<size_t>(g)] < 0) {
+                    piece_of[static_cast<size_t>(g)] = id;
+                    piece.push_back(g);
+                }
+        }
+        if (pc.area_mm2 > 0) pc.centroid /= pc.area_mm2;
+        cand.pieces.push_back(pc);
+        const auto score = [](const SacCandidates::Piece& q) { return q.area_mm2 * (q.max_ratio - 1.0); };
+        if (cand.kept < 0 || score(pc) > score(cand.pieces[static_cast<size_t>(cand.kept)])) cand.kept = id;
+    }
+    for (Eigen::Index f = 0; f < nf; ++f) label[f] = label[f] && piece_of[static_cast<size_t>(f)] == cand.kept ? 1 : 0;
+    if (found != nullptr) *found = std::move(cand);
     return label;
 }
 
@@ -555,6 +596,11 @@ LumenResult lumen_from_segmentation(const ImageData& seg, const SurfaceParams& p
         if (moved > 0) loops = boundary_loops(cut);
     } catch (const InputError& e) {  // the stage's own isosurface, not the input, is at fault
         throw MeshingError(std::string("surface: check 'cut isosurface is a manifold' failed: ") + e.what());
+    }
+    if (loops.size() < 2) {  // nothing left to remesh: smoothing and remeshing an empty or closed piece crashed VTK
+        throw MeshingError("surface: check 'the cut lumen has open ends' failed: the isosurface cut at the segmentation's " + std::to_string(seg.planes.size()) +
+                           " end planes has " + std::to_string(cut.F.rows()) + " triangles and " + std::to_string(loops.size()) +
+                           " open end(s), a vessel needs 2 (do the planes cross the segmented vessel? see `aneuprep inspect` of the segment file)");
     }
     if (loops.size() != seg.planes.size()) {
         rep.warn("surface: the cut surface has " + std::to_string(loops.size()) + " open ends for " + std::to_string(seg.planes.size()) +

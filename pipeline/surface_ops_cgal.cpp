@@ -69,12 +69,16 @@ SurfaceData from_cgal(const Mesh& m) {
 }
 }  // namespace
 
-SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm) {
+SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm, const std::vector<char>* fine, double fine_edge_mm) {
     Mesh m = to_cgal(capped, "remesh (CGAL)");
     // Patches: label 0 is the surface, labels >= 1 the caps; edges between patches are constrained so
-    // each boundary polyline (in its plane) survives, resampled to the target length.
+    // each boundary polyline (in its plane) survives, resampled to the target length. A finer zone is a patch
+    // of its own (patch id 2·label + 1), remeshed in a second pass at its own edge.
     auto patch = m.add_property_map<Mesh::Face_index, int>("f:patch", 0).first;
-    for (auto fd : m.faces()) put(patch, fd, capped.face_label[static_cast<Eigen::Index>(fd.idx())]);
+    for (auto fd : m.faces()) {
+        const auto f = static_cast<Eigen::Index>(fd.idx());
+        put(patch, fd, 2 * capped.face_label[f] + (fine != nullptr && (*fine)[static_cast<size_t>(f)] ? 1 : 0));
+    }
     auto constrained = m.add_property_map<Mesh::Edge_index, bool>("e:constrained", false).first;
     for (auto e : m.edges()) {
         const auto h0 = m.halfedge(e), h1 = m.opposite(h0);
@@ -84,16 +88,24 @@ SurfaceData remesh_cgal(const SurfaceData& capped, double edge_mm) {
         }
         put(constrained, e, get(patch, m.face(h0)) != get(patch, m.face(h1)));
     }
-    PMP::isotropic_remeshing(faces(m), edge_mm, m,
-                             CGAL::parameters::number_of_iterations(10)
-                                 .edge_is_constrained_map(constrained)
-                                 .protect_constraints(false)
-                                 .face_patch_map(patch)
-                                 .number_of_relaxation_steps(3));
+    const auto pass = [&](bool zone, double edge) {
+        std::vector<Mesh::Face_index> which;
+        for (auto fd : m.faces())
+            if (fine == nullptr || (get(patch, fd) % 2 == 1) == zone) which.push_back(fd);
+        if (which.empty()) return;
+        PMP::isotropic_remeshing(which, edge, m,
+                                 CGAL::parameters::number_of_iterations(10)
+                                     .edge_is_constrained_map(constrained)
+                                     .protect_constraints(false)
+                                     .face_patch_map(patch)
+                                     .number_of_relaxation_steps(3));
+    };
+    pass(false, edge_mm);
+    if (fine != nullptr) pass(true, fine_edge_mm);
     m.collect_garbage();
     SurfaceData out = from_cgal(m);
     Eigen::Index f = 0;
-    for (auto fd : m.faces()) out.face_label[f++] = get(patch, fd);
+    for (auto fd : m.faces()) out.face_label[f++] = get(patch, fd) / 2;
     return out;
 }
 
@@ -119,20 +131,31 @@ NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d
     return r;
 }
 
-Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points) {
+Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points, Eigen::VectorXi* nearest_face) {
     // A triangle soup: any subset of a surface's faces (it need not be a manifold mesh).
     std::vector<K::Triangle_3> tris;
     tris.reserve(static_cast<size_t>(F.rows()));
     auto pt = [&](int v) { return Point(V(v, 0), V(v, 1), V(v, 2)); };
     for (Eigen::Index f = 0; f < F.rows(); ++f) tris.emplace_back(pt(F(f, 0)), pt(F(f, 1)), pt(F(f, 2)));
     Eigen::VectorXd d = Eigen::VectorXd::Constant(points.rows(), std::numeric_limits<double>::infinity());
+    if (nearest_face != nullptr) *nearest_face = Eigen::VectorXi::Constant(points.rows(), -1);
     if (tris.empty()) return d;
     using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<K::Triangle_3>::const_iterator>;
     using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
     Tree tree(tris.cbegin(), tris.cend());
     tree.accelerate_distance_queries();
+    if (nearest_face == nullptr) {
 #pragma omp parallel for schedule(dynamic, 1024)
-    for (Eigen::Index i = 0; i < points.rows(); ++i) d[i] = std::sqrt(tree.squared_distance(Point(points(i, 0), points(i, 1), points(i, 2))));
+        for (Eigen::Index i = 0; i < points.rows(); ++i) d[i] = std::sqrt(tree.squared_distance(Point(points(i, 0), points(i, 1), points(i, 2))));
+        return d;
+    }
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (Eigen::Index i = 0; i < points.rows(); ++i) {
+        const Point q(points(i, 0), points(i, 1), points(i, 2));
+        const auto [p, it] = tree.closest_point_and_primitive(q);
+        d[i] = std::sqrt(CGAL::squared_distance(p, q));
+        (*nearest_face)[i] = static_cast<int>(it - tris.cbegin());
+    }
     return d;
 }
 

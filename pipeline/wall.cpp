@@ -5,7 +5,7 @@
 // that goes from the artery's to the sac's thickness across the neck: with d_A, d_S the distances to the
 // lumen's artery and sac parts (split at the label border), the sac weight is the smoothstep of
 // (d_A − d_S)/(2·blend) + ½, which on the lumen is the signed distance to the border, so the change spans
-// ±blend/2 about it (the blend narrowed to half the sac's depth for a shallow sac; QA blend_used_mm). The outer
+// ±blend/2 about it (narrowed to a quarter of its depth for a shallow sac piece; QA blend_used_min_mm). The outer
 // isosurface (VTK flying edges per block) cut at the end planes and remeshed, annular caps joining the inner
 // and outer loops, then checks (closed, manifold, oriented, no self-intersection).
 //
@@ -14,7 +14,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <map>
+#include <numeric>
 #include <queue>
 #include <set>
 
@@ -357,18 +359,10 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     r.qa.emplace_back("grid_spacing_mm", h);
 
     // The lumen extended past its ends (distance surface: open; sign surface: closed).
-    // The blend spans ±blend/2 about the label border; a sac shallower than twice that (a 2 mm bleb) would
-    // never reach its own thickness, so the blend narrows to half the sac's depth there (said in the log).
+    // The blend spans ±blend/2 about the label border (narrowed per sac piece below).
     const Eigen::VectorXd border_mm = border_distance(lumen);
-    double sac_depth = 0, blend = p.blend_mm;
-    for (Eigen::Index v = 0; v < border_mm.size(); ++v)
-        if (border_mm[v] > 0 && border_mm[v] < 1e9) sac_depth = std::max(sac_depth, border_mm[v]);
-    if (sac_depth > 0 && blend > 0.5 * sac_depth) {
-        blend = 0.5 * sac_depth;
-        rep.info("wall: the sac is " + shortest(sac_depth) + " mm deep from its border; thickness blend narrowed from " + shortest(p.blend_mm) + " to " +
-                 shortest(blend) + " mm");
-    }
-    r.qa.emplace_back("blend_used_mm", blend);
+    const double blend = p.blend_mm;
+    r.qa.emplace_back("blend_mm", blend);
     Eigen::VectorXd w = sac_weight(border_mm, blend);
     const double ext = 2 * t_max + 4 * h;
     Eigen::VectorXd w_ext = w;
@@ -418,8 +412,55 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         return M;
     };
     const Eigen::MatrixX3i FA = as_matrix(fa), FS = as_matrix(fs);
-    auto local_thickness = [&](double dA, double dS) {
-        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA - dS) / (2 * blend) + 0.5, 0.0, 1.0);
+    // Each sac piece (a connected part of S) has its own blend: in a piece shallower than four times the blend (a
+    // 2 mm bleb, a small second lobe) most of the sac would lie in the transition and its thickness median would
+    // not reach the sac's (C0070's bleb: 0.182 mm against 0.133 at half its depth), so its blend narrows to a
+    // quarter of its depth from its border (said in the log; QA blend_used_min_mm).
+    std::vector<double> piece_blend;
+    double blend_min = blend;
+    std::vector<int> piece_of_fs(fs.size(), 0);
+    {
+        std::vector<int> parent(static_cast<size_t>(dist_surf.V.rows()));
+        std::iota(parent.begin(), parent.end(), 0);
+        const std::function<int(int)> find = [&](int x) { return parent[static_cast<size_t>(x)] == x ? x : parent[static_cast<size_t>(x)] = find(parent[static_cast<size_t>(x)]); };
+        for (const auto& f : fs)
+            for (int k = 1; k < 3; ++k) parent[static_cast<size_t>(find(f[k]))] = find(f[0]);
+        std::map<int, int> piece;  // root → piece
+        std::vector<double> depth;
+        for (size_t i = 0; i < fs.size(); ++i) {
+            const int root = find(fs[i][0]);
+            const auto [it, fresh] = piece.emplace(root, static_cast<int>(depth.size()));
+            if (fresh) depth.push_back(0.0);
+            piece_of_fs[i] = it->second;
+            for (int k = 0; k < 3; ++k) {
+                const int v = fs[i][k];
+                if (v < border_mm.size() && border_mm[v] > 0 && border_mm[v] < 1e9) depth[static_cast<size_t>(it->second)] = std::max(depth[static_cast<size_t>(it->second)], border_mm[v]);
+            }
+        }
+        double narrowest = blend;
+        int narrowed = 0;
+        for (double d : depth) {
+            piece_blend.push_back(d > 0 ? std::min(blend, 0.25 * d) : blend);
+            narrowed += piece_blend.back() < blend ? 1 : 0;
+            narrowest = std::min(narrowest, piece_blend.back());
+        }
+        if (narrowed > 0)
+            rep.info("wall: " + std::to_string(narrowed) + " of " + std::to_string(depth.size()) + " sac piece(s) shallower than four times the " + shortest(blend) +
+                     " mm thickness blend: their blend narrowed to a quarter of their depth (down to " + shortest(narrowest) + " mm)");
+        r.qa.emplace_back("sac_pieces", static_cast<double>(depth.size()));
+        r.qa.emplace_back("blend_used_min_mm", narrowest);
+        blend_min = narrowest;
+    }
+    // The distance to S and the blend of the nearest sac piece, at each point.
+    auto sac_distance = [&](const Eigen::MatrixX3d& X, Eigen::VectorXd& bl) {
+        Eigen::VectorXi nf;
+        Eigen::VectorXd d = distance_to_faces(dist_surf.V, FS, X, &nf);
+        bl.resize(X.rows());
+        for (Eigen::Index m = 0; m < X.rows(); ++m) bl[m] = nf[m] >= 0 ? piece_blend[static_cast<size_t>(piece_of_fs[static_cast<size_t>(nf[m])])] : blend;
+        return d;
+    };
+    auto local_thickness = [&](double dA, double dS, double bl) {
+        double ws = fs.empty() ? 0.0 : fa.empty() ? 1.0 : std::clamp((dA - dS) / (2 * bl) + 0.5, 0.0, 1.0);
         ws = ws * ws * (3 - 2 * ws);
         return t_art + (t_sac - t_art) * ws;
     };
@@ -448,13 +489,14 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
         }
         queries += static_cast<double>(where.size());
         const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, q);
-        const Eigen::VectorXd dS = distance_to_faces(dist_surf.V, FS, q);
+        Eigen::VectorXd bl;
+        const Eigen::VectorXd dS = sac_distance(q, bl);
 #pragma omp parallel for schedule(static)
         for (Eigen::Index m = 0; m < static_cast<Eigen::Index>(where.size()); ++m) {
             const auto& [b, l] = where[static_cast<size_t>(m)];
             float& v = blocks[static_cast<size_t>(b)].values[static_cast<size_t>(l)];
             const double sign = v == QUERY_MARK_INSIDE ? -1.0 : 1.0;
-            v = static_cast<float>(sign * std::min(std::min(dA[m], dS[m]), band) - local_thickness(dA[m], dS[m]));
+            v = static_cast<float>(sign * std::min(std::min(dA[m], dS[m]), band) - local_thickness(dA[m], dS[m], bl[m]));
         }
     }
     r.qa.emplace_back("distance_queries", queries);
@@ -510,139 +552,182 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
                            std::to_string(lumen.loop_end_id.size()) + (where.empty() ? "" : ": " + where) +
                            " (are two vessels, or a branch and its parent, closer than the wall thickness near that end?)");
     }
-    {
-        RemeshOutcome rm = remesh_checked(outer, edge, p.remesher, p.timeout_s);
-        if (!rm.fallback_why.empty()) rep.warn("wall: outer surface remeshed with " + rm.method + " instead of " + p.remesher + " (" + rm.fallback_why + ")");
-        r.qa.emplace_back("remesher_fallback", rm.fallback_why.empty() ? 0.0 : 1.0);
-        outer = std::move(rm.surface);
-    }
-    lap("remesh");
-    // Onto the exact offset: Newton steps along the distance gradient on φ(x) = d(x) − t(x) with exact
-    // distances, so the wall's thickness does not depend on the grid; cut-end vertices stay in their planes
-    // (the lumen runs straight through them, so the gradient lies in the plane there).
-    std::vector<int> plane_of(static_cast<size_t>(outer.V.rows()), -1);
-    for (const auto& l : boundary_loops(outer)) {
-        Eigen::Vector3d c = Eigen::Vector3d::Zero();
-        for (int v : l) c += outer.V.row(v).transpose();
-        c /= static_cast<double>(l.size());
-        int best = 0;
-        for (size_t q = 1; q < planes.size(); ++q)
-            if (std::abs(planes[q].normal.dot(c - planes[q].point)) + 1e-3 * (c - planes[q].point).norm() <
-                std::abs(planes[static_cast<size_t>(best)].normal.dot(c - planes[static_cast<size_t>(best)].point)) + 1e-3 * (c - planes[static_cast<size_t>(best)].point).norm())
-                best = static_cast<int>(q);
-        for (int v : l) plane_of[static_cast<size_t>(v)] = best;
-    }
-    auto project = [&](const std::vector<Eigen::Index>& which) {
-        Eigen::MatrixX3d X(static_cast<Eigen::Index>(which.size()), 3);
-        for (size_t m = 0; m < which.size(); ++m) X.row(static_cast<Eigen::Index>(m)) = outer.V.row(which[m]);
-        double moved = 0;
-        for (int it = 0; it < 3; ++it) {
-            const NearestOnSurface near = nearest_on_surface(dist_surf, X);
-            const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, X), dS = distance_to_faces(dist_surf.V, FS, X);
-            for (Eigen::Index m = 0; m < X.rows(); ++m) {
-                const Eigen::Vector3d x = X.row(m).transpose(), dir = x - near.point.row(m).transpose();
-                if (!(dir.norm() > 1e-9)) continue;
-                const double phi = near.distance[m] - local_thickness(dA[m], dS[m]);
-                Eigen::Vector3d step = -phi * dir.normalized();
-                const int pq = plane_of[static_cast<size_t>(which[static_cast<size_t>(m)])];
-                if (pq >= 0) step -= planes[static_cast<size_t>(pq)].normal.dot(step) * planes[static_cast<size_t>(pq)].normal;
-                X.row(m) += step.transpose();
-                if (it == 0) moved = std::max(moved, step.norm());
-            }
+    // The outer surface: the cut isosurface remeshed (with a finer zone on a retry), projected onto the exact
+    // offset, refined where it still meets the lumen. Returns where it still does.
+    const SurfaceData iso = std::move(outer);
+    bool remesher_fallback = false;
+    double largest_move = 0;
+    int refined = 0;
+    std::vector<int> plane_of;
+    auto shape_outer = [&](const RemeshZone* zone) -> std::vector<Eigen::Vector3d> {
+        {
+            RemeshOutcome rm = remesh_checked(iso, edge, p.remesher, p.timeout_s, zone);
+            if (!rm.fallback_why.empty()) rep.warn("wall: outer surface remeshed with " + rm.method + " instead of " + p.remesher + " (" + rm.fallback_why + ")");
+            remesher_fallback = !rm.fallback_why.empty();
+            outer = std::move(rm.surface);
         }
-        for (size_t m = 0; m < which.size(); ++m) outer.V.row(which[m]) = X.row(static_cast<Eigen::Index>(m));
-        return moved;
-    };
-    {
-        std::vector<Eigen::Index> all(static_cast<size_t>(outer.V.rows()));
-        for (size_t v = 0; v < all.size(); ++v) all[v] = static_cast<Eigen::Index>(v);
-        r.qa.emplace_back("projection_largest_move_mm", project(all));
-    }
-    // Where two vessels run closer than twice the wall, the offset has a sharp crease between them and an outer
-    // surface remeshed at the lumen's edge length cuts across it, through the inner wall (a real Circle of
-    // Willis): split the longest edge of every outer face that meets the lumen, project the new vertices onto the
-    // offset, and repeat while such faces are left and their number falls (at most 8 rounds).
-    int refined = 0, last_bad = 0;
-    for (int round = 0; round < 8; ++round) {
-        SurfaceData both;
-        both.V.resize(lumen.V.rows() + outer.V.rows(), 3);
-        both.V << lumen.V, outer.V;
-        both.F.resize(lumen.F.rows() + outer.F.rows(), 3);
-        both.F << lumen.F, (outer.F.array() + static_cast<int>(lumen.V.rows())).matrix();
-        both.face_label = Eigen::VectorXi::Zero(both.F.rows());
-        const auto pairs = self_intersections(both, 1000000);
+        // Onto the exact offset: Newton steps along the distance gradient on φ(x) = d(x) − t(x) with exact
+        // distances, so the wall's thickness does not depend on the grid; cut-end vertices stay in their planes
+        // (the lumen runs straight through them, so the gradient lies in the plane there).
+        plane_of.assign(static_cast<size_t>(outer.V.rows()), -1);
+        for (const auto& l : boundary_loops(outer)) {
+            Eigen::Vector3d c = Eigen::Vector3d::Zero();
+            for (int v : l) c += outer.V.row(v).transpose();
+            c /= static_cast<double>(l.size());
+            int best = 0;
+            for (size_t q = 1; q < planes.size(); ++q)
+                if (std::abs(planes[q].normal.dot(c - planes[q].point)) + 1e-3 * (c - planes[q].point).norm() <
+                    std::abs(planes[static_cast<size_t>(best)].normal.dot(c - planes[static_cast<size_t>(best)].point)) + 1e-3 * (c - planes[static_cast<size_t>(best)].point).norm())
+                    best = static_cast<int>(q);
+            for (int v : l) plane_of[static_cast<size_t>(v)] = best;
+        }
+        auto project = [&](const std::vector<Eigen::Index>& which) {
+            Eigen::MatrixX3d X(static_cast<Eigen::Index>(which.size()), 3);
+            for (size_t m = 0; m < which.size(); ++m) X.row(static_cast<Eigen::Index>(m)) = outer.V.row(which[m]);
+            double moved = 0;
+            for (int it = 0; it < 3; ++it) {
+                const NearestOnSurface near = nearest_on_surface(dist_surf, X);
+                Eigen::VectorXd bl;
+                const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, X), dS = sac_distance(X, bl);
+                for (Eigen::Index m = 0; m < X.rows(); ++m) {
+                    const Eigen::Vector3d x = X.row(m).transpose(), dir = x - near.point.row(m).transpose();
+                    if (!(dir.norm() > 1e-9)) continue;
+                    const double phi = near.distance[m] - local_thickness(dA[m], dS[m], bl[m]);
+                    Eigen::Vector3d step = -phi * dir.normalized();
+                    const int pq = plane_of[static_cast<size_t>(which[static_cast<size_t>(m)])];
+                    if (pq >= 0) step -= planes[static_cast<size_t>(pq)].normal.dot(step) * planes[static_cast<size_t>(pq)].normal;
+                    X.row(m) += step.transpose();
+                    if (it == 0) moved = std::max(moved, step.norm());
+                }
+            }
+            for (size_t m = 0; m < which.size(); ++m) outer.V.row(which[m]) = X.row(static_cast<Eigen::Index>(m));
+            return moved;
+        };
+        {
+            std::vector<Eigen::Index> all(static_cast<size_t>(outer.V.rows()));
+            for (size_t v = 0; v < all.size(); ++v) all[v] = static_cast<Eigen::Index>(v);
+            largest_move = project(all);
+        }
+        // Where two vessels run closer than twice the wall, the offset has a sharp crease between them and an outer
+        // surface remeshed at the lumen's edge length cuts across it, through the inner wall (a real Circle of
+        // Willis): split the longest edge of every outer face that meets the lumen, project the new vertices onto the
+        // offset, and repeat while such faces are left and their number falls (at most 8 rounds).
+        int last_bad = 0;
         std::set<int> bad;
-        const int nl = static_cast<int>(lumen.F.rows());
-        for (const auto& [fa2, fb2] : pairs)
-            if ((fa2 < nl) != (fb2 < nl)) bad.insert(std::max(fa2, fb2) - nl);  // outer against inner only
-        if (bad.empty() || (round > 0 && static_cast<int>(bad.size()) >= last_bad)) break;  // done, or not converging
-        last_bad = static_cast<int>(bad.size());
-        rep.debug("wall: refinement round " + std::to_string(round) + ": " + std::to_string(bad.size()) + " outer faces meet the lumen");
-        refined += static_cast<int>(bad.size());
-        std::map<std::pair<int, int>, int> mid;  // edge → its new midpoint vertex
-        std::vector<Eigen::Vector3i> F2;
-        std::vector<Eigen::Index> fresh;
-        for (int f : bad) {
-            int k_long = 0;
-            double L = -1;
-            for (int k = 0; k < 3; ++k) {
-                const double lk = (outer.V.row(outer.F(f, k)) - outer.V.row(outer.F(f, (k + 1) % 3))).norm();
-                if (lk > L) {
-                    L = lk;
-                    k_long = k;
+        for (int round = 0; round < 8; ++round) {
+            SurfaceData both;
+            both.V.resize(lumen.V.rows() + outer.V.rows(), 3);
+            both.V << lumen.V, outer.V;
+            both.F.resize(lumen.F.rows() + outer.F.rows(), 3);
+            both.F << lumen.F, (outer.F.array() + static_cast<int>(lumen.V.rows())).matrix();
+            both.face_label = Eigen::VectorXi::Zero(both.F.rows());
+            const auto pairs = self_intersections(both, 1000000);
+            bad.clear();
+            const int nl = static_cast<int>(lumen.F.rows());
+            for (const auto& [fa2, fb2] : pairs)
+                if ((fa2 < nl) != (fb2 < nl)) bad.insert(std::max(fa2, fb2) - nl);  // outer against inner only
+            if (bad.empty() || (round > 0 && static_cast<int>(bad.size()) >= last_bad)) break;  // done, or not converging
+            last_bad = static_cast<int>(bad.size());
+            rep.debug("wall: refinement round " + std::to_string(round) + ": " + std::to_string(bad.size()) + " outer faces meet the lumen");
+            refined += static_cast<int>(bad.size());
+            std::map<std::pair<int, int>, int> mid;  // edge → its new midpoint vertex
+            std::vector<Eigen::Vector3i> F2;
+            std::vector<Eigen::Index> fresh;
+            for (int f : bad) {
+                int k_long = 0;
+                double L = -1;
+                for (int k = 0; k < 3; ++k) {
+                    const double lk = (outer.V.row(outer.F(f, k)) - outer.V.row(outer.F(f, (k + 1) % 3))).norm();
+                    if (lk > L) {
+                        L = lk;
+                        k_long = k;
+                    }
                 }
+                const int a = outer.F(f, k_long), b = outer.F(f, (k_long + 1) % 3);
+                const std::pair<int, int> e{std::min(a, b), std::max(a, b)};
+                if (mid.count(e)) continue;
+                const Eigen::Index m = outer.V.rows();
+                outer.V.conservativeResize(m + 1, 3);
+                outer.V.row(m) = 0.5 * (outer.V.row(a) + outer.V.row(b));
+                const int pa = plane_of[static_cast<size_t>(a)], pb = plane_of[static_cast<size_t>(b)];
+                plane_of.push_back(pa >= 0 && pa == pb ? pa : -1);
+                mid[e] = static_cast<int>(m);
+                fresh.push_back(m);
             }
-            const int a = outer.F(f, k_long), b = outer.F(f, (k_long + 1) % 3);
-            const std::pair<int, int> e{std::min(a, b), std::max(a, b)};
-            if (mid.count(e)) continue;
-            const Eigen::Index m = outer.V.rows();
-            outer.V.conservativeResize(m + 1, 3);
-            outer.V.row(m) = 0.5 * (outer.V.row(a) + outer.V.row(b));
-            const int pa = plane_of[static_cast<size_t>(a)], pb = plane_of[static_cast<size_t>(b)];
-            plane_of.push_back(pa >= 0 && pa == pb ? pa : -1);
-            mid[e] = static_cast<int>(m);
-            fresh.push_back(m);
-        }
-        // Every face with split edges is divided conformingly (1, 2 or 3 of its edges).
-        for (Eigen::Index f = 0; f < outer.F.rows(); ++f) {
-            int v[3], mm[3], n_split = 0;
-            for (int k = 0; k < 3; ++k) {
-                v[k] = outer.F(f, k);
-                const int b = outer.F(f, (k + 1) % 3);
-                const auto it = mid.find({std::min(v[k], b), std::max(v[k], b)});
-                mm[k] = it == mid.end() ? -1 : it->second;  // midpoint of edge v[k] → v[k+1]
-                n_split += mm[k] >= 0;
-            }
-            if (n_split == 0) {
-                F2.emplace_back(v[0], v[1], v[2]);
-            } else if (n_split == 3) {
-                F2.emplace_back(v[0], mm[0], mm[2]);
-                F2.emplace_back(mm[0], v[1], mm[1]);
-                F2.emplace_back(mm[2], mm[1], v[2]);
-                F2.emplace_back(mm[0], mm[1], mm[2]);
-            } else {
-                // Rotate so that edge 0 is split and, with two splits, edge 1 too.
-                int r0 = 0;
-                for (int k = 0; k < 3; ++k)
-                    if (mm[k] >= 0 && (n_split == 1 || mm[(k + 1) % 3] >= 0)) r0 = k;
-                const int a = v[r0], b = v[(r0 + 1) % 3], c = v[(r0 + 2) % 3], m0 = mm[r0], m1 = mm[(r0 + 1) % 3];
-                if (n_split == 1) {
-                    F2.emplace_back(a, m0, c);
-                    F2.emplace_back(m0, b, c);
+            // Every face with split edges is divided conformingly (1, 2 or 3 of its edges).
+            for (Eigen::Index f = 0; f < outer.F.rows(); ++f) {
+                int v[3], mm[3], n_split = 0;
+                for (int k = 0; k < 3; ++k) {
+                    v[k] = outer.F(f, k);
+                    const int b = outer.F(f, (k + 1) % 3);
+                    const auto it = mid.find({std::min(v[k], b), std::max(v[k], b)});
+                    mm[k] = it == mid.end() ? -1 : it->second;  // midpoint of edge v[k] → v[k+1]
+                    n_split += mm[k] >= 0;
+                }
+                if (n_split == 0) {
+                    F2.emplace_back(v[0], v[1], v[2]);
+                } else if (n_split == 3) {
+                    F2.emplace_back(v[0], mm[0], mm[2]);
+                    F2.emplace_back(mm[0], v[1], mm[1]);
+                    F2.emplace_back(mm[2], mm[1], v[2]);
+                    F2.emplace_back(mm[0], mm[1], mm[2]);
                 } else {
-                    F2.emplace_back(m0, b, m1);
-                    F2.emplace_back(a, m0, m1);
-                    F2.emplace_back(a, m1, c);
+                    // Rotate so that edge 0 is split and, with two splits, edge 1 too.
+                    int r0 = 0;
+                    for (int k = 0; k < 3; ++k)
+                        if (mm[k] >= 0 && (n_split == 1 || mm[(k + 1) % 3] >= 0)) r0 = k;
+                    const int a = v[r0], b = v[(r0 + 1) % 3], c = v[(r0 + 2) % 3], m0 = mm[r0], m1 = mm[(r0 + 1) % 3];
+                    if (n_split == 1) {
+                        F2.emplace_back(a, m0, c);
+                        F2.emplace_back(m0, b, c);
+                    } else {
+                        F2.emplace_back(m0, b, m1);
+                        F2.emplace_back(a, m0, m1);
+                        F2.emplace_back(a, m1, c);
+                    }
                 }
             }
+            outer.F.resize(static_cast<Eigen::Index>(F2.size()), 3);
+            for (size_t f = 0; f < F2.size(); ++f) outer.F.row(static_cast<Eigen::Index>(f)) = F2[f].transpose();
+            project(fresh);
         }
-        outer.F.resize(static_cast<Eigen::Index>(F2.size()), 3);
-        for (size_t f = 0; f < F2.size(); ++f) outer.F.row(static_cast<Eigen::Index>(f)) = F2[f].transpose();
-        project(fresh);
+        std::vector<Eigen::Vector3d> left;  // centroids of the outer faces that still meet the lumen
+        for (int f : bad) left.push_back((outer.V.row(outer.F(f, 0)) + outer.V.row(outer.F(f, 1)) + outer.V.row(outer.F(f, 2))).transpose() / 3.0);
+        return left;
+    };
+    std::vector<Eigen::Vector3d> left = shape_outer(nullptr);
+    // A sac tip or a thin stub sharper than the outer surface's edge (a wall of a third of a millimetre round a
+    // tip of a few tenths: a TOF-MRA's faded branches) is cut across by the remeshed triangles, and splitting them
+    // does not converge: remesh again with a finer zone round those places, at most twice.
+    int zone_faces = 0;
+    double zone_edge = edge;
+    for (int attempt = 0; attempt < 2 && !left.empty(); ++attempt) {
+        zone_edge = std::min(zone_edge, 1.5 * t_min) * (attempt == 0 ? 1.0 : 0.7);
+        const double rho = 4 * edge;
+        RemeshZone zone;
+        zone.fine_edge_mm = zone_edge;
+        zone.fine.assign(static_cast<size_t>(iso.F.rows()), 0);
+        zone_faces = 0;
+        for (Eigen::Index f = 0; f < iso.F.rows(); ++f) {
+            const Eigen::Vector3d c = (iso.V.row(iso.F(f, 0)) + iso.V.row(iso.F(f, 1)) + iso.V.row(iso.F(f, 2))).transpose() / 3.0;
+            for (const auto& x : left)
+                if ((c - x).norm() < rho) {
+                    zone.fine[static_cast<size_t>(f)] = 1;
+                    ++zone_faces;
+                    break;
+                }
+        }
+        rep.info("wall: " + std::to_string(left.size()) + " outer faces still meet the lumen (a tip sharper than the outer edge); remeshing " +
+                 shortest(rho) + " mm round them at " + shortest(zone_edge) + " mm");
+        left = shape_outer(&zone);
     }
+    r.qa.emplace_back("remesher_fallback", remesher_fallback ? 1.0 : 0.0);
+    r.qa.emplace_back("projection_largest_move_mm", largest_move);
     r.qa.emplace_back("outer_faces_refined", static_cast<double>(refined));
+    r.qa.emplace_back("outer_fine_zone_faces", static_cast<double>(zone_faces));
+    r.qa.emplace_back("outer_fine_zone_edge_mm", zone_faces > 0 ? zone_edge : 0.0);
+    lap("remesh_and_projection");
 
-    lap("projection");
     const auto loops_out = boundary_loops(outer);
 
     // Assemble: inner (lumen, reversed), outer, annular caps.
@@ -748,7 +833,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
             if (L > 0) grad = std::max(grad, std::abs(to_inner.distance[a] - to_inner.distance[b]) / L);
         }
     r.qa.emplace_back("thickness_gradient_max", grad);
-    r.qa.emplace_back("thickness_gradient_blend_allows", 1.5 * std::abs(t_art - t_sac) / blend);
+    r.qa.emplace_back("thickness_gradient_blend_allows", 1.5 * std::abs(t_art - t_sac) / blend_min);
     for (auto& qv : triangle_quality(wall)) r.qa.emplace_back("wall_" + qv.first, qv.second);
     {  // smallest triangle angle on the inner, outer and cap faces (thin triangles there make flat tetrahedra)
         double amin[3] = {180, 180, 180};

@@ -426,6 +426,22 @@ TEST(Wall, ClosedThicknessAndBlend) {
     EXPECT_EQ(w.wall.label_names.size(), 5u);
 }
 
+// A segmentation whose mask gives no surface between its end planes (a TopCoW CTA's mask once did): a clear stage
+// failure, not a crash in the smoothing of an empty surface.
+TEST(GeometryErrors, NoLumenBetweenTheEndPlanesIsAStageFailure) {
+    ImageData img = default_case().seg.image;
+    std::fill(img.mask.begin(), img.mask.end(), std::uint8_t{0});
+    for (std::int64_t k = 5; k < 8; ++k)  // a closed blob in a corner, away from every end plane
+        for (std::int64_t j = 5; j < 8; ++j)
+            for (std::int64_t i = 5; i < 8; ++i) img.mask[img.grid.linear(i, j, k)] = 1;
+    try {
+        (void)lumen_from_segmentation(img, SurfaceParams{});
+        ADD_FAILURE() << "an empty lumen was accepted";
+    } catch (const MeshingError& e) {
+        EXPECT_NE(std::string(e.what()).find("check 'the cut lumen has open ends' failed"), std::string::npos) << e.what();
+    }
+}
+
 TEST(GeometryErrors, BadInputsAreInputErrors) {
     const auto& d = default_case();
     EXPECT_THROW(segment("/nonexistent/ct.nii.gz", SegmentParams{}), InputError);
@@ -529,6 +545,86 @@ TEST(SurfaceInput, RoundedEndsAreCutWhereTheVesselIsTubular) {
     EXPECT_GT(sac_area, 0.0) << "the sac is labelled";
     EXPECT_LT(sac_far, Rs + 0.5) << "only the sac is labelled";
     fs::remove_all(dir);
+}
+
+// One sac: a tube (radius 1.5 mm) with a sidewall sac (radius 2.5 mm) and, 6 mm away on the other side, a bump of
+// radius 1.2 mm whose far side is 1.73 radii from the axis — above the ratio that seeds a sac. Both are candidates;
+// the sac is kept and the bump becomes artery.
+TEST(SurfaceInput, TheMostProminentSacCandidateIsKept) {
+    Volume<float> v;
+    v.grid.size = {50, 60, 140};
+    v.grid.spacing = {0.2, 0.2, 0.2};
+    v.grid.origin = {-4.9, -4.9, -13.9};
+    v.data.resize(v.grid.voxel_count());
+    const double R = 1.5, L = 30.0, Rs = 2.5, Rb = 1.2;  // the tube leaves the box: two open ends
+    const Eigen::Vector3d sac(0, 3.4, 1.0), bump(0, -1.4, -5.0);
+    for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
+        for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
+            for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
+                const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                const Eigen::Vector3d p(x[0], x[1], x[2]);
+                const double zc = std::clamp(p.z(), -L, L);
+                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
+                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max({tube, Rs - (p - sac).norm(), Rb - (p - bump).norm()}));
+            }
+    const fs::path dir = fs::temp_directory_path() / ("aneu_one_sac_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    write_mesh_file((dir / "two.stl").string(), isosurface(v, 0.0, true));
+    SurfaceParams sp;
+    sp.remesher = "cgal";
+    const LumenResult r = lumen_from_mesh((dir / "two.stl").string(), sp);
+    fs::remove_all(dir);
+    EXPECT_EQ(value(r.qa, "sac_candidates"), 2.0);
+    double near_sac = 0, near_bump = 0;
+    for (Eigen::Index f = 0; f < r.lumen.F.rows(); ++f) {
+        if (r.lumen.face_label[f] != 1) continue;
+        const Eigen::Vector3d c = (r.lumen.V.row(r.lumen.F(f, 0)) + r.lumen.V.row(r.lumen.F(f, 1)) + r.lumen.V.row(r.lumen.F(f, 2))).transpose() / 3.0;
+        ((c - sac).norm() < Rs + 0.5 ? near_sac : near_bump) += 1;
+    }
+    EXPECT_GT(near_sac, 100.0) << "the sac is labelled";
+    EXPECT_EQ(near_bump, 0.0) << "the bump is artery";
+}
+
+// A sharp thin tip with the sac's thin wall: a tube of radius 1.5 mm with a needle (a cone from 0.45 mm radius at
+// the tube's wall to a point 2.4 mm out, a TOF-MRA's faded branch) labelled sac, so its wall is a third of the
+// artery's. The outer surface remeshed at the lumen's 0.4 mm edge cuts across the tip's offset (0.13 mm round a
+// point) and splitting its triangles does not converge; the wall stage remeshes a finer zone there. The wall is
+// closed, free of self-intersections, and the zone is reported.
+TEST(Wall, ASharpThinWalledTipGetsAFinerZone) {
+    Volume<float> v;
+    v.grid.size = {50, 40, 140};
+    v.grid.spacing = {0.2, 0.2, 0.2};
+    v.grid.origin = {-3.9, -3.9, -13.9};
+    v.data.resize(v.grid.voxel_count());
+    const double R = 1.5, L = 10.0, x0 = 1.2, x1 = 4.4, r0 = 0.45;
+    for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
+        for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
+            for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
+                const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
+                const Eigen::Vector3d p(x[0], x[1], x[2]);
+                const double zc = std::clamp(p.z(), -L, L);
+                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
+                const double along = std::clamp((p.x() - x0) / (x1 - x0), 0.0, 1.0);
+                const double cone = p.x() < x0 || p.x() > x1 ? -1.0 : r0 * (1 - along) - std::hypot(p.y(), p.z() - 1.0);
+                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max(tube, cone));
+            }
+    const fs::path dir = fs::temp_directory_path() / ("aneu_tip_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    write_mesh_file((dir / "tip.stl").string(), isosurface(v, 0.0, true));
+    SurfaceParams sp;
+    sp.remesher = "cgal";
+    sp.aneurysm_sphere = std::array<double, 4>{3.2, 0.0, 1.0, 1.6};
+    const LumenResult r = lumen_from_mesh((dir / "tip.stl").string(), sp);
+    fs::remove_all(dir);
+    ASSERT_GT(r.lumen.face_label.maxCoeff(), 0);
+    const WallResult w = make_wall(r.lumen, r.image.planes, WallParams{});
+    std::printf("tip: lumen edge %.3f mm; outer faces refined %g, fine zone %g faces at %g mm; sac median %.4f\n", value(r.qa, "edge_mean_mm"),
+                value(w.qa, "outer_faces_refined"), value(w.qa, "outer_fine_zone_faces"), value(w.qa, "outer_fine_zone_edge_mm"),
+                value(w.qa, "thickness_aneurysm_median_mm"));
+    EXPECT_NO_THROW(check_closed_surface(w.wall, "wall"));
+    EXPECT_TRUE(self_intersections(w.wall, 1).empty());
+    EXPECT_GT(value(w.qa, "outer_fine_zone_faces"), 0.0);
+    EXPECT_NEAR(value(w.qa, "thickness_artery_median_mm"), 0.4, THICK_ARTERY_TOL * 0.4);
 }
 
 TEST(ImageFilters, InsideDistanceOfACylinder) {

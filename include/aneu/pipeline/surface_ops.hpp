@@ -89,7 +89,8 @@ NamedValues triangle_quality(const SurfaceData& s);
 /// those of the faces they replace. Returns the number of flips.
 int improve_min_angle(SurfaceData& s, double max_dihedral_deg = 10.0, int passes = 5);
 
-/// Collapses, to its midpoint, every boundary edge whose opposite angle is below `min_angle_deg` (a short cut-end
+/// Collapses, to its midpoint, every boundary edge whose opposite angle is below `min_angle_deg` or that is shorter
+/// than a quarter of the median boundary edge (a short cut-end
 /// segment a remesher left) where the link condition allows; a planar boundary loop stays in its plane.
 /// Unused vertices are dropped. Returns the number of collapses.
 int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg = 15.0);
@@ -105,6 +106,15 @@ double enclosed_volume(const SurfaceData& s);
 /// @throws MeshingError the mesher failed; InputError unknown method
 SurfaceData remesh(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s = 300.0);
 
+/// Part of a surface remeshed finer than the rest (CGAL only: the faces of `fine` at `fine_edge_mm`, the others at
+/// the remesh's edge; the border between them is kept as a polyline, resampled, so the two parts stay conforming).
+struct RemeshZone {
+    std::vector<char> fine;     ///< per input face: 1 = in the fine zone
+    double fine_edge_mm = 0.0;  ///< target edge in the zone [mm]
+};
+/// `remesh` with a finer zone (CGAL).
+SurfaceData remesh(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s, const RemeshZone* zone);
+
 /// What `remesh_checked` did: the remesher whose result was kept, and why the asked one was not.
 struct RemeshOutcome {
     SurfaceData surface;
@@ -115,7 +125,8 @@ struct RemeshOutcome {
 /// loops as the input and no self-intersection. If the mesher fails, times out or its result fails a check,
 /// the other remesher runs (its result checked alike), and the outcome says so.
 /// @throws MeshingError naming the check and the place when both remeshers fail
-RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s);
+/// With a `zone`, only CGAL runs (Netgen has no zones here).
+RemeshOutcome remesh_checked(const SurfaceData& s, double edge_mm, const std::string& method, double timeout_s, const RemeshZone* zone = nullptr);
 
 /// Largest triangle count a remesh may be asked for (an equilateral mesh of the whole surface): beyond it the
 /// surface, the wall and the tetrahedra would not fit in this tool's memory budget.
@@ -134,6 +145,7 @@ NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d
 
 /// Distance from each point to the nearest of the triangles F (any subset of a surface's faces; +∞ when F is
 /// empty). CGAL AABB tree over the triangle soup, OpenMP over the points.
-Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points);
+/// With `nearest_face`, also the row of F nearest to each point (−1 when F is empty).
+Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points, Eigen::VectorXi* nearest_face = nullptr);
 
 }  // namespace aneu::pipeline
