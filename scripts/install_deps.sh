@@ -12,6 +12,8 @@ PACKAGES=(
   libeigen3-dev libhdf5-dev libsuitesparse-dev libopenblas-dev liblapack-dev
   libcli11-dev nlohmann-json3-dev libspdlog-dev libfmt-dev libssl-dev zlib1g-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  # simulator: the OpenIGTLink device and viewer interface (aneusim serve)
+  libopenigtlink-dev
   # pipeline: imaging and meshing
   libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
   libcgal-dev libgmp-dev libmpfr-dev libboost-dev

@@ -252,6 +252,12 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
     HapticTiming htime;
     const double H = sc.haptic_hz;
     const int phys_every = every(H, sc.physics_hz), log_every = every(H, sc.log_hz), series_every = every(H, sc.series_hz);
+    const int surface_every = every(H, opt.surface_hz);
+    const bool have_live = opt.live != nullptr || static_cast<bool>(opt.live_source);
+    const auto make_reader = [&] {
+        const auto index = [&](const std::string& name) { return sim.instrument_index(name); };
+        return opt.live_source ? LiveReader(opt.live_source, index) : LiveReader(*opt.live, index);
+    };
     FrameStats last;
     std::vector<Eigen::Vector3d> F(sc.instruments.size(), Eigen::Vector3d::Zero());
 
@@ -266,6 +272,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             }
             F = sim.haptic_step(t);
             hlog.line(t, F);
+            if (opt.on_haptic) opt.on_haptic(t, F);
+            if (opt.on_surface && surface_every && n % surface_every == 0) opt.on_surface(t, sim.deformed_surface(), sim.clips());
             const Stopwatch to;
             if (n % log_every == 0) log.line(last, t, F, sim.clips());
             if (series.on() && series_every && n % series_every == 0) {
@@ -284,8 +292,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                 tick(t);
             }
         } else {
-            if (!opt.live) throw InputError(sc.path + ": live_input is set but no pose stream was given");
-            LiveReader reader(*opt.live, [&](const std::string& name) { return sim.instrument_index(name); });
+            if (!have_live) throw InputError(sc.path + ": live_input is set but no pose stream was given");
+            LiveReader reader = make_reader();
             const auto skipped = [&](long line, const std::string& why) {
                 sim.count_skipped_input();
                 message("pose stream line " + std::to_string(line) + " skipped: " + why);
@@ -328,9 +336,22 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         });
         std::thread output([&] {
             const double lp = 1.0 / sc.log_hz, sp = sc.series_hz > 0 ? 1.0 / sc.series_hz : 1e300;
-            double next_log = 0, next_series = 0;
+            const double up = opt.on_surface && opt.surface_hz > 0 ? 1.0 / opt.surface_hz : 1e300;
+            double next_log = 0, next_series = 0, next_surface = 0;
             while (running) {
                 const double t = now();
+                if (opt.on_surface && t >= next_surface) {
+                    Eigen::MatrixX3d x;
+                    std::vector<Clip> cl;
+                    {
+                        std::lock_guard<std::mutex> lk(mx);
+                        x = sim.deformed_surface(true);
+                        cl = sim.clips();
+                    }
+                    opt.on_surface(t, x, cl);
+                    next_surface += up;
+                    if (next_surface < t) next_surface = t + up;  // a slow consumer skips frames, it does not queue them
+                }
                 if (t >= next_log) {
                     FrameStats fs;
                     {
@@ -370,7 +391,7 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         const double hp = 1.0 / H;
         double t_prev = -1, next = 0;
         std::optional<LiveReader> reader;
-        if (sc.live_input && opt.live) reader.emplace(*opt.live, [&](const std::string& name) { return sim.instrument_index(name); });
+        if (sc.live_input && have_live) reader.emplace(make_reader());
         while (true) {
             const double t = now();
             if (!sc.live_input && t > sc.duration_s) break;
@@ -383,8 +404,11 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             htime.step_s.push_back(now() - t);
             if (hlog.out.on()) hbuf.emplace_back(t, F);
             t_prev = t;
-            if (reader) {
-                // One sample per tick at most (a pose device streams at the haptic rate), applied at the tick's time.
+            bool ended = false;
+            // A text stream gives one sample per tick at most (a pose device streams at the haptic rate); a device
+            // server's source gives what has arrived since the last tick (it keeps one pose per instrument), all
+            // applied at the tick's time.
+            for (int k = 0; reader && k < (opt.live_source ? 64 : 1); ++k) {
                 std::vector<std::pair<long, std::string>> refused;
                 const auto s = reader->next([&](long line, const std::string& why) { refused.emplace_back(line, why); });
                 std::lock_guard<std::mutex> lk(mx);
@@ -392,9 +416,15 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                     sim.count_skipped_input();
                     message("pose stream line " + std::to_string(line) + " skipped: " + why);
                 }
-                if (!s) break;
-                sim.set_input(s->instrument, s->sample.key, t);
+                if (s) {
+                    sim.set_input(s->instrument, s->sample.key, t);
+                    continue;
+                }
+                ended = reader->ended();
+                break;
             }
+            if (ended) break;
+            if (opt.on_haptic) opt.on_haptic(t, F);
             next += hp;
             const double wait = next - now();
             if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));

@@ -440,11 +440,20 @@ std::optional<LiveSample> parse_live_line(const std::string& line, std::string& 
     return s;
 }
 
-LiveReader::LiveReader(std::istream& in, std::function<int(const std::string&)> instrument_index) : m_in(in), m_index(std::move(instrument_index)) {}
+LiveReader::LiveReader(std::istream& in, std::function<int(const std::string&)> instrument_index)
+    : LiveReader([&in](std::string& line) { return std::getline(in, line) ? Fetch::LINE : Fetch::END; }, std::move(instrument_index)) {}
+
+LiveReader::LiveReader(Source source, std::function<int(const std::string&)> instrument_index) : m_source(std::move(source)), m_index(std::move(instrument_index)) {}
 
 std::optional<LiveReader::Sample> LiveReader::next(const std::function<void(long, const std::string&)>& skipped) {
     std::string line;
-    while (std::getline(m_in, line)) {
+    while (!m_ended) {
+        const Fetch f = m_source(line);
+        if (f == Fetch::NONE_NOW) return std::nullopt;
+        if (f == Fetch::END) {
+            m_ended = true;
+            break;
+        }
         ++m_line;
         const auto first = line.find_first_not_of(" \t\r");
         if (first == std::string::npos || line[first] == '#') continue;

@@ -11,6 +11,7 @@
 #include "aneu/core/version.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/plan.hpp"
+#include "aneu/sim/serve.hpp"
 #include "aneu/sim/simulator.hpp"
 #include "cli_common.hpp"
 
@@ -55,6 +56,26 @@ int main(int argc, char** argv) {
     plan->add_option("bundle", plan_bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
     plan->add_option("-o,--output", plan_out, "scene file to write (JSON); its outputs are named after it")->required();
 
+    // aneusim serve SCENE: the simulator behind an OpenIGTLink server.
+    auto* serve = app.add_subcommand("serve", "run a scene with poses from OpenIGTLink clients (a device bridge, a viewer, 3D Slicer) and send them "
+                                              "forces, the deformed surface, clip poses and events (docs/openigtlink.md)");
+    std::string serve_scene_path, serve_bundle, serve_report, serve_log, serve_series;
+    aneu::sim::ServeOptions sopt;
+    serve->add_option("scene", serve_scene_path, "scene file (JSON); served as live input")->required();
+    serve->add_option("--port", sopt.port, "TCP port (0: any free port, said in the log)")->check(CLI::Range(0, 65535))->capture_default_str();
+    serve->add_flag("--deterministic", sopt.deterministic,
+                    "lockstep: the timeline follows the messages' time stamps (tests, replays; forces as `run --deterministic --live` gives them)");
+    serve->add_option("--max-seconds", sopt.max_seconds, "stop after this long (0: no limit; a client stops the session with STRING aneusim=stop)")
+        ->check(CLI::NonNegativeNumber);
+    serve->add_option("--idle-seconds", sopt.idle_seconds, "stop after this long without any client (0: never)")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    serve->add_option("--polydata-hz", sopt.polydata_hz, "deformed surface to the clients [Hz]")->check(CLI::PositiveNumber)->capture_default_str();
+    serve->add_option("--bundle", serve_bundle, "case bundle instead of the scene's");
+    serve->add_option("--report", serve_report, "assessment report (JSON; a readable summary goes to REPORT.txt)");
+    serve->add_option("--log", serve_log, "per-frame log (CSV) instead of the scene's");
+    serve->add_option("--series", serve_series, "deformed surface series (writes BASE.xdmf + BASE.h5)");
+
     CLI11_PARSE(app, argc, argv);
     apply_logging_options(log);
     if (load->parsed()) {
@@ -89,6 +110,32 @@ int main(int argc, char** argv) {
             const aneu::sim::NeckFrame nf = aneu::sim::neck_frame(m);
             logger().info("planned {}: neck {:.2f} x {:.2f} mm at ({:.2f}, {:.2f}, {:.2f}); run it with `aneusim run {}`", plan_out, nf.length_mm,
                           nf.width_mm, nf.centre.x(), nf.centre.y(), nf.centre.z(), plan_out);
+        });
+    }
+    if (serve->parsed()) {
+        return run_guarded("aneusim serve", [&] {
+            aneu::sim::Scene scene = aneu::sim::read_scene(serve_scene_path);
+            if (!serve_bundle.empty()) scene.bundle = serve_bundle;
+            if (!serve_report.empty()) scene.report = serve_report;
+            if (!serve_log.empty()) scene.log = serve_log;
+            if (!serve_series.empty()) scene.series = serve_series;
+            scene.live_input = true;
+            aneu::sim::LoadOptions lo;
+            lo.region = scene.region;
+            lo.working_precision = scene.working_precision;
+            aneu::sim::SimModel model = aneu::sim::load_model(scene.bundle, lo);
+            aneu::sim::Simulator sim(std::move(scene), std::move(model));
+            sopt.on_listening = [](int port) { logger().info("serving OpenIGTLink on port {}", port); };
+            sopt.on_message = [](const std::string& m) { logger().warn("{}", m); };
+            aneu::sim::ServeCounters c;
+            const aneu::sim::Assessment a = aneu::sim::serve_scene(sim, sopt, &c);
+            fmt::print("time_s {:.3f}\nclips_used {}\nclips_deposited {}\npeak_force_n {:.4f}\nneck_closed_fraction {:.3f}\nskipped_inputs {}\n"
+                       "haptic_ticks {}\nclients_connected {}\nclients_refused {}\nmessages {}\nposes {}\nposes_coalesced {}\n"
+                       "dropped_unknown {}\ndropped_malformed {}\ndropped_oversize {}\ndropped_garbage {}\nforces_sent {}\nforces_skipped {}\n"
+                       "polydata_sent {}\ntransforms_sent {}\nstatus_sent {}\n",
+                       a.total_time_s, a.clips_used, a.clips_deposited, a.peak_force_n, a.neck_closed_fraction, a.skipped_inputs, a.haptic_ticks,
+                       c.clients_connected, c.clients_refused, c.messages, c.poses, c.poses_coalesced, c.dropped_unknown, c.dropped_malformed,
+                       c.dropped_oversize, c.dropped_garbage, c.forces_sent, c.forces_skipped, c.polydata_sent, c.transforms_sent, c.status_sent);
         });
     }
     return run_guarded("aneusim run", [&] {

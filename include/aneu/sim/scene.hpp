@@ -155,20 +155,27 @@ std::optional<LiveSample> parse_live_line(const std::string& line, std::string& 
 /// does not parse, names an unknown instrument or goes back in time is skipped, with its line number and why.
 class LiveReader {
 public:
+    /// Where lines come from: LINE (one in `line`), NONE_NOW (none yet: a live device between samples) or END.
+    enum class Fetch { LINE, NONE_NOW, END };
+    using Source = std::function<Fetch(std::string& line)>;
     /// `instrument_index`: the scene's instrument of a name, −1 if none.
     LiveReader(std::istream& in, std::function<int(const std::string&)> instrument_index);
+    LiveReader(Source source, std::function<int(const std::string&)> instrument_index);
     struct Sample {
         LiveSample sample;
         int instrument = -1;
     };
-    /// The next valid sample (nullopt at the end of the stream); `skipped(line_number, why)` for each refused line.
+    /// The next valid sample (nullopt at the end of the stream, or when the source has none now: see ended());
+    /// `skipped(line_number, why)` for each refused line.
     std::optional<Sample> next(const std::function<void(long, const std::string&)>& skipped);
+    bool ended() const { return m_ended; }
 
 private:
-    std::istream& m_in;
+    Source m_source;
     std::function<int(const std::string&)> m_index;
     long m_line = 0;
     double m_t = -std::numeric_limits<double>::infinity();
+    bool m_ended = false;
 };
 
 }  // namespace aneu::sim

@@ -134,8 +134,16 @@ private:
 struct RunOptions {
     bool deterministic = true;      ///< single thread, fixed timeline; false: threads at wall-clock rates
     std::istream* live = nullptr;   ///< pose stream (scene.live_input)
+    LiveReader::Source live_source; ///< instead of `live`: lines from a device server (aneusim serve)
     std::function<void(const std::string&)> on_message;  ///< warnings (skipped input, ignored actions)
     std::function<void(const FrameStats&)> on_frame;     ///< after each physics frame
+    /// After each haptic tick: its time and the force per instrument (real-time: on the haptic thread, so it must
+    /// not block).
+    std::function<void(double t, const std::vector<Eigen::Vector3d>& F)> on_haptic;
+    /// The deformed surface (all vertices) and the instruments' and clips' state at `surface_hz` (deterministic: at
+    /// the ticks that cross each period; real-time: on the output thread).
+    double surface_hz = 0.0;
+    std::function<void(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips)> on_surface;
 };
 
 /// Runs a scene to its end and writes the outputs the scene asks for (log, haptic log, series, report).
