@@ -395,19 +395,11 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         while (true) {
             const double t = now();
             if (!sc.live_input && t > sc.duration_s) break;
-            {
-                std::lock_guard<std::mutex> lk(mx);
-                if (!sc.live_input) sim.apply_script(t_prev, t);
-                F = sim.haptic_step(t);
-            }
-            htime.tick_s.push_back(t);
-            htime.step_s.push_back(now() - t);
-            if (hlog.out.on()) hbuf.emplace_back(t, F);
-            t_prev = t;
             bool ended = false;
-            // A text stream gives one sample per tick at most (a pose device streams at the haptic rate); a device
-            // server's source gives what has arrived since the last tick (it keeps one pose per instrument), all
-            // applied at the tick's time.
+            // Inputs first, then the force, so a tick's force answers the poses that arrived before it (as in the
+            // deterministic timeline). A text stream gives one sample per tick at most (a pose device streams at the
+            // haptic rate); a device server's source gives what has arrived since the last tick (it keeps one pose
+            // per instrument), all applied at the tick's time.
             for (int k = 0; reader && k < (opt.live_source ? 64 : 1); ++k) {
                 std::vector<std::pair<long, std::string>> refused;
                 const auto s = reader->next([&](long line, const std::string& why) { refused.emplace_back(line, why); });
@@ -424,6 +416,15 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                 break;
             }
             if (ended) break;
+            {
+                std::lock_guard<std::mutex> lk(mx);
+                if (!sc.live_input) sim.apply_script(t_prev, t);
+                F = sim.haptic_step(t);
+            }
+            htime.tick_s.push_back(t);
+            htime.step_s.push_back(now() - t);
+            if (hlog.out.on()) hbuf.emplace_back(t, F);
+            t_prev = t;
             if (opt.on_haptic) opt.on_haptic(t, F);
             next += hp;
             const double wait = next - now();

@@ -115,6 +115,7 @@ public:
         if (m_server->CreateServer(m_opt.port) < 0) throw InputError("serve: --port " + std::to_string(m_opt.port) + ": cannot listen there (in use?)");
         m_port = m_server->GetServerPort();
         m_start = std::chrono::steady_clock::now();
+        if (m_opt.on_listening) m_opt.on_listening(m_port);  // at the clock's start: a client can put its times on it
         m_accept = std::thread([this] { accept_loop(); });
         if (m_opt.max_seconds > 0) {
             m_timer = std::thread([this] {
@@ -124,7 +125,6 @@ public:
                 m_cv.notify_all();
             });
         }
-        if (m_opt.on_listening) m_opt.on_listening(m_port);
     }
 
     /// The live input: one line at a time (deterministic: waits for it).
@@ -143,7 +143,7 @@ public:
         for (size_t i = 0; i < ins.size() && i < F.size(); ++i) {
             auto m = igtl::SensorMessage::New();
             m->SetDeviceName((ins[i].name + ".force").c_str());
-            stamp(m, t);
+            stamp(m, m_opt.deterministic ? t : now());  // real time: the server's clock, the one poses are taken on
             m->SetLength(3);
             for (unsigned k = 0; k < 3; ++k) m->SetValue(k, F[i][static_cast<Eigen::Index>(k)]);
             msgs.push_back(packed(m));

@@ -17,7 +17,7 @@ struct ServeOptions {
     double idle_seconds = 10.0;  ///< stop after this long without any client (0: never); a client that leaves may come back
     double polydata_hz = 30.0;   ///< the deformed surface to the clients
     int max_clients = 2;         ///< a device bridge and a viewer
-    std::function<void(int port)> on_listening;
+    std::function<void(int port)> on_listening;  ///< called as the server's clock starts (real-time time stamps count from here)
     std::function<void(const std::string&)> on_message;
 };
 
