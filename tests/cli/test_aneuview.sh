@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# usage: test_aneuview.sh PREP SIM VIEW WORKDIR
+# aneuview against a running `aneusim serve` (issue #18): a tube with a sac (tubewall -> tetmesh -> assemble ->
+# condense), served live; aneuview under Xvfb takes a screenshot after 3 surfaces and says where 400 vertices
+# land on it. The pixels there must show each vertex's label colour (artery red, aneurysm yellow; a vertex behind
+# the front surface may show the other, so at least 80 % per label), and the background must be white away from
+# the vessel. Then aneuview renders for 3 s and its frame rate is printed (a figure for the bench, not asserted).
+set -eu
+prep=$1 sim=$2 view=$3 w=$4/aneuview
+rm -rf "$w" && mkdir -p "$w"
+"$prep" tubewall -o "$w/wall.h5" --sac-radius-mm 2 --neck-radius-mm 1.3 --length-mm 10 --edge-mm 0.3 -q
+"$prep" tetmesh "$w/wall.h5" -o "$w/vol.h5" -q
+"$prep" assemble "$w/vol.h5" -o "$w/fem.h5" -q
+"$prep" condense "$w/fem.h5" -o "$w/case.h5" -q
+cat > "$w/scene.json" <<JSON
+{"bundle": "case.h5", "live_input": true,
+ "instruments": [{"name": "suction", "kind": "suction", "radius_mm": 0.75}]}
+JSON
+port=$(( 20000 + RANDOM % 20000 ))
+"$sim" serve "$w/scene.json" --port $port --max-seconds 30 --idle-seconds 3 > "$w/serve.out" 2> "$w/serve.err" &
+server=$!
+trap 'kill $server 2>/dev/null || true' EXIT
+xvfb-run -a "$view" --port $port --screenshot "$w/view.png" --after-surfaces 3 --points "$w/points.txt" --size 600,500 > "$w/view.out"
+python3 - "$w/view.png" "$w/points.txt" <<'PY'
+import struct, sys, zlib
+png, pts = sys.argv[1], sys.argv[2]
+data = open(png, 'rb').read()
+assert data[:8] == b'\x89PNG\r\n\x1a\n', 'not a PNG'
+pos, idat, W = 8, b'', 0
+while pos < len(data):
+    n, t = struct.unpack('>I4s', data[pos:pos + 8])
+    body = data[pos + 8:pos + 8 + n]
+    if t == b'IHDR':
+        W, H, depth, ctype = struct.unpack('>IIBB', body[:10])
+        assert depth == 8 and ctype in (2, 6), (depth, ctype)
+        bpp = 3 if ctype == 2 else 4
+    elif t == b'IDAT':
+        idat += body
+    pos += 12 + n
+raw = zlib.decompress(idat)
+stride = W * bpp
+rows, prev, off = [], bytearray(stride), 0
+for y in range(H):
+    f = raw[off]; line = bytearray(raw[off + 1:off + 1 + stride]); off += 1 + stride
+    for i in range(stride):
+        a = line[i - bpp] if i >= bpp else 0
+        b = prev[i]; c = prev[i - bpp] if i >= bpp else 0
+        if f == 1: line[i] = (line[i] + a) & 255
+        elif f == 2: line[i] = (line[i] + b) & 255
+        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
+        elif f == 4:
+            p = a + b - c; pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+    rows.append(line); prev = line
+def pixel(x, y):  # display coordinates: origin bottom left
+    r = rows[H - 1 - y]; return r[x * bpp], r[x * bpp + 1], r[x * bpp + 2]
+lines = open(pts).read().split('\n')
+good, total = {0: 0, 1: 0}, {0: 0, 1: 0}
+for l in lines[1:]:
+    if not l.strip(): continue
+    _, x, y, lab = l.split()[:4]
+    x, y, lab = int(round(float(x))), int(round(float(y))), int(round(float(lab)))
+    if not (0 <= x < W and 0 <= y < H): continue
+    r, g, b = pixel(x, y)
+    red = r > 60 and g < 0.6 * r and b < 0.6 * r
+    yellow = r > 60 and g > 0.7 * r and b < 0.7 * g
+    total[lab] += 1
+    good[lab] += (yellow if lab == 1 else red)
+corner = pixel(2, H - 3)
+print('aneuview: %d x %d; artery %d/%d red, aneurysm %d/%d yellow; corner %s' % (W, H, good[0], total[0], good[1], total[1], corner))
+assert total[0] > 50 and total[1] > 20, total
+assert good[0] >= 0.8 * total[0], 'artery vertices not red where they land'
+assert good[1] >= 0.8 * total[1], 'sac vertices not yellow where they land'
+assert min(corner) > 240, 'background not white'
+PY
+# The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
+xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
+echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
