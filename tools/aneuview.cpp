@@ -22,6 +22,7 @@
 #include <igtlPolyDataMessage.h>
 #include <igtlSensorMessage.h>
 #include <igtlStatusMessage.h>
+#include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
 #include <vtkActor.h>
 #include <vtkCallbackCommand.h>
@@ -30,7 +31,11 @@
 #include <vtkCoordinate.h>
 #include <vtkCubeSource.h>
 #include <vtkFloatArray.h>
+#include <vtkInteractorStyleTrackballCamera.h>
+#include <vtkLineSource.h>
 #include <vtkLookupTable.h>
+#include <vtkObjectFactory.h>
+#include <vtkTubeFilter.h>
 #include <vtkMath.h>
 #include <vtkNew.h>
 #include <vtkPNGWriter.h>
@@ -62,7 +67,7 @@ struct Shared {
     std::mutex mx;
     Frame frame;
     std::map<std::string, std::array<float, 12>> clips;  // name → 3×4 matrix (rows)
-    std::map<std::string, double> force_n;
+    std::map<std::string, std::array<double, 3>> force;
     std::string last_status;
     long surfaces = 0;
     std::atomic<bool> connected{false}, done{false};
@@ -119,7 +124,7 @@ void receive_loop(igtl::ClientSocket* s, Shared& sh) {
             sh.clips[name] = r;
         } else if (type == "SENSOR" && name.size() > 6 && name.compare(name.size() - 6, 6, ".force") == 0) {
             auto* f = static_cast<igtl::SensorMessage*>(m.GetPointer());
-            if (f->GetLength() == 3) sh.force_n[name.substr(0, name.size() - 6)] = std::sqrt(f->GetValue(0) * f->GetValue(0) + f->GetValue(1) * f->GetValue(1) + f->GetValue(2) * f->GetValue(2));
+            if (f->GetLength() == 3) sh.force[name.substr(0, name.size() - 6)] = {f->GetValue(0), f->GetValue(1), f->GetValue(2)};
         } else if (type == "STATUS") {
             sh.last_status = static_cast<igtl::StatusMessage*>(m.GetPointer())->GetStatusString();
         }
@@ -138,11 +143,94 @@ struct View {
     bool camera_set = false;
     std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
     long renders = 0;
+    // Steering one instrument from the keyboard (without a haptic device).
+    igtl::ClientSocket* sock = nullptr;
+    std::string steer, clip_model;
+    double p[3] = {0, 0, 0}, axis[3] = {0, 0, -1}, up[3] = {0, 1, 0}, opening = 40;
+    bool button = false, placed = false;
+    std::string action;
+    std::vector<std::string> keys;  // scripted key presses, one per frame once the instrument is placed
+    size_t next_key = 0;
+    vtkActor* tool = nullptr;
+    vtkLineSource* tool_line = nullptr;
+    vtkActor* arrow = nullptr;
+    vtkLineSource* arrow_line = nullptr;
     // Screenshot mode.
     std::string screenshot, points_out;
     long after_surfaces = 0;
     bool finished = false;
 };
+
+void send(igtl::ClientSocket* s, igtl::MessageBase* m) {
+    m->Pack();
+    s->Send(m->GetPackPointer(), m->GetPackSize());
+}
+
+/// The steered instrument's state to the server: opening, button, a pending action, then its pose.
+void send_steer(View& v) {
+    auto o = igtl::SensorMessage::New();
+    o->SetDeviceName((v.steer + ".opening").c_str());
+    o->SetLength(1);
+    o->SetValue(0u, v.opening);
+    send(v.sock, o);
+    auto b = igtl::SensorMessage::New();
+    b->SetDeviceName((v.steer + ".button").c_str());
+    b->SetLength(1);
+    b->SetValue(0u, v.button ? 1.0 : 0.0);
+    send(v.sock, b);
+    if (!v.action.empty()) {
+        auto a = igtl::StringMessage::New();
+        a->SetDeviceName((v.steer + ".action").c_str());
+        a->SetString(v.action.c_str());
+        send(v.sock, a);
+        v.action.clear();
+    }
+    auto tm = igtl::TransformMessage::New();
+    tm->SetDeviceName(v.steer.c_str());
+    igtl::Matrix4x4 M;
+    igtl::IdentityMatrix(M);
+    double y[3];
+    vtkMath::Cross(v.axis, v.up, y);
+    for (int r = 0; r < 3; ++r) {
+        M[r][0] = static_cast<float>(v.up[r]);
+        M[r][1] = static_cast<float>(-y[r]);
+        M[r][2] = static_cast<float>(v.axis[r]);
+        M[r][3] = static_cast<float>(v.p[r]);
+    }
+    tm->SetMatrix(M);
+    send(v.sock, tm);
+}
+
+/// One key of the steering: 0.25 mm moves in the view plane (arrows) and along the instrument (i/k), 5° of
+/// opening (o/c), the actions (l/r/g) and the suction button (b).
+void steer_key(View& v, const std::string& key) {
+    constexpr double STEP = 0.25;
+    double right[3];
+    vtkMath::Cross(v.axis, v.up, right);
+    auto move = [&](const double* d, double k) {
+        for (int a = 0; a < 3; ++a) v.p[a] += k * STEP * d[a];
+    };
+    if (key == "Left") move(right, -1);
+    else if (key == "Right") move(right, 1);
+    else if (key == "Up") move(v.up, 1);
+    else if (key == "Down") move(v.up, -1);
+    else if (key == "i") move(v.axis, 1);
+    else if (key == "k") move(v.axis, -1);
+    else if (key == "o") v.opening = std::min(90.0, v.opening + 5);
+    else if (key == "c") v.opening = std::max(0.0, v.opening - 5);
+    else if (key == "l" && !v.clip_model.empty()) v.action = "load " + v.clip_model;
+    else if (key == "r") v.action = "release";
+    else if (key == "g") v.action = "grasp";
+    else if (key == "b") v.button = !v.button;
+    else return;
+    send_steer(v);
+}
+
+/// Each frame: scripted keys (one a frame), then the pose (devices stream theirs continuously).
+void steer_frame(View& v) {
+    if (v.next_key < v.keys.size()) steer_key(v, v.keys[v.next_key++]);
+    send_steer(v);
+}
 
 void write_png(vtkRenderWindow* win, const std::string& path) {
     vtkNew<vtkWindowToImageFilter> w2i;
@@ -158,14 +246,14 @@ void write_png(vtkRenderWindow* win, const std::string& path) {
 void update(View& v) {
     Frame f;
     std::map<std::string, std::array<float, 12>> clips;
-    std::map<std::string, double> forces;
+    std::map<std::string, std::array<double, 3>> forces;
     std::string status;
     long surfaces = 0;
     {
         std::lock_guard<std::mutex> lk(v.sh->mx);
         if (v.sh->frame.serial != v.shown) f = v.sh->frame;
         clips = v.sh->clips;
-        forces = v.sh->force_n;
+        forces = v.sh->force;
         status = v.sh->last_status;
         surfaces = v.sh->surfaces;
     }
@@ -204,6 +292,20 @@ void update(View& v) {
             cam->SetViewUp(V[0][1], V[1][1], V[2][1]);
             v.ren->ResetCamera();
             v.camera_set = true;
+            if (!v.steer.empty()) {  // the steered instrument starts 3 mm in front of the vessel, pointing into the view
+                double d[3] = {V[0][2], V[1][2], V[2][2]}, reach = 0;
+                for (vtkIdType i = 0; i < n; ++i) {
+                    double proj = 0;
+                    for (int a = 0; a < 3; ++a) proj += (f.points[static_cast<size_t>(3 * i + a)] - c[a]) * d[a];
+                    reach = std::max(reach, proj);
+                }
+                for (int a = 0; a < 3; ++a) {
+                    v.p[a] = c[a] + (reach + 3.0) * d[a];
+                    v.axis[a] = -d[a];
+                    v.up[a] = V[a][1];
+                }
+                v.placed = true;
+            }
         }
     }
     for (const auto& [name, M] : clips) {
@@ -228,9 +330,22 @@ void update(View& v) {
     }
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
     std::string line;
-    for (const auto& [ins, fn] : forces) {
+    for (const auto& [ins, fv] : forces) {
         char b[96];
-        std::snprintf(b, sizeof b, "%s %.2f N   ", ins.c_str(), fn);
+        std::snprintf(b, sizeof b, "%s %.2f N   ", ins.c_str(), std::sqrt(fv[0] * fv[0] + fv[1] * fv[1] + fv[2] * fv[2]));
+        line += b;
+    }
+    if (!v.steer.empty() && v.placed) {
+        steer_frame(v);
+        v.tool_line->SetPoint1(v.p);
+        v.tool_line->SetPoint2(v.p[0] - 15 * v.axis[0], v.p[1] - 15 * v.axis[1], v.p[2] - 15 * v.axis[2]);
+        const auto it = forces.find(v.steer);
+        const std::array<double, 3> fv = it == forces.end() ? std::array<double, 3>{0, 0, 0} : it->second;
+        v.arrow_line->SetPoint1(v.p);
+        v.arrow_line->SetPoint2(v.p[0] + 5 * fv[0], v.p[1] + 5 * fv[1], v.p[2] + 5 * fv[2]);  // 1 N = 5 mm
+        char b[128];
+        std::snprintf(b, sizeof b, "[%s: arrows/i/k move, o/c open %.0f deg, l load, r release, g grasp, b button%s]   ", v.steer.c_str(), v.opening,
+                      v.button ? " ON" : "");
         line += b;
     }
     char b[160];
@@ -272,6 +387,10 @@ void on_key(vtkObject* caller, unsigned long, void* data, void*) {
     auto* iren = static_cast<vtkRenderWindowInteractor*>(caller);
     auto& v = *static_cast<View*>(data);
     const std::string key = iren->GetKeySym() ? iren->GetKeySym() : "";
+    if (!v.steer.empty() && v.placed && key != "s") {
+        steer_key(v, key);
+        return;
+    }
     if (key == "s" || key == "S") {
         char name[64];
         std::snprintf(name, sizeof name, "aneuview_%ld.png", static_cast<long>(std::time(nullptr)));
@@ -279,6 +398,16 @@ void on_key(vtkObject* caller, unsigned long, void* data, void*) {
         std::printf("screenshot %s\n", name);
     }
 }
+
+/// Trackball camera for the mouse; VTK's character bindings (r reset, c camera mode, w/s wireframe, e/q exit, …)
+/// are off: the keys steer the instrument.
+class ViewStyle : public vtkInteractorStyleTrackballCamera {
+public:
+    static ViewStyle* New();
+    vtkTypeMacro(ViewStyle, vtkInteractorStyleTrackballCamera)
+    void OnChar() override {}
+};
+vtkStandardNewMacro(ViewStyle)
 
 }  // namespace
 
@@ -294,6 +423,10 @@ int main(int argc, char** argv) {
     app.add_option("--screenshot", screenshot, "write a PNG once --after-surfaces surfaces have arrived, then exit (tests, reports)");
     app.add_option("--after-surfaces", after, "surfaces to wait for before the screenshot")->check(CLI::PositiveNumber)->capture_default_str();
     app.add_option("--points", points_out, "with --screenshot: where some vertices land on it (text: index x y label wx wy wz)");
+    std::string steer, clip_model, keys;
+    app.add_option("--steer", steer, "instrument of the scene to steer from the keyboard (e.g. applier, suction); starts 3 mm in front of the vessel");
+    app.add_option("--clip-model", clip_model, "clip model the 'l' key loads (a name from the scene's clip_models)");
+    app.add_option("--keys", keys, "with --steer: key presses to apply one a frame (comma separated: Left,Right,Up,Down,i,k,o,c,l,r,g,b) — demos, tests");
     app.add_option("--wait-seconds", wait_s, "keep trying to connect this long (the server may still be loading its bundle)")->check(CLI::NonNegativeNumber)->capture_default_str();
     app.add_option("--size", size, "window size W,H")->delimiter(',')->expected(2)->capture_default_str();
     CLI11_PARSE(app, argc, argv);
@@ -355,6 +488,38 @@ int main(int argc, char** argv) {
     v.screenshot = screenshot;
     v.points_out = points_out;
     v.after_surfaces = after;
+    v.sock = sock;
+    v.steer = steer;
+    v.clip_model = clip_model;
+    for (size_t a = 0, b; a < keys.size(); a = b + 1) {
+        b = keys.find(',', a);
+        if (b == std::string::npos) b = keys.size();
+        if (b > a) v.keys.push_back(keys.substr(a, b - a));
+    }
+    vtkNew<vtkLineSource> tool_line, arrow_line;
+    vtkNew<vtkTubeFilter> tool_tube;
+    tool_tube->SetInputConnection(tool_line->GetOutputPort());
+    tool_tube->SetRadius(0.4);
+    tool_tube->SetNumberOfSides(16);
+    vtkNew<vtkPolyDataMapper> tool_map, arrow_map;
+    tool_map->SetInputConnection(tool_tube->GetOutputPort());
+    arrow_map->SetInputConnection(arrow_line->GetOutputPort());
+    vtkNew<vtkActor> tool, arrow;
+    tool->SetMapper(tool_map);
+    tool->GetProperty()->SetColor(0.3, 0.55, 0.85);
+    arrow->SetMapper(arrow_map);
+    arrow->GetProperty()->SetColor(0.1, 0.6, 0.2);
+    arrow->GetProperty()->SetLineWidth(3);
+    v.tool = tool;
+    v.tool_line = tool_line;
+    v.arrow = arrow;
+    v.arrow_line = arrow_line;
+    if (!steer.empty()) {
+        ren->AddActor(tool);
+        ren->AddActor(arrow);
+    }
+    vtkNew<ViewStyle> style;
+    iren->SetInteractorStyle(style);
     iren->Initialize();
     vtkNew<vtkCallbackCommand> timer;
     timer->SetCallback(on_timer);

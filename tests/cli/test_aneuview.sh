@@ -6,6 +6,8 @@
 # land on it. The pixels there must show each vertex's label colour (artery red, aneurysm yellow; a vertex behind
 # the front surface may show the other, so at least 80 % per label), and the background must be white away from
 # the vessel. Then aneuview renders for 3 s and its frame rate is printed (a figure for the bench, not asserted).
+# Last, aneuview steers the suction tube from the keyboard (scripted keys: 20 x 0.25 mm into the view, from 3 mm
+# in front of the vessel): the server's report must show a force, and the tool is drawn in the screenshot.
 set -eu
 prep=$1 sim=$2 view=$3 w=$4/aneuview
 rm -rf "$w" && mkdir -p "$w"
@@ -18,7 +20,7 @@ cat > "$w/scene.json" <<JSON
  "instruments": [{"name": "suction", "kind": "suction", "radius_mm": 0.75}]}
 JSON
 port=$(( 20000 + RANDOM % 20000 ))
-"$sim" serve "$w/scene.json" --port $port --max-seconds 30 --idle-seconds 3 > "$w/serve.out" 2> "$w/serve.err" &
+"$sim" serve "$w/scene.json" --port $port --max-seconds 60 --idle-seconds 3 --report "$w/report.json" > "$w/serve.out" 2> "$w/serve.err" &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
 xvfb-run -a "$view" --port $port --screenshot "$w/view.png" --after-surfaces 3 --points "$w/points.txt" --size 600,500 > "$w/view.out"
@@ -77,3 +79,16 @@ PY
 # The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
 xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
+# Steering: 20 presses of 'i' move the suction tube 5 mm along its axis, through the wall in front of it.
+keys=$(printf 'i,%.0s' $(seq 20))
+xvfb-run -a "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
+wait $server
+trap - EXIT
+python3 - "$w/report.json" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[1]))
+print('steered session: peak force %.4f N, %d poses, %d clients' % (r['peak_force_n'], r['igtl']['poses'], r['igtl']['clients_connected']))
+assert r['igtl']['clients_connected'] == 3, r['igtl']
+assert r['igtl']['poses'] >= 20, 'the steered poses reached the server'
+assert r['peak_force_n'] > 0.005, 'the suction tube steered into the wall was pushed back'
+PY
