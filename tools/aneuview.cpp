@@ -423,7 +423,9 @@ int main(int argc, char** argv) {
     app.add_option("--screenshot", screenshot, "write a PNG once --after-surfaces surfaces have arrived, then exit (tests, reports)");
     app.add_option("--after-surfaces", after, "surfaces to wait for before the screenshot")->check(CLI::PositiveNumber)->capture_default_str();
     app.add_option("--points", points_out, "with --screenshot: where some vertices land on it (text: index x y label wx wy wz)");
-    std::string steer, clip_model, keys;
+    std::string steer, clip_model, keys, stereo;
+    app.add_option("--stereo", stereo, "side-by-side: a stereo pair, left and right eye in the two halves of the window (as the published system's display)")
+        ->check(CLI::IsMember({"side-by-side"}));
     app.add_option("--steer", steer, "instrument of the scene to steer from the keyboard (e.g. applier, suction); starts 3 mm in front of the vessel");
     app.add_option("--clip-model", clip_model, "clip model the 'l' key loads (a name from the scene's clip_models)");
     app.add_option("--keys", keys, "with --steer: key presses to apply one a frame (comma separated: Left,Right,Up,Down,i,k,o,c,l,r,g,b) — demos, tests");
@@ -477,6 +479,11 @@ int main(int argc, char** argv) {
     win->AddRenderer(ren);
     win->SetSize(size[0], size[1]);
     win->SetWindowName("aneuview");
+    if (stereo == "side-by-side") {
+        win->SetStereoCapableWindow(1);
+        win->SetStereoTypeToSplitViewportHorizontal();
+        win->StereoRenderOn();
+    }
     vtkNew<vtkRenderWindowInteractor> iren;
     iren->SetRenderWindow(win);
     View v;

@@ -79,6 +79,35 @@ PY
 # The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
 xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
+# Stereo, side by side: both halves show the vessel, the same size (one eye each).
+xvfb-run -a "$view" --port $port --stereo side-by-side --screenshot "$w/stereo.png" --after-surfaces 3 --size 800,400 > "$w/stereo.out"
+python3 - "$w/stereo.png" <<'PY'
+import struct, sys, zlib
+d = open(sys.argv[1], 'rb').read(); pos, idat = 8, b''
+while pos < len(d):
+    n, t = struct.unpack('>I4s', d[pos:pos + 8]); body = d[pos + 8:pos + 8 + n]
+    if t == b'IHDR': W, H, _, ct = struct.unpack('>IIBB', body[:10]); bpp = 3 if ct == 2 else 4
+    elif t == b'IDAT': idat += body
+    pos += 12 + n
+raw = zlib.decompress(idat); stride = W * bpp; prev = bytearray(stride); off = 0; cols = [0] * W
+for y in range(H):
+    f = raw[off]; line = bytearray(raw[off + 1:off + 1 + stride]); off += 1 + stride
+    for i in range(stride):
+        a = line[i - bpp] if i >= bpp else 0; b = prev[i]; c = prev[i - bpp] if i >= bpp else 0
+        if f == 1: line[i] = (line[i] + a) & 255
+        elif f == 2: line[i] = (line[i] + b) & 255
+        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
+        elif f == 4:
+            p = a + b - c; pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+    prev = line
+    for x in range(W):
+        if min(line[x * bpp:x * bpp + 3]) < 200 and y < H - 60: cols[x] += 1  # not background (the HUD at the bottom left aside)
+left, right = sum(cols[:W // 2]), sum(cols[W // 2:])
+print('stereo: vessel pixels left %d, right %d' % (left, right))
+assert left > 2000 and right > 2000, 'both eyes see the vessel'
+assert abs(left - right) < 0.25 * max(left, right), 'the two views are alike'
+PY
 # Steering: 20 presses of 'i' move the suction tube 5 mm along its axis, through the wall in front of it.
 keys=$(printf 'i,%.0s' $(seq 20))
 xvfb-run -a "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
@@ -88,7 +117,7 @@ python3 - "$w/report.json" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))
 print('steered session: peak force %.4f N, %d poses, %d clients' % (r['peak_force_n'], r['igtl']['poses'], r['igtl']['clients_connected']))
-assert r['igtl']['clients_connected'] == 3, r['igtl']
+assert r['igtl']['clients_connected'] == 4, r['igtl']
 assert r['igtl']['poses'] >= 20, 'the steered poses reached the server'
 assert r['peak_force_n'] > 0.005, 'the suction tube steered into the wall was pushed back'
 PY
