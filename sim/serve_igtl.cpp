@@ -145,7 +145,7 @@ public:
             m->SetDeviceName((ins[i].name + ".force").c_str());
             stamp(m, m_opt.deterministic ? t : now());  // real time: the server's clock, the one poses are taken on
             m->SetLength(3);
-            for (unsigned k = 0; k < 3; ++k) m->SetValue(k, F[i][static_cast<Eigen::Index>(k)]);
+            for (unsigned k = 0; k < 3; ++k) m->SetValue(k, (m_opt.ras && k < 2 ? -1.0 : 1.0) * F[i][static_cast<Eigen::Index>(k)]);
             msgs.push_back(packed(m));
         }
         for_clients([&](Client& c) {
@@ -172,7 +172,8 @@ public:
                 }
         }
         auto pts = igtl::PolyDataPointArray::New();
-        for (Eigen::Index v = 0; v < x.rows(); ++v) pts->AddPoint(static_cast<float>(x(v, 0)), static_cast<float>(x(v, 1)), static_cast<float>(x(v, 2)));
+        const float sx = m_opt.ras ? -1.0f : 1.0f;  // RAS: x and y negated
+        for (Eigen::Index v = 0; v < x.rows(); ++v) pts->AddPoint(sx * static_cast<float>(x(v, 0)), sx * static_cast<float>(x(v, 1)), static_cast<float>(x(v, 2)));
         auto tri = igtl::PolyDataCellArray::New();
         for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
             igtlUint32 c[3] = {static_cast<igtlUint32>(s.F(f, 0)), static_cast<igtlUint32>(s.F(f, 1)), static_cast<igtlUint32>(s.F(f, 2))};
@@ -206,6 +207,9 @@ public:
             }
             M[3][0] = M[3][1] = M[3][2] = 0;
             M[3][3] = 1;
+            if (m_opt.ras)
+                for (int r = 0; r < 2; ++r)
+                    for (int col = 0; col < 4; ++col) M[r][col] = -M[r][col];
             tm->SetMatrix(M);
             poses.push_back(packed(tm));
         }
@@ -396,6 +400,9 @@ private:
         if (type == "TRANSFORM") {
             igtl::Matrix4x4 M;
             static_cast<igtl::TransformMessage*>(msg.GetPointer())->GetMatrix(M);
+            if (m_opt.ras)  // back to the bundle's frame
+                for (int r = 0; r < 2; ++r)
+                    for (int col = 0; col < 4; ++col) M[r][col] = -M[r][col];
             for (int r = 0; r < 3; ++r)
                 for (int col : {0, 2, 3})
                     if (!std::isfinite(M[r][col])) {  // a NaN pose never reaches the queue (where a newer pose would replace it)

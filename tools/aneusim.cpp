@@ -71,6 +71,7 @@ int main(int argc, char** argv) {
         ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
     serve->add_option("--polydata-hz", sopt.polydata_hz, "deformed surface to the clients [Hz]")->check(CLI::PositiveNumber)->capture_default_str();
+    serve->add_flag("--ras", sopt.ras, "coordinates to and from the clients in RAS (3D Slicer) instead of the bundle's LPS: x and y negated");
     serve->add_option("--bundle", serve_bundle, "case bundle instead of the scene's");
     serve->add_option("--report", serve_report, "assessment report (JSON; a readable summary goes to REPORT.txt)");
     serve->add_option("--log", serve_log, "per-frame log (CSV) instead of the scene's");

@@ -142,6 +142,7 @@ void send_sample(igtl::ClientSocket* s, const Sample& x) {
 struct Received {
     std::vector<std::pair<double, std::array<double, 3>>> forces;
     int polydata = 0, polydata_points = 0, clip_transforms = 0;
+    std::array<float, 3> first_point{0, 0, 0};  // vertex 0 of the first surface
     std::vector<std::string> status;
 };
 
@@ -174,8 +175,9 @@ Received receive_all(igtl::ClientSocket* s) {
             auto* f = static_cast<igtl::SensorMessage*>(m.GetPointer());
             if (std::string(f->GetDeviceName()) == "applier.force" && f->GetLength() == 3) r.forces.push_back({t, {f->GetValue(0), f->GetValue(1), f->GetValue(2)}});
         } else if (type == "POLYDATA") {
-            ++r.polydata;
-            r.polydata_points = static_cast<igtl::PolyDataMessage*>(m.GetPointer())->GetPoints()->GetNumberOfPoints();
+            auto* pd = static_cast<igtl::PolyDataMessage*>(m.GetPointer());
+            if (r.polydata++ == 0) pd->GetPoints()->GetPoint(0u, r.first_point.data());
+            r.polydata_points = pd->GetPoints()->GetNumberOfPoints();
         } else if (type == "STATUS") {
             r.status.push_back(static_cast<igtl::StatusMessage*>(m.GetPointer())->GetStatusString());
         } else {
@@ -212,47 +214,59 @@ TEST(Serve, ForcesOverLoopbackEqualTheTextStreamsInDeterministicMode) {
     for (const auto& [t, f] : ref) peak = std::max(peak, f.norm());
     ASSERT_GT(peak, 0.0) << "the session touches the vessel";
 
-    // The server, deterministic, driven by an OpenIGTLink client.
-    test::TempDir d2("serve_run");
-    sim::Simulator sim = make_sim(d2.file(""));
-    std::promise<int> port;
-    sim::ServeOptions so;
-    so.port = 0;
-    so.deterministic = true;
-    so.polydata_hz = 50;
-    so.on_listening = [&](int p) { port.set_value(p); };
-    sim::ServeCounters c;
-    auto served = std::async(std::launch::async, [&] { return sim::serve_scene(sim, so, &c); });
-    auto sock = connect_to(port.get_future().get());
-    ASSERT_TRUE(sock->GetConnected());
-    auto got = std::async(std::launch::async, [&] { return receive_all(sock); });
-    for (const auto& s : samples) send_sample(sock, s);
-    auto stop = igtl::StringMessage::New();
-    stop->SetDeviceName("aneusim");
-    stop->SetString("stop");
-    send(sock, stop);
-    const sim::Assessment a = served.get();
-    const Received r = got.get();
-    sock->CloseSocket();
+    // The server, deterministic, driven by an OpenIGTLink client; then the same in RAS (3D Slicer's frame: x and y
+    // negated both ways).
+    for (const bool ras : {false, true}) {
+        SCOPED_TRACE(ras ? "ras" : "bundle frame");
+        test::TempDir d2(ras ? "serve_ras" : "serve_run");
+        sim::Simulator sim = make_sim(d2.file(""));
+        std::promise<int> port;
+        sim::ServeOptions so;
+        so.port = 0;
+        so.deterministic = true;
+        so.polydata_hz = 50;
+        so.ras = ras;
+        so.on_listening = [&](int p) { port.set_value(p); };
+        sim::ServeCounters c;
+        auto served = std::async(std::launch::async, [&] { return sim::serve_scene(sim, so, &c); });
+        auto sock = connect_to(port.get_future().get());
+        ASSERT_TRUE(sock->GetConnected());
+        auto got = std::async(std::launch::async, [&] { return receive_all(sock); });
+        for (Sample s : samples) {
+            if (ras)
+                for (float* v : {s.p, s.axis, s.up}) v[0] = -v[0], v[1] = -v[1];
+            send_sample(sock, s);
+        }
+        auto stop = igtl::StringMessage::New();
+        stop->SetDeviceName("aneusim");
+        stop->SetString("stop");
+        send(sock, stop);
+        const sim::Assessment a = served.get();
+        const Received r = got.get();
+        sock->CloseSocket();
 
-    EXPECT_EQ(a.clips_used, 1);
-    EXPECT_EQ(a.skipped_inputs, 0);
-    EXPECT_EQ(c.poses, static_cast<long>(samples.size()));
-    EXPECT_EQ(c.dropped_unknown + c.dropped_malformed + c.dropped_garbage + c.dropped_oversize, 0);
-    ASSERT_EQ(r.forces.size(), ref.size()) << "one force per haptic tick";
-    double worst = 0;
-    for (size_t k = 0; k < ref.size(); ++k) {
-        EXPECT_NEAR(r.forces[k].first, ref[k].first, 1e-9);
-        for (int i = 0; i < 3; ++i) worst = std::max(worst, std::abs(r.forces[k].second[static_cast<size_t>(i)] - ref[k].second[i]));
+        EXPECT_EQ(a.clips_used, 1);
+        EXPECT_EQ(a.skipped_inputs, 0);
+        EXPECT_EQ(c.poses, static_cast<long>(samples.size()));
+        EXPECT_EQ(c.dropped_unknown + c.dropped_malformed + c.dropped_garbage + c.dropped_oversize, 0);
+        ASSERT_EQ(r.forces.size(), ref.size()) << "one force per haptic tick";
+        double worst = 0;
+        for (size_t k = 0; k < ref.size(); ++k) {
+            EXPECT_NEAR(r.forces[k].first, ref[k].first, 1e-9);
+            for (int i = 0; i < 3; ++i) worst = std::max(worst, std::abs(r.forces[k].second[static_cast<size_t>(i)] - (ras && i < 2 ? -1 : 1) * ref[k].second[i]));
+        }
+        std::printf("serve: %zu forces, peak %.4f N, largest difference %.3g N; %d polydata of %d points, %d clip poses, %zu status\n", r.forces.size(), peak,
+                    worst, r.polydata, r.polydata_points, r.clip_transforms, r.status.size());
+        EXPECT_EQ(worst, 0.0) << "the same samples through the same parser: bit-identical forces";
+        EXPECT_EQ(r.polydata, static_cast<int>((ref.size() - 1) / 20 + 1));  // every 20th tick at 1 kHz: 50 Hz, every frame in lockstep
+        EXPECT_EQ(r.polydata_points, static_cast<int>(sim.model().surface.size()));
+        EXPECT_GT(r.clip_transforms, 0);
+        ASSERT_FALSE(r.status.empty());
+        EXPECT_EQ(r.status.back(), "session ended");
+        EXPECT_NEAR(r.first_point[0], (ras ? -1 : 1) * sim.model().surface.X(0, 0), 1e-5);
+        EXPECT_NEAR(r.first_point[1], (ras ? -1 : 1) * sim.model().surface.X(0, 1), 1e-5);
+        EXPECT_NEAR(r.first_point[2], sim.model().surface.X(0, 2), 1e-5);
     }
-    std::printf("serve: %zu forces, peak %.4f N, largest difference %.3g N; %d polydata of %d points, %d clip poses, %zu status\n", r.forces.size(), peak,
-                worst, r.polydata, r.polydata_points, r.clip_transforms, r.status.size());
-    EXPECT_EQ(worst, 0.0) << "the same samples through the same parser: bit-identical forces";
-    EXPECT_EQ(r.polydata, static_cast<int>((ref.size() - 1) / 20 + 1));  // every 20th tick at 1 kHz: 50 Hz, every frame in lockstep
-    EXPECT_EQ(r.polydata_points, static_cast<int>(sim.model().surface.size()));
-    EXPECT_GT(r.clip_transforms, 0);
-    ASSERT_FALSE(r.status.empty());
-    EXPECT_EQ(r.status.back(), "session ended");
 }
 
 TEST(Serve, BadClientsAreCountedAndDroppedWhileTheSessionGoesOn) {

@@ -17,6 +17,8 @@ struct ServeOptions {
     double idle_seconds = 10.0;  ///< stop after this long without any client (0: never); a client that leaves may come back
     double polydata_hz = 30.0;   ///< the deformed surface to the clients
     int max_clients = 2;         ///< a device bridge and a viewer
+    bool ras = false;            ///< coordinates to and from the clients in RAS (3D Slicer's convention): x and y negated;
+                                 ///< otherwise the bundle's frame (the CT's physical frame as ITK reads it: LPS)
     std::function<void(int port)> on_listening;  ///< called as the server's clock starts (real-time time stamps count from here)
     std::function<void(const std::string&)> on_message;
 };
