@@ -30,6 +30,8 @@ struct SegmentParams {
     bool fill_holes = true;
     double min_end_area_mm2 = 0.5;                ///< smaller crossings of the ROI border are not vessel ends
     double end_inset_mm = 0.0;                    ///< end plane distance inside the border; 0 = automatic
+    double bone_clearance_mm = 2.0;               ///< with automatic bone detection: no lumen within this of bone
+    double air_clearance_mm = 1.5;                ///< likewise, no lumen within this of air (< −300 HU: sinus walls blur into contrast)
     std::vector<EndPlane> planes;                 ///< given end planes (replace the detected ones)
 };
 /// The options of `aneuprep segment`, declared once (command line, case config, --set, validation,
@@ -49,7 +51,10 @@ inline const opt::Spec<SegmentParams>& segment_spec() {
             .text("select", &P::select, {"seed", "largest"}, "seed: the seed-connected lumen; largest: the largest component")
             .flag("fill-holes", &P::fill_holes, "fill cavities of the mask")
             .real("min-end-area-mm2", &P::min_end_area_mm2, "mm²", gt(0), "smaller crossings of the ROI border are not vessel ends")
-            .real("end-inset-mm", &P::end_inset_mm, "mm", ge(0), "end plane distance inside the ROI border along the centerline (0 = automatic)", "auto");
+            .real("end-inset-mm", &P::end_inset_mm, "mm", ge(0), "end plane distance inside the ROI border along the centerline (0 = automatic)", "auto")
+            .real("bone-clearance-mm", &P::bone_clearance_mm, "mm", closed(0, 10),
+                  "with the automatic threshold, when bone brighter than the vessels is found: no lumen within this of it (its blurred rim)")
+            .real("air-clearance-mm", &P::air_clearance_mm, "mm", closed(0, 10), "with the automatic threshold, when bone is found: no lumen within this of air (< -300 HU: thin bone round the sinuses)");
         Option planes;
         planes.key = "plane";
         planes.name = "planes";
