@@ -354,7 +354,7 @@ void update(View& v) {
     v.hud->SetInput((line + b + (status.empty() ? "" : "\n" + status)).c_str());
     v.win->Render();
     ++v.renders;
-    if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0) {
+    if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0 && v.next_key >= v.keys.size()) {
         write_png(v.win, v.screenshot);
         if (!v.points_out.empty()) {
             // Where a few vertices land on the screenshot (display coordinates, origin bottom left), with their label.

@@ -10,6 +10,7 @@
 # in front of the vessel): the server's report must show a force, and the tool is drawn in the screenshot.
 set -eu
 prep=$1 sim=$2 view=$3 w=$4/aneuview
+here=$(cd "$(dirname "$0")" && pwd)
 rm -rf "$w" && mkdir -p "$w"
 "$prep" tubewall -o "$w/wall.h5" --sac-radius-mm 2 --neck-radius-mm 1.3 --length-mm 10 --edge-mm 0.3 -q
 "$prep" tetmesh "$w/wall.h5" -o "$w/vol.h5" -q
@@ -20,43 +21,16 @@ cat > "$w/scene.json" <<JSON
  "instruments": [{"name": "suction", "kind": "suction", "radius_mm": 0.75}]}
 JSON
 port=$(( 20000 + RANDOM % 20000 ))
-"$sim" serve "$w/scene.json" --port $port --max-seconds 60 --idle-seconds 3 --report "$w/report.json" > "$w/serve.out" 2> "$w/serve.err" &
+"$sim" serve "$w/scene.json" --port $port --max-seconds 120 --idle-seconds 10 --report "$w/report.json" > "$w/serve.out" 2> "$w/serve.err" &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
 xvfb-run -a "$view" --port $port --screenshot "$w/view.png" --after-surfaces 3 --points "$w/points.txt" --size 600,500 > "$w/view.out"
-python3 - "$w/view.png" "$w/points.txt" <<'PY'
-import struct, sys, zlib
+python3 - "$w/view.png" "$w/points.txt" "$here" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[3])
+from png_pixels import read_png
 png, pts = sys.argv[1], sys.argv[2]
-data = open(png, 'rb').read()
-assert data[:8] == b'\x89PNG\r\n\x1a\n', 'not a PNG'
-pos, idat, W = 8, b'', 0
-while pos < len(data):
-    n, t = struct.unpack('>I4s', data[pos:pos + 8])
-    body = data[pos + 8:pos + 8 + n]
-    if t == b'IHDR':
-        W, H, depth, ctype = struct.unpack('>IIBB', body[:10])
-        assert depth == 8 and ctype in (2, 6), (depth, ctype)
-        bpp = 3 if ctype == 2 else 4
-    elif t == b'IDAT':
-        idat += body
-    pos += 12 + n
-raw = zlib.decompress(idat)
-stride = W * bpp
-rows, prev, off = [], bytearray(stride), 0
-for y in range(H):
-    f = raw[off]; line = bytearray(raw[off + 1:off + 1 + stride]); off += 1 + stride
-    for i in range(stride):
-        a = line[i - bpp] if i >= bpp else 0
-        b = prev[i]; c = prev[i - bpp] if i >= bpp else 0
-        if f == 1: line[i] = (line[i] + a) & 255
-        elif f == 2: line[i] = (line[i] + b) & 255
-        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
-        elif f == 4:
-            p = a + b - c; pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-    rows.append(line); prev = line
-def pixel(x, y):  # display coordinates: origin bottom left
-    r = rows[H - 1 - y]; return r[x * bpp], r[x * bpp + 1], r[x * bpp + 2]
+W, H, pixel = read_png(png)
 lines = open(pts).read().split('\n')
 good, total = {0: 0, 1: 0}, {0: 0, 1: 0}
 for l in lines[1:]:
@@ -81,28 +55,12 @@ xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
 # Stereo, side by side: both halves show the vessel, the same size (one eye each).
 xvfb-run -a "$view" --port $port --stereo side-by-side --screenshot "$w/stereo.png" --after-surfaces 3 --size 800,400 > "$w/stereo.out"
-python3 - "$w/stereo.png" <<'PY'
-import struct, sys, zlib
-d = open(sys.argv[1], 'rb').read(); pos, idat = 8, b''
-while pos < len(d):
-    n, t = struct.unpack('>I4s', d[pos:pos + 8]); body = d[pos + 8:pos + 8 + n]
-    if t == b'IHDR': W, H, _, ct = struct.unpack('>IIBB', body[:10]); bpp = 3 if ct == 2 else 4
-    elif t == b'IDAT': idat += body
-    pos += 12 + n
-raw = zlib.decompress(idat); stride = W * bpp; prev = bytearray(stride); off = 0; cols = [0] * W
-for y in range(H):
-    f = raw[off]; line = bytearray(raw[off + 1:off + 1 + stride]); off += 1 + stride
-    for i in range(stride):
-        a = line[i - bpp] if i >= bpp else 0; b = prev[i]; c = prev[i - bpp] if i >= bpp else 0
-        if f == 1: line[i] = (line[i] + a) & 255
-        elif f == 2: line[i] = (line[i] + b) & 255
-        elif f == 3: line[i] = (line[i] + (a + b) // 2) & 255
-        elif f == 4:
-            p = a + b - c; pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-            line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-    prev = line
-    for x in range(W):
-        if min(line[x * bpp:x * bpp + 3]) < 200 and y < H - 60: cols[x] += 1  # not background (the HUD at the bottom left aside)
+python3 - "$w/stereo.png" "$here" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[2])
+from png_pixels import read_png
+W, H, pixel = read_png(sys.argv[1])
+cols = [sum(1 for y in range(60, H) if min(pixel(x, y)) < 200) for x in range(W)]  # not background (the HUD at the bottom aside)
 left, right = sum(cols[:W // 2]), sum(cols[W // 2:])
 print('stereo: vessel pixels left %d, right %d' % (left, right))
 assert left > 2000 and right > 2000, 'both eyes see the vessel'

@@ -4,6 +4,7 @@
 // surfaces from other tools, bad inputs.
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <map>
 
 #include <Eigen/Geometry>
@@ -492,27 +493,33 @@ TEST(GeometryErrors, BadInputsAreInputErrors) {
     fs::remove_all(dir);
 }
 
-// A segmentation's closed surface: a tube of radius 1.5 mm along z with rounded (hemispherical) blind ends at
-// z = ±11.5 and a sidewall sac of radius 2.5 mm. The ends are cut where the tube is tubular again (|z| ≤ 10),
-// perpendicular to the axis, and the sac is kept whole and labelled.
-TEST(SurfaceInput, RoundedEndsAreCutWhereTheVesselIsTubular) {
+namespace {
+// A volume of 0.2 mm voxels over [-4.9, ...] × [-4.9, ...] × [-13.9, ...] whose value is an implicit field (> 0 inside).
+Volume<float> implicit_volume(std::array<std::int64_t, 3> size, double x0, const std::function<double(const Eigen::Vector3d&)>& field) {
     Volume<float> v;
-    v.grid.size = {50, 60, 140};
+    v.grid.size = size;
     v.grid.spacing = {0.2, 0.2, 0.2};
-    v.grid.origin = {-4.9, -4.9, -13.9};
+    v.grid.origin = {x0, -4.9, -13.9};
     v.data.resize(v.grid.voxel_count());
-    const double R = 1.5, L = 10.0, Rs = 2.5;
-    const Eigen::Vector3d sac(0, 3.4, 1.0);
     for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
         for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
             for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
                 const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
-                const Eigen::Vector3d p(x[0], x[1], x[2]);
-                const double zc = std::clamp(p.z(), -L, L);
-                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
-                const double ball = Rs - (p - sac).norm();
-                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max(tube, ball));
+                v.data[v.grid.linear(i, j, k)] = static_cast<float>(field(Eigen::Vector3d(x[0], x[1], x[2])));
             }
+    return v;
+}
+// A tube of radius R along z, with hemispherical ends at ±L (beyond the box when L is large).
+double tube_field(const Eigen::Vector3d& p, double R, double L) { return R - (p - Eigen::Vector3d(0, 0, std::clamp(p.z(), -L, L))).norm(); }
+}  // namespace
+
+// A segmentation's closed surface: a tube of radius 1.5 mm along z with rounded (hemispherical) blind ends at
+// z = ±11.5 and a sidewall sac of radius 2.5 mm. The ends are cut where the tube is tubular again (|z| ≤ 10),
+// perpendicular to the axis, and the sac is kept whole and labelled.
+TEST(SurfaceInput, RoundedEndsAreCutWhereTheVesselIsTubular) {
+    const double R = 1.5, L = 10.0, Rs = 2.5;
+    const Eigen::Vector3d sac(0, 3.4, 1.0);
+    const Volume<float> v = implicit_volume({50, 60, 140}, -4.9, [&](const Eigen::Vector3d& p) { return std::max(tube_field(p, R, L), Rs - (p - sac).norm()); });
     const SurfaceData closed = isosurface(v, 0.0, true);
     const RoundedEnds ends = find_rounded_ends(closed, 0.2);
     ASSERT_EQ(ends.planes.size(), 2u);
@@ -551,22 +558,11 @@ TEST(SurfaceInput, RoundedEndsAreCutWhereTheVesselIsTubular) {
 // radius 1.2 mm whose far side is 1.73 radii from the axis — above the ratio that seeds a sac. Both are candidates;
 // the sac is kept and the bump becomes artery.
 TEST(SurfaceInput, TheMostProminentSacCandidateIsKept) {
-    Volume<float> v;
-    v.grid.size = {50, 60, 140};
-    v.grid.spacing = {0.2, 0.2, 0.2};
-    v.grid.origin = {-4.9, -4.9, -13.9};
-    v.data.resize(v.grid.voxel_count());
     const double R = 1.5, L = 30.0, Rs = 2.5, Rb = 1.2;  // the tube leaves the box: two open ends
     const Eigen::Vector3d sac(0, 3.4, 1.0), bump(0, -1.4, -5.0);
-    for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
-        for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
-            for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
-                const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
-                const Eigen::Vector3d p(x[0], x[1], x[2]);
-                const double zc = std::clamp(p.z(), -L, L);
-                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
-                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max({tube, Rs - (p - sac).norm(), Rb - (p - bump).norm()}));
-            }
+    const Volume<float> v = implicit_volume({50, 60, 140}, -4.9, [&](const Eigen::Vector3d& p) {
+        return std::max({tube_field(p, R, L), Rs - (p - sac).norm(), Rb - (p - bump).norm()});
+    });
     const fs::path dir = fs::temp_directory_path() / ("aneu_one_sac_" + std::to_string(::getpid()));
     fs::create_directories(dir);
     write_mesh_file((dir / "two.stl").string(), isosurface(v, 0.0, true));
@@ -591,23 +587,12 @@ TEST(SurfaceInput, TheMostProminentSacCandidateIsKept) {
 // point) and splitting its triangles does not converge; the wall stage remeshes a finer zone there. The wall is
 // closed, free of self-intersections, and the zone is reported.
 TEST(Wall, ASharpThinWalledTipGetsAFinerZone) {
-    Volume<float> v;
-    v.grid.size = {50, 40, 140};
-    v.grid.spacing = {0.2, 0.2, 0.2};
-    v.grid.origin = {-3.9, -3.9, -13.9};
-    v.data.resize(v.grid.voxel_count());
     const double R = 1.5, L = 10.0, x0 = 1.2, x1 = 4.4, r0 = 0.45;
-    for (std::int64_t k = 0; k < v.grid.size[2]; ++k)
-        for (std::int64_t j = 0; j < v.grid.size[1]; ++j)
-            for (std::int64_t i = 0; i < v.grid.size[0]; ++i) {
-                const auto x = v.grid.point(static_cast<double>(i), static_cast<double>(j), static_cast<double>(k));
-                const Eigen::Vector3d p(x[0], x[1], x[2]);
-                const double zc = std::clamp(p.z(), -L, L);
-                const double tube = R - (p - Eigen::Vector3d(0, 0, zc)).norm();
-                const double along = std::clamp((p.x() - x0) / (x1 - x0), 0.0, 1.0);
-                const double cone = p.x() < x0 || p.x() > x1 ? -1.0 : r0 * (1 - along) - std::hypot(p.y(), p.z() - 1.0);
-                v.data[v.grid.linear(i, j, k)] = static_cast<float>(std::max(tube, cone));
-            }
+    const Volume<float> v = implicit_volume({50, 40, 140}, -3.9, [&](const Eigen::Vector3d& p) {
+        const double along = std::clamp((p.x() - x0) / (x1 - x0), 0.0, 1.0);
+        const double cone = p.x() < x0 || p.x() > x1 ? -1.0 : r0 * (1 - along) - std::hypot(p.y(), p.z() - 1.0);
+        return std::max(tube_field(p, R, L), cone);
+    });
     const fs::path dir = fs::temp_directory_path() / ("aneu_tip_" + std::to_string(::getpid()));
     fs::create_directories(dir);
     write_mesh_file((dir / "tip.stl").string(), isosurface(v, 0.0, true));
