@@ -7,7 +7,10 @@
 //     time stamps are on the server's clock, which starts when it listens), p50/p99/max;
 //   - the haptic loop's rate and period p99 (the session report), the physics rate;
 //   - the surfaces (POLYDATA) each client received per second, and their size.
-// Usage: aneu_bench_serve SCENE [--seconds S] [--out results.md]   (the scene's instruments and keyframes are used;
+// With --flood, a third client meanwhile sends 10,000 messages a second (TRANSFORMs of an unknown device, every
+// 100th a NaN pose of the first instrument) and a fourth connects every 0.5 s, sends garbage and is dropped: the
+// haptic loop's rate and period under that load.
+// Usage: aneu_bench_serve SCENE [--seconds S] [--out results.md] [--flood 1]   (the scene's instruments and keyframes are used;
 // its bundle, relative to the scene file)
 #include <algorithm>
 #include <atomic>
@@ -116,10 +119,12 @@ int main(int argc, char** argv) {
         return 2;
     }
     double seconds = 0;
+    bool flood = false;
     std::string out;
     for (int a = 2; a + 1 < argc; a += 2) {
         if (!std::strcmp(argv[a], "--seconds")) seconds = std::atof(argv[a + 1]);
         if (!std::strcmp(argv[a], "--out")) out = argv[a + 1];
+        if (!std::strcmp(argv[a], "--flood")) flood = std::atoi(argv[a + 1]) != 0;
     }
     sim::Scene scene = sim::read_scene(argv[1]);
     const sim::Scene script = scene;  // the keyframes the client replays
@@ -143,6 +148,7 @@ int main(int argc, char** argv) {
     Clock::time_point t0;
     sim::ServeOptions so;
     so.port = 0;
+    so.max_clients = flood ? 4 : 2;
     so.on_listening = [&](int p) {
         t0 = Clock::now();
         port_p.set_value(p);
@@ -155,6 +161,38 @@ int main(int argc, char** argv) {
     auto dev_reader = std::async(std::launch::async, [&] { return read_all(device, t0, first + ".force"); });
     auto view_reader = std::async(std::launch::async, [&] { return read_all(viewer, t0, "-"); });
 
+    std::atomic<bool> flooding{flood};
+    std::thread flooder, garbler;
+    if (flood) {
+        flooder = std::thread([&] {
+            auto s = connect_to(port);
+            const auto f0 = Clock::now();
+            for (long k = 0; flooding; ++k) {
+                std::this_thread::sleep_until(f0 + std::chrono::microseconds(100 * k));
+                auto tm = igtl::TransformMessage::New();
+                igtl::Matrix4x4 M;
+                igtl::IdentityMatrix(M);
+                if (k % 100 == 0) {
+                    tm->SetDeviceName(script.instruments.front().name.c_str());
+                    M[0][3] = std::nanf("");
+                } else {
+                    tm->SetDeviceName("flood");
+                }
+                tm->SetMatrix(M);
+                send(s, tm);
+            }
+            s->CloseSocket();
+        });
+        garbler = std::thread([&] {
+            const std::string junk(256, '\x5a');
+            while (flooding) {
+                auto s = connect_to(port);
+                s->Send(junk.data(), static_cast<int>(junk.size()));
+                std::this_thread::sleep_for(std::chrono::milliseconds(500));
+                s->CloseSocket();
+            }
+        });
+    }
     // The device: every instrument's pose each millisecond of the script, on the wall clock; the time each pose of
     // the first instrument left, on the server's clock.
     std::vector<double> sent;
@@ -200,6 +238,9 @@ int main(int argc, char** argv) {
         }
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    flooding = false;
+    if (flooder.joinable()) flooder.join();
+    if (garbler.joinable()) garbler.join();
     auto stop = igtl::StringMessage::New();
     stop->SetDeviceName("aneusim");
     stop->SetString("stop");
@@ -225,15 +266,18 @@ int main(int argc, char** argv) {
     const double span = dr.forces.empty() ? 0 : dr.forces.back().second - dr.forces.front().second;
     char buf[2048];
     std::snprintf(buf, sizeof buf,
-                  "| %s | %zu | %.2f | %.3f | %.3f | %.3f | %.0f | %.2f | %.0f | %.1f | %.1f | %d | %.0f | %ld | %ld |\n", argv[1], n_vertices, duration,
+                  "| %s%s | %zu | %.2f | %.3f | %.3f | %.3f | %.0f | %.2f | %.0f | %.1f | %.1f | %d | %.0f | %ld | %ld |\n", argv[1],
+                  flood ? " + flood (10 kHz, NaN, garbage)" : "", n_vertices, duration,
                   pct(lat, 0.5), pct(lat, 0.99), pct(lat, 1.0), rep["haptic_loop"].value("rate_hz", 0.0),
                   rep["haptic_loop"]["period_ms"].value("p99", 0.0), rep.value("physics_rate_hz", 0.0),
                   span > 0 ? static_cast<double>(dr.polydata) / span : 0.0, span > 0 ? static_cast<double>(vr.polydata) / span : 0.0, vr.points,
                   vr.polydata ? static_cast<double>(vr.polydata_bytes) / static_cast<double>(vr.polydata) / 1024.0 : 0.0, counters.poses_coalesced,
                   counters.forces_skipped);
     std::printf("scene | surface vertices | session (s) | latency p50 (ms) | p99 (ms) | max (ms) | haptic rate (Hz) | haptic period p99 (ms) | physics rate (Hz) | surfaces/s to the device client | to the viewer | points per surface | KiB per surface | poses coalesced | forces skipped\n%s", buf);
-    std::printf("peak force %.3f N, neck closed %.1f %%, clips used %d, poses %ld, forces sent %ld, latency samples %zu\n", a.peak_force_n,
-                100 * a.neck_closed_fraction, a.clips_used, counters.poses, counters.forces_sent, lat.size());
+    std::printf("peak force %.3f N, neck closed %.1f %%, clips used %d, poses %ld, forces sent %ld, latency samples %zu; dropped unknown %ld, "
+                "malformed %ld, garbage %ld, oversize %ld\n",
+                a.peak_force_n, 100 * a.neck_closed_fraction, a.clips_used, counters.poses, counters.forces_sent, lat.size(), counters.dropped_unknown,
+                counters.dropped_malformed, counters.dropped_garbage, counters.dropped_oversize);
     if (!out.empty()) std::ofstream(out, std::ios::app) << buf;
     return 0;
 }
