@@ -418,14 +418,14 @@ private:
             // A newer pose of an instrument replaces one the haptic loop has not taken yet (real time; never an action).
             if (!m_opt.deterministic && st.action.empty())
                 for (auto& [who, l] : m_lines)
-                    if (who == name && l.find(':') == std::string::npos && l.find("release") == std::string::npos && l.find("grasp") == std::string::npos) {
+                    if (who == name) {  // queued lines with an action are filed under "" (never replaced)
                         l = line;
                         ++m_c.poses_coalesced;
                         ++m_c.poses;
                         return;
                     }
+            m_lines.emplace_back(st.action.empty() ? name : std::string(), std::move(line));
             st.action.clear();
-            m_lines.emplace_back(name, std::move(line));
             ++m_c.poses;
             m_cv.notify_all();
         } else if (type == "SENSOR" && (what == "opening" || what == "button")) {
