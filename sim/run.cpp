@@ -273,7 +273,7 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             F = sim.haptic_step(t);
             hlog.line(t, F);
             if (opt.on_haptic) opt.on_haptic(t, F);
-            if (opt.on_surface && surface_every && n % surface_every == 0) opt.on_surface(t, sim.deformed_surface(), sim.clips());
+            if (opt.on_surface && surface_every && n % surface_every == 0) opt.on_surface(t, sim.deformed_surface(), sim.clips(), sim.instrument_poses());
             const Stopwatch to;
             if (n % log_every == 0) log.line(last, t, F, sim.clips());
             if (series.on() && series_every && n % series_every == 0) {
@@ -343,12 +343,14 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                 if (opt.on_surface && t >= next_surface) {
                     Eigen::MatrixX3d x;
                     std::vector<Clip> cl;
+                    std::vector<std::optional<Pose>> poses;
                     {
                         std::lock_guard<std::mutex> lk(mx);
                         x = sim.deformed_surface(true);
                         cl = sim.clips();
+                        poses = sim.instrument_poses();
                     }
-                    opt.on_surface(t, x, cl);
+                    opt.on_surface(t, x, cl, poses);
                     next_surface += up;
                     if (next_surface < t) next_surface = t + up;  // a slow consumer skips frames, it does not queue them
                 }

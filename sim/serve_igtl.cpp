@@ -34,6 +34,7 @@
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
+#include <igtl_util.h>
 
 #include <nlohmann/json.hpp>
 
@@ -148,6 +149,10 @@ public:
             for (unsigned k = 0; k < 3; ++k) m->SetValue(k, (m_opt.ras && k < 2 ? -1.0 : 1.0) * F[i][static_cast<Eigen::Index>(k)]);
             msgs.push_back(packed(m));
         }
+        {
+            std::lock_guard<std::mutex> lk(m_fmx);
+            m_last_force = F;
+        }
         for_clients([&](Client& c) {
             std::lock_guard<std::mutex> lk(c.mx);
             for (auto& b : msgs) c.forces.push_back(b);
@@ -161,7 +166,7 @@ public:
         });
     }
 
-    void surface(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips) {
+    void surface(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips, const std::vector<std::optional<Pose>>& instruments) {
         const SimSurface& s = m_sim.model().surface;
         if (m_vertex_label.size() != static_cast<size_t>(x.rows())) {
             m_vertex_label.assign(static_cast<size_t>(x.rows()), 0.0f);
@@ -192,18 +197,17 @@ public:
         m->AddAttribute(lab);
         const Bytes poly = packed(m);
         std::vector<Bytes> poses;
-        for (const Clip& c : clips) {
-            if (c.model.empty()) continue;
+        const auto transform = [&](const std::string& name, const Pose& p) {
             auto tm = igtl::TransformMessage::New();
-            tm->SetDeviceName(("clip" + std::to_string(c.id)).c_str());
+            tm->SetDeviceName(name.c_str());
             stamp(tm, t);
             igtl::Matrix4x4 M;
-            const Eigen::Vector3d z = c.pose.axis.normalized(), xa = (c.pose.up - c.pose.up.dot(z) * z).normalized(), y = z.cross(xa);
+            const Eigen::Vector3d z = p.axis.normalized(), xa = (p.up - p.up.dot(z) * z).normalized(), y = z.cross(xa);
             for (int r = 0; r < 3; ++r) {
                 M[r][0] = static_cast<float>(xa[r]);
                 M[r][1] = static_cast<float>(y[r]);
                 M[r][2] = static_cast<float>(z[r]);
-                M[r][3] = static_cast<float>(c.pose.position[r]);
+                M[r][3] = static_cast<float>(p.position[r]);
             }
             M[3][0] = M[3][1] = M[3][2] = 0;
             M[3][3] = 1;
@@ -212,6 +216,30 @@ public:
                     for (int col = 0; col < 4; ++col) M[r][col] = -M[r][col];
             tm->SetMatrix(M);
             poses.push_back(packed(tm));
+        };
+        for (const Clip& c : clips)
+            if (!c.model.empty()) transform("clip" + std::to_string(c.id), c.pose);
+        // The instruments as the simulator has them, named apart from the poses that come in (3D Slicer never sends
+        // a node back under the name it receives it by), and their force as text for viewers that do not read
+        // SENSOR (Slicer shows a STRING as a text node).
+        const auto& ins = m_sim.scene().instruments;
+        std::vector<Eigen::Vector3d> F;
+        {
+            std::lock_guard<std::mutex> lk(m_fmx);
+            F = m_last_force;
+        }
+        for (size_t i = 0; i < ins.size() && i < instruments.size(); ++i) {
+            if (!instruments[i]) continue;  // no input yet
+            transform(ins[i].name + ".pose", *instruments[i]);
+            if (i >= F.size()) continue;
+            const double sx = m_opt.ras ? -1.0 : 1.0;
+            char b[128];
+            std::snprintf(b, sizeof b, "%.4f %.4f %.4f N (|F| %.3f N)", sx * F[i].x(), sx * F[i].y(), F[i].z(), F[i].norm());
+            auto sm = igtl::StringMessage::New();
+            sm->SetDeviceName((ins[i].name + ".force").c_str());
+            stamp(sm, t);
+            sm->SetString(b);
+            poses.push_back(packed(sm));
         }
         for_clients([&](Client& c) {
             std::lock_guard<std::mutex> lk(c.mx);
@@ -359,12 +387,42 @@ private:
                 add([](ServeCounters& k) { ++k.dropped_unknown; });
                 continue;
             }
+            body.resize(static_cast<size_t>(size));
+            if (size > 0 && c.sock->Receive(body.data(), static_cast<int>(size)) != static_cast<int>(size)) return drop(c, nullptr);
+            if (version == 2) {
+                // Version 2 (3D Slicer sends it by default): CRC over the whole body, which is an extended header
+                // (u16 its size, u16 metadata header size, u32 metadata size, u32 message id), the content, and the
+                // metadata. The library here speaks version 1: hand it the content under a version-1 header.
+                const auto* b = reinterpret_cast<unsigned char*>(body.data());
+                if (size < 12 || crc64(const_cast<unsigned char*>(b), size, 0) != be64(h + 50)) {
+                    add([](ServeCounters& k) { ++k.dropped_malformed; });
+                    continue;
+                }
+                const std::uint64_t ext = (std::uint64_t{b[0]} << 8) | b[1], meta_head = (std::uint64_t{b[2]} << 8) | b[3],
+                                    meta = (std::uint64_t{b[4]} << 24) | (std::uint64_t{b[5]} << 16) | (std::uint64_t{b[6]} << 8) | b[7];
+                if (ext < 12 || ext + meta_head + meta > size) {
+                    add([](ServeCounters& k) { ++k.dropped_malformed; });
+                    continue;
+                }
+                body = body.substr(static_cast<size_t>(ext), static_cast<size_t>(size - ext - meta_head - meta));
+                const std::uint64_t n = body.size(), crc = crc64(reinterpret_cast<unsigned char*>(body.data()), n, 0);
+                h[0] = 0;
+                h[1] = 1;
+                for (int k = 0; k < 8; ++k) {
+                    h[42 + k] = static_cast<unsigned char>(n >> (56 - 8 * k));
+                    h[50 + k] = static_cast<unsigned char>(crc >> (56 - 8 * k));
+                }
+                add([](ServeCounters& k) { ++k.v2_messages; });
+            }
             msg->InitPack();
             std::memcpy(msg->GetPackPointer(), h, HEADER);
             msg->Unpack();
             msg->AllocatePack();
-            if (msg->GetPackBodySize() != static_cast<int>(size)) return drop(c, &ServeCounters::dropped_malformed);
-            if (size > 0 && c.sock->Receive(msg->GetPackBodyPointer(), static_cast<int>(size)) != static_cast<int>(size)) return drop(c, nullptr);
+            if (msg->GetPackBodySize() != static_cast<int>(body.size())) {
+                add([](ServeCounters& k) { ++k.dropped_malformed; });
+                continue;
+            }
+            if (!body.empty()) std::memcpy(msg->GetPackBodyPointer(), body.data(), body.size());
             if (!(msg->Unpack(1) & igtl::MessageHeader::UNPACK_BODY)) {
                 add([](ServeCounters& k) { ++k.dropped_malformed; });
                 continue;
@@ -462,11 +520,11 @@ private:
                 c.surface.reset();
                 if (batch.empty() && !surf && c.closing) return;
             }
-            long forces = 0, polys = 0, transforms = 0, statuses = 0;
+            long forces = 0, polys = 0, transforms = 0, statuses = 0, strings = 0;
             for (const auto& b : batch) {
                 if (c.sock->Send(b->data(), static_cast<int>(b->size())) == 0) return drop(c, nullptr);
                 const std::string type = field(reinterpret_cast<const unsigned char*>(b->data()) + 2, 12);
-                (type == "SENSOR" ? forces : type == "STATUS" ? statuses : type == "POLYDATA" ? polys : transforms) += 1;
+                (type == "SENSOR" ? forces : type == "STATUS" ? statuses : type == "POLYDATA" ? polys : type == "STRING" ? strings : transforms) += 1;
             }
             if (surf) {
                 if (c.sock->Send(surf->data(), static_cast<int>(surf->size())) == 0) return drop(c, nullptr);
@@ -477,6 +535,7 @@ private:
                 k.polydata_sent += polys;
                 k.transforms_sent += transforms;
                 k.status_sent += statuses;
+                k.strings_sent += strings;
             });
         }
     }
@@ -490,6 +549,8 @@ private:
     ServeCounters m_c;
     bool m_closed = false, m_stopping = false;
     std::mutex m_cmx;  // clients
+    std::mutex m_fmx;  // the last haptic force
+    std::vector<Eigen::Vector3d> m_last_force;
     std::vector<std::shared_ptr<Client>> m_clients;
     igtl::ServerSocket::Pointer m_server;
     int m_port = 0;
@@ -502,6 +563,9 @@ private:
 
 Assessment serve_scene(Simulator& sim, const ServeOptions& opt, ServeCounters* counters) {
     if (!sim.scene().live_input) throw InputError(sim.scene().path + ": `aneusim serve` needs a scene with \"live_input\": true");
+    for (const auto& ins : sim.scene().instruments)  // OpenIGTLink device names hold 20 bytes: "<name>.opening"
+        if (ins.name.size() > 12)
+            throw InputError(sim.scene().path + ": instrument \"" + ins.name + "\": `aneusim serve` needs names of at most 12 characters (OpenIGTLink device names hold 20: \"" + ins.name + ".opening\")");
     Server server(sim, opt);
     server.listen();
     RunOptions ro;
@@ -509,7 +573,9 @@ Assessment serve_scene(Simulator& sim, const ServeOptions& opt, ServeCounters* c
     ro.live_source = [&](std::string& line) { return server.next_line(line); };
     ro.on_haptic = [&](double t, const std::vector<Eigen::Vector3d>& F) { server.haptic(t, F); };
     ro.surface_hz = opt.polydata_hz;
-    ro.on_surface = [&](double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips) { server.surface(t, x, clips); };
+    ro.on_surface = [&](double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips, const std::vector<std::optional<Pose>>& poses) {
+        server.surface(t, x, clips, poses);
+    };
     ro.on_message = [&](const std::string& m) {
         server.status(m);
         if (opt.on_message) opt.on_message(m);
@@ -537,7 +603,8 @@ Assessment serve_scene(Simulator& sim, const ServeOptions& opt, ServeCounters* c
                      {"messages", c.messages}, {"poses", c.poses}, {"poses_coalesced", c.poses_coalesced},
                      {"dropped_unknown", c.dropped_unknown}, {"dropped_malformed", c.dropped_malformed}, {"dropped_oversize", c.dropped_oversize},
                      {"dropped_garbage", c.dropped_garbage}, {"forces_sent", c.forces_sent}, {"forces_skipped", c.forces_skipped},
-                     {"polydata_sent", c.polydata_sent}, {"transforms_sent", c.transforms_sent}, {"status_sent", c.status_sent}};
+                     {"polydata_sent", c.polydata_sent}, {"transforms_sent", c.transforms_sent}, {"status_sent", c.status_sent},
+                     {"strings_sent", c.strings_sent}, {"v2_messages", c.v2_messages}};
         AtomicTextFile out(rp);
         out.out() << j.dump(2) << '\n';
         out.commit();

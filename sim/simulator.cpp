@@ -95,6 +95,11 @@ const std::vector<Eigen::Vector3d>& Simulator::haptic_step(double t) { return m_
 void Simulator::set_solver_threads(int n) { m_impl->solver.set_threads(n); }
 Eigen::MatrixX3d Simulator::deformed_surface(bool region_only) { return m_impl->deformed(region_only); }
 const std::vector<Clip>& Simulator::clips() const { return m_impl->clips; }
+std::vector<std::optional<Pose>> Simulator::instrument_poses() const {
+    std::vector<std::optional<Pose>> out;
+    for (const auto& I : m_impl->ins) out.push_back(I.prev_t >= 0 ? std::optional<Pose>(I.in.pose) : std::nullopt);
+    return out;
+}
 Assessment Simulator::assess() { return m_impl->assess(); }
 std::vector<std::string> Simulator::take_messages() {
     std::vector<std::string> out;

@@ -1,9 +1,12 @@
 // SPDX-License-Identifier: MIT
 // aneuview: a VTK desktop view of a running `aneusim serve` (issue #18). It connects as an OpenIGTLink client and
 // draws the deformed vessel (label colours: artery red, aneurysm yellow), the deposited and held clips (a bar along
-// each clip's axis), a heads-up line (force per instrument, surfaces per second, the last event) and takes
-// screenshots. Not in this first version: steering the instruments from keyboard and mouse, --stereo.
+// each clip's axis), the instruments where the simulator has them (`<ins>.pose`) with their force as an arrow, a
+// heads-up line (force per instrument, surfaces and frames per second, the last event), screenshots on 's';
+// `--steer` drives one instrument from the keyboard, `--stereo side-by-side` renders a stereo pair.
 // It is not the simulator: it may link VTK; aneusim does not.
+#include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -47,6 +50,7 @@
 #include <vtkRenderWindow.h>
 #include <vtkRenderWindowInteractor.h>
 #include <vtkRenderer.h>
+#include <vtkSmartPointer.h>
 #include <vtkTextActor.h>
 #include <vtkTextProperty.h>
 #include <vtkTransform.h>
@@ -67,11 +71,16 @@ struct Shared {
     std::mutex mx;
     Frame frame;
     std::map<std::string, std::array<float, 12>> clips;  // name → 3×4 matrix (rows)
+    std::map<std::string, std::array<float, 12>> instruments;  // `<ins>.pose` → 3×4 matrix (rows)
     std::map<std::string, std::array<double, 3>> force;
     std::string last_status;
     long surfaces = 0;
     std::atomic<bool> connected{false}, done{false};
 };
+
+bool ends_with(const std::string& s, const std::string& tail) {
+    return s.size() > tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
 
 void receive_loop(igtl::ClientSocket* s, Shared& sh) {
     while (!sh.done) {
@@ -115,14 +124,15 @@ void receive_loop(igtl::ClientSocket* s, Shared& sh) {
             f.serial = sh.frame.serial + 1;
             sh.frame = std::move(f);
             ++sh.surfaces;
-        } else if (type == "TRANSFORM" && name.rfind("clip", 0) == 0) {
+        } else if (type == "TRANSFORM" && (name.rfind("clip", 0) == 0 || ends_with(name, ".pose"))) {
             igtl::Matrix4x4 M;
             static_cast<igtl::TransformMessage*>(m.GetPointer())->GetMatrix(M);
             std::array<float, 12> r{};
             for (int i = 0; i < 3; ++i)
                 for (int j = 0; j < 4; ++j) r[static_cast<size_t>(4 * i + j)] = M[i][j];
-            sh.clips[name] = r;
-        } else if (type == "SENSOR" && name.size() > 6 && name.compare(name.size() - 6, 6, ".force") == 0) {
+            if (ends_with(name, ".pose")) sh.instruments[name.substr(0, name.size() - 5)] = r;
+            else sh.clips[name] = r;
+        } else if (type == "SENSOR" && ends_with(name, ".force")) {
             auto* f = static_cast<igtl::SensorMessage*>(m.GetPointer());
             if (f->GetLength() == 3) sh.force[name.substr(0, name.size() - 6)] = {f->GetValue(0), f->GetValue(1), f->GetValue(2)};
         } else if (type == "STATUS") {
@@ -139,10 +149,18 @@ struct View {
     vtkRenderWindow* win = nullptr;
     vtkTextActor* hud = nullptr;
     std::map<std::string, vtkSmartPointer<vtkActor>> clip_actors;
+    struct Tool {  // an instrument the server reports: a shaft back from its tip, and its force as an arrow
+        vtkSmartPointer<vtkLineSource> line, arrow_line;
+    };
+    std::map<std::string, Tool> tools;
+    vtkSmartPointer<vtkPoints> points;
     long shown = 0;
+    double min_period = 1.0 / 60;  // --max-fps
+    std::chrono::steady_clock::time_point next_frame = std::chrono::steady_clock::now();
     bool camera_set = false;
     std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
     long renders = 0;
+    double render_s = 0;  // time in Render()
     // Steering one instrument from the keyboard (without a haptic device).
     igtl::ClientSocket* sock = nullptr;
     std::string steer, clip_model;
@@ -245,7 +263,7 @@ void write_png(vtkRenderWindow* win, const std::string& path) {
 
 void update(View& v) {
     Frame f;
-    std::map<std::string, std::array<float, 12>> clips;
+    std::map<std::string, std::array<float, 12>> clips, instruments;
     std::map<std::string, std::array<double, 3>> forces;
     std::string status;
     long surfaces = 0;
@@ -253,28 +271,33 @@ void update(View& v) {
         std::lock_guard<std::mutex> lk(v.sh->mx);
         if (v.sh->frame.serial != v.shown) f = v.sh->frame;
         clips = v.sh->clips;
+        instruments = v.sh->instruments;
         forces = v.sh->force;
         status = v.sh->last_status;
         surfaces = v.sh->surfaces;
     }
     if (f.serial != 0) {
         const vtkIdType n = static_cast<vtkIdType>(f.points.size() / 3);
-        vtkNew<vtkPoints> pts;
-        pts->SetNumberOfPoints(n);
-        for (vtkIdType i = 0; i < n; ++i) pts->SetPoint(i, f.points[static_cast<size_t>(3 * i)], f.points[static_cast<size_t>(3 * i + 1)], f.points[static_cast<size_t>(3 * i + 2)]);
-        v.vessel->SetPoints(pts);
-        if (v.vessel->GetNumberOfPolys() == 0) {
+        // The connectivity and labels do not change in a session: set once; the positions are copied in place.
+        if (!v.points || v.points->GetNumberOfPoints() != n) {
+            v.points = vtkSmartPointer<vtkPoints>::New();
+            v.points->SetDataTypeToFloat();
+            v.points->SetNumberOfPoints(n);
+            v.vessel->SetPoints(v.points);
             vtkNew<vtkCellArray> tris;
             for (size_t t = 0; t + 2 < f.triangles.size(); t += 3) {
                 const vtkIdType ids[3] = {f.triangles[t], f.triangles[t + 1], f.triangles[t + 2]};
                 tris->InsertNextCell(3, ids);
             }
             v.vessel->SetPolys(tris);
+            vtkNew<vtkFloatArray> lab;
+            lab->SetName("label");
+            for (float l : f.labels) lab->InsertNextValue(l);
+            v.vessel->GetPointData()->SetScalars(lab);
         }
-        vtkNew<vtkFloatArray> lab;
-        lab->SetName("label");
-        for (float l : f.labels) lab->InsertNextValue(l);
-        v.vessel->GetPointData()->SetScalars(lab);
+        auto* dst = static_cast<float*>(v.points->GetVoidPointer(0));
+        std::copy(f.points.begin(), f.points.end(), dst);
+        v.points->Modified();
         v.vessel->Modified();
         v.shown = f.serial;
         if (!v.camera_set) {  // look along the vessel's least extent (its principal axes), the longest axis across
@@ -328,6 +351,37 @@ void update(View& v) {
         tf->SetMatrix(e);
         a->SetUserTransform(tf);
     }
+    for (const auto& [name, M] : instruments) {  // the instruments the server reports (the steered one is drawn as steered)
+        if (name == v.steer) continue;
+        auto& t = v.tools[name];
+        if (!t.line) {
+            t.line = vtkSmartPointer<vtkLineSource>::New();
+            t.arrow_line = vtkSmartPointer<vtkLineSource>::New();
+            vtkNew<vtkTubeFilter> tube;
+            tube->SetInputConnection(t.line->GetOutputPort());
+            tube->SetRadius(0.4);
+            tube->SetNumberOfSides(16);
+            tube->CappingOn();
+            vtkNew<vtkPolyDataMapper> tm, am;
+            tm->SetInputConnection(tube->GetOutputPort());
+            am->SetInputConnection(t.arrow_line->GetOutputPort());
+            vtkNew<vtkActor> ta, aa;
+            ta->SetMapper(tm);
+            ta->GetProperty()->SetColor(0.3, 0.55, 0.85);
+            aa->SetMapper(am);
+            aa->GetProperty()->SetColor(0.1, 0.6, 0.2);
+            aa->GetProperty()->SetLineWidth(3);
+            v.ren->AddActor(ta);
+            v.ren->AddActor(aa);
+        }
+        const double tip[3] = {M[3], M[7], M[11]}, ax[3] = {M[2], M[6], M[10]};
+        t.line->SetPoint1(tip);
+        t.line->SetPoint2(tip[0] - 15 * ax[0], tip[1] - 15 * ax[1], tip[2] - 15 * ax[2]);
+        const auto it = forces.find(name);
+        const std::array<double, 3> fv = it == forces.end() ? std::array<double, 3>{0, 0, 0} : it->second;
+        t.arrow_line->SetPoint1(tip);
+        t.arrow_line->SetPoint2(tip[0] + 5 * fv[0], tip[1] + 5 * fv[1], tip[2] + 5 * fv[2]);  // 1 N = 5 mm
+    }
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
     std::string line;
     for (const auto& [ins, fv] : forces) {
@@ -352,7 +406,10 @@ void update(View& v) {
     std::snprintf(b, sizeof b, "surfaces %.0f/s   view %.0f Hz   %s", secs > 0 ? static_cast<double>(surfaces) / secs : 0.0,
                   secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, v.sh->connected ? "" : "(disconnected)");
     v.hud->SetInput((line + b + (status.empty() ? "" : "\n" + status)).c_str());
+    v.ren->ResetCameraClippingRange();  // the instruments move: keep them inside the depth range
+    const auto r0 = std::chrono::steady_clock::now();
     v.win->Render();
+    v.render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count();
     ++v.renders;
     if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0 && v.next_key >= v.keys.size()) {
         write_png(v.win, v.screenshot);
@@ -372,6 +429,14 @@ void update(View& v) {
                 const double* d = c->GetComputedDoubleDisplayValue(v.ren);
                 o << i << " " << d[0] << " " << d[1] << " " << lab->GetTuple1(i) << " " << p[0] << " " << p[1] << " " << p[2] << "\n";
             }
+            for (const auto& [name, M] : clips) {  // each clip's near end (its hinge) and the bar's middle
+                for (const double along : {0.25, 4.0}) {
+                    const double w[3] = {M[3] + along * M[2], M[7] + along * M[6], M[11] + along * M[10]};
+                    c->SetValue(w[0], w[1], w[2]);
+                    const double* d = c->GetComputedDoubleDisplayValue(v.ren);
+                    o << "clip " << name << " " << along << " " << d[0] << " " << d[1] << " " << w[0] << " " << w[1] << " " << w[2] << "\n";
+                }
+            }
         }
         v.finished = true;
     }
@@ -379,6 +444,13 @@ void update(View& v) {
 
 void on_timer(vtkObject* caller, unsigned long, void* data, void*) {
     auto& v = *static_cast<View*>(data);
+    // Frames on a fixed schedule (--max-fps; a display shows no more): a late frame moves the schedule, it does not
+    // bunch frames to catch up.
+    const auto now = std::chrono::steady_clock::now();
+    if (now < v.next_frame) return;
+    const auto period = std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(v.min_period));
+    v.next_frame += period;
+    if (v.next_frame < now) v.next_frame = now + period;
     update(v);
     if (v.finished || (!v.sh->connected && !v.screenshot.empty())) static_cast<vtkRenderWindowInteractor*>(caller)->TerminateApp();
 }
@@ -430,6 +502,12 @@ int main(int argc, char** argv) {
     app.add_option("--clip-model", clip_model, "clip model the 'l' key loads (a name from the scene's clip_models)");
     app.add_option("--keys", keys, "with --steer: key presses to apply one a frame (comma separated: Left,Right,Up,Down,i,k,o,c,l,r,g,b) — demos, tests");
     app.add_option("--wait-seconds", wait_s, "keep trying to connect this long (the server may still be loading its bundle)")->check(CLI::NonNegativeNumber)->capture_default_str();
+    std::string antialias = "none";
+    app.add_option("--antialias", antialias, "none, fxaa or msaa (8 samples): smoother edges, at a cost under a software renderer")
+        ->check(CLI::IsMember({"none", "fxaa", "msaa"}))->capture_default_str();
+    double max_fps = 60;
+    app.add_option("--max-fps", max_fps, "frames per second to render at most (a display shows no more; 0: as fast as it can, for benchmarks)")
+        ->check(CLI::NonNegativeNumber)->capture_default_str();
     app.add_option("--size", size, "window size W,H")->delimiter(',')->expected(2)->capture_default_str();
     CLI11_PARSE(app, argc, argv);
     if (!std::getenv("DISPLAY")) {
@@ -479,6 +557,10 @@ int main(int argc, char** argv) {
     win->AddRenderer(ren);
     win->SetSize(size[0], size[1]);
     win->SetWindowName("aneuview");
+    // Multisampling (VTK's default, 8 samples) triples the frame time of a software renderer (Xvfb's llvmpipe:
+    // 24 ms against 8 ms a frame at 600 x 500, FXAA 18 ms): off unless asked for (a GPU does it for free).
+    win->SetMultiSamples(antialias == "msaa" ? 8 : 0);
+    if (antialias == "fxaa") ren->UseFXAAOn();
     if (stereo == "side-by-side") {
         win->SetStereoCapableWindow(1);
         win->SetStereoTypeToSplitViewportHorizontal();
@@ -498,6 +580,7 @@ int main(int argc, char** argv) {
     v.sock = sock;
     v.steer = steer;
     v.clip_model = clip_model;
+    v.min_period = max_fps > 0 ? 1.0 / max_fps : 0.0;
     for (size_t a = 0, b; a < keys.size(); a = b + 1) {
         b = keys.find(',', a);
         if (b == std::string::npos) b = keys.size();
@@ -508,6 +591,7 @@ int main(int argc, char** argv) {
     tool_tube->SetInputConnection(tool_line->GetOutputPort());
     tool_tube->SetRadius(0.4);
     tool_tube->SetNumberOfSides(16);
+    tool_tube->CappingOn();
     vtkNew<vtkPolyDataMapper> tool_map, arrow_map;
     tool_map->SetInputConnection(tool_tube->GetOutputPort());
     arrow_map->SetInputConnection(arrow_line->GetOutputPort());
@@ -536,11 +620,12 @@ int main(int argc, char** argv) {
     key->SetCallback(on_key);
     key->SetClientData(&v);
     iren->AddObserver(vtkCommand::KeyPressEvent, key);
-    iren->CreateRepeatingTimer(10);
+    iren->CreateRepeatingTimer(1);
     win->Render();
     iren->Start();
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
-    std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\n", sh.surfaces, v.renders, secs > 0 ? static_cast<double>(v.renders) / secs : 0.0);
+    std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
+                secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
     sh.done = true;
     sock->CloseSocket();
     net.join();

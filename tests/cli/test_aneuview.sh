@@ -6,8 +6,10 @@
 # land on it. The pixels there must show each vertex's label colour (artery red, aneurysm yellow; a vertex behind
 # the front surface may show the other, so at least 80 % per label), and the background must be white away from
 # the vessel. Then aneuview renders for 3 s and its frame rate is printed (a figure for the bench, not asserted).
-# Last, aneuview steers the suction tube from the keyboard (scripted keys: 20 x 0.25 mm into the view, from 3 mm
-# in front of the vessel): the server's report must show a force, and the tool is drawn in the screenshot.
+# Then aneuview steers the suction tube from the keyboard (scripted keys: 20 x 0.25 mm into the view, from 3 mm
+# in front of the vessel): the server's report must show a force. Last, it steers the clip applier: load a clip,
+# 3 mm aside, 2 mm in, close, release, back off and aside; the deposited clip's near end, projected with the pose the server
+# sent, must show the clip's grey (not the vessel's red or yellow, not the tool's blue, not the background).
 set -eu
 prep=$1 sim=$2 view=$3 w=$4/aneuview
 here=$(cd "$(dirname "$0")" && pwd)
@@ -18,7 +20,9 @@ rm -rf "$w" && mkdir -p "$w"
 "$prep" condense "$w/fem.h5" -o "$w/case.h5" -q
 cat > "$w/scene.json" <<JSON
 {"bundle": "case.h5", "live_input": true,
- "instruments": [{"name": "suction", "kind": "suction", "radius_mm": 0.75}]}
+ "clip_models": {"straight": {"jaw_length_mm": 4.0, "jaw_width_mm": 1.2, "jaw_thickness_mm": 0.5, "max_opening_deg": 45}},
+ "instruments": [{"name": "suction", "kind": "suction", "radius_mm": 0.75},
+                 {"name": "applier", "kind": "clip_applier"}]}
 JSON
 port=$(( 20000 + RANDOM % 20000 ))
 "$sim" serve "$w/scene.json" --port $port --max-seconds 120 --idle-seconds 10 --report "$w/report.json" > "$w/serve.out" 2> "$w/serve.err" &
@@ -34,7 +38,7 @@ W, H, pixel = read_png(png)
 lines = open(pts).read().split('\n')
 good, total = {0: 0, 1: 0}, {0: 0, 1: 0}
 for l in lines[1:]:
-    if not l.strip(): continue
+    if not l.strip() or l.startswith('clip'): continue
     _, x, y, lab = l.split()[:4]
     x, y, lab = int(round(float(x))), int(round(float(y))), int(round(float(lab)))
     if not (0 <= x < W and 0 <= y < H): continue
@@ -69,13 +73,37 @@ PY
 # Steering: 20 presses of 'i' move the suction tube 5 mm along its axis, through the wall in front of it.
 keys=$(printf 'i,%.0s' $(seq 20))
 xvfb-run -a "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
+# The clip: l, 12 x Left (3 mm along the view, away from where the suction tube stays), 8 x i (2 mm in), 8 x c
+# (40 deg to 0), r, 20 x k (5 mm back), 20 x Up (5 mm aside: the tool off the clip).
+keys="l,$(printf 'Left,%.0s' $(seq 12))$(printf 'i,%.0s' $(seq 8))$(printf 'c,%.0s' $(seq 8))r,$(printf 'k,%.0s' $(seq 20))$(printf 'Up,%.0s' $(seq 20))"
+xvfb-run -a "$view" --port $port --steer applier --clip-model straight --keys "${keys%,}" --screenshot "$w/clip.png" --after-surfaces 10 \
+    --points "$w/clip_points.txt" --size 600,500 > "$w/clip.out"
+python3 - "$w/clip.png" "$w/clip_points.txt" "$here" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[3])
+from png_pixels import read_png
+W, H, pixel = read_png(sys.argv[1])
+clips = [l.split() for l in open(sys.argv[2]) if l.startswith('clip ')]
+assert clips, 'the viewer received no clip pose'
+_, name, along, x, y = clips[0][:5]
+x, y = int(round(float(x))), int(round(float(y)))
+assert 3 <= x < W - 3 and 3 <= y < H - 3, 'the clip is off the screen'
+def grey(p):
+    r, g, b = p
+    return abs(r - g) < 25 and -10 <= b - r < 50 and max(p) < 245 and min(p) > 60
+near = [pixel(x + dx, y + dy) for dx in (-2, 0, 2) for dy in (-2, 0, 2)]
+n = sum(grey(p) for p in near)
+print('aneuview clip: %s near end at (%d, %d): %d/9 grey pixels, centre %s' % (name, x, y, n, pixel(x, y)))
+assert n >= 7, 'the clip is not drawn where its pose puts it'
+PY
 wait $server
 trap - EXIT
 python3 - "$w/report.json" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))
 print('steered session: peak force %.4f N, %d poses, %d clients' % (r['peak_force_n'], r['igtl']['poses'], r['igtl']['clients_connected']))
-assert r['igtl']['clients_connected'] == 4, r['igtl']
+assert r['igtl']['clients_connected'] == 5, r['igtl']
+assert r['clips_used'] == 1, 'the applier loaded one clip'
 assert r['igtl']['poses'] >= 20, 'the steered poses reached the server'
 assert r['peak_force_n'] > 0.005, 'the suction tube steered into the wall was pushed back'
 PY

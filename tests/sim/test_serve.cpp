@@ -22,6 +22,7 @@
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTransformMessage.h>
+#include <igtl_util.h>
 #include <nlohmann/json.hpp>
 
 #include "aneu/sim/serve.hpp"
@@ -102,24 +103,61 @@ void stamp(igtl::MessageBase* m, double t) {
     m->SetTimeStamp(static_cast<unsigned>(sec), static_cast<unsigned>(std::llround((t - sec) * 4294967296.0)));
 }
 
-bool send(igtl::ClientSocket* s, igtl::MessageBase* m) {
+void put_be(std::string& out, std::uint64_t v, int n) {
+    for (int k = n - 1; k >= 0; --k) out.push_back(static_cast<char>((v >> (8 * k)) & 0xff));
+}
+
+// What 3D Slicer's OpenIGTLinkIF sends (header version 2 by default): an extended header (its size 12, the metadata
+// header's size, the metadata's size, a message id), the content, then metadata (here MRMLNodeName = the device
+// name, as Slicer writes it); body size and CRC over all of it. The library here packs version 1: rebuilt by hand.
+std::string as_version2(igtl::MessageBase* m) {
+    m->Pack();
+    const auto* p = static_cast<const unsigned char*>(m->GetPackPointer());
+    const std::string content(reinterpret_cast<const char*>(p) + 58, static_cast<size_t>(m->GetPackBodySize()));
+    const std::string key = "MRMLNodeName", value = m->GetDeviceName();
+    std::string body;
+    put_be(body, 12, 2);
+    put_be(body, 2 + 8, 2);  // one metadata entry
+    put_be(body, key.size() + value.size(), 4);
+    put_be(body, 7, 4);      // message id
+    body += content;
+    put_be(body, 1, 2);      // index count, then key size, value encoding (3: US-ASCII), value size
+    put_be(body, key.size(), 2);
+    put_be(body, 3, 2);
+    put_be(body, value.size(), 4);
+    body += key + value;
+    std::string h(reinterpret_cast<const char*>(p), 58);
+    h[0] = 0;
+    h[1] = 2;
+    std::string size_crc;
+    put_be(size_crc, body.size(), 8);
+    put_be(size_crc, crc64(reinterpret_cast<unsigned char*>(body.data()), body.size(), 0), 8);
+    h.replace(42, 16, size_crc);
+    return h + body;
+}
+
+bool send(igtl::ClientSocket* s, igtl::MessageBase* m, bool v2 = false) {
+    if (v2) {
+        const std::string b = as_version2(m);
+        return s->Send(b.data(), static_cast<int>(b.size())) != 0;
+    }
     m->Pack();
     return s->Send(m->GetPackPointer(), m->GetPackSize()) != 0;
 }
 
-void send_sample(igtl::ClientSocket* s, const Sample& x) {
+void send_sample(igtl::ClientSocket* s, const Sample& x, bool v2 = false) {
     auto o = igtl::SensorMessage::New();
     o->SetDeviceName("applier.opening");
     stamp(o, x.t);
     o->SetLength(1);
     o->SetValue(0u, x.opening);
-    send(s, o);
+    send(s, o, v2);
     if (!x.action.empty()) {
         auto a = igtl::StringMessage::New();
         a->SetDeviceName("applier.action");
         stamp(a, x.t);
         a->SetString(x.action.c_str());
-        send(s, a);
+        send(s, a, v2);
     }
     auto tm = igtl::TransformMessage::New();
     tm->SetDeviceName("applier");
@@ -136,7 +174,7 @@ void send_sample(igtl::ClientSocket* s, const Sample& x) {
     M[1][1] = x.axis[2] * x.up[0] - x.axis[0] * x.up[2];
     M[2][1] = x.axis[0] * x.up[1] - x.axis[1] * x.up[0];
     tm->SetMatrix(M);
-    send(s, tm);
+    send(s, tm, v2);
 }
 
 struct Received {
@@ -144,6 +182,15 @@ struct Received {
     int polydata = 0, polydata_points = 0, clip_transforms = 0;
     std::array<float, 3> first_point{0, 0, 0};  // vertex 0 of the first surface
     std::vector<std::string> status;
+    std::vector<std::pair<double, std::string>> force_text;  // STRING applier.force
+    int applier_poses = 0;
+    double last_applier_pose_t = -1;
+    igtl::Matrix4x4 last_applier_pose;
+    // What 3D Slicer's OpenIGTLinkIF could not take: message types it does not convert (it does not convert SENSOR:
+    // that force also comes as STRING), device names over 20 bytes, polydata attributes other than a 1-component
+    // point scalar, STATUS codes of 20 or more.
+    std::map<std::string, int> types;
+    int long_names = 0, odd_attributes = 0, odd_status = 0;
 };
 
 // Reads until the server closes the connection.
@@ -160,6 +207,10 @@ Received receive_all(igtl::ClientSocket* s) {
         else if (type == "POLYDATA") m = igtl::PolyDataMessage::New();
         else if (type == "STATUS") m = igtl::StatusMessage::New();
         else if (type == "TRANSFORM") m = igtl::TransformMessage::New();
+        else if (type == "STRING") m = igtl::StringMessage::New();
+        ++r.types[type];
+        const auto* raw = static_cast<const unsigned char*>(h->GetPackPointer());
+        r.long_names += raw[14 + 19] != 0;  // 20 bytes used: no room for the terminating NUL some readers expect
         if (m.IsNull()) {
             s->Skip(h->GetBodySizeToRead());
             continue;
@@ -178,10 +229,25 @@ Received receive_all(igtl::ClientSocket* s) {
             auto* pd = static_cast<igtl::PolyDataMessage*>(m.GetPointer());
             if (r.polydata++ == 0) pd->GetPoints()->GetPoint(0u, r.first_point.data());
             r.polydata_points = pd->GetPoints()->GetNumberOfPoints();
+            for (int i = 0; i < pd->GetNumberOfAttributes(); ++i) {
+                auto* at = pd->GetAttribute(i);
+                r.odd_attributes += at->GetType() != igtl::PolyDataAttribute::POINT_SCALAR || at->GetNumberOfComponents() != 1 ||
+                                    std::string(at->GetName()) != "label";
+            }
         } else if (type == "STATUS") {
-            r.status.push_back(static_cast<igtl::StatusMessage*>(m.GetPointer())->GetStatusString());
+            auto* st = static_cast<igtl::StatusMessage*>(m.GetPointer());
+            r.status.push_back(st->GetStatusString());
+            r.odd_status += st->GetCode() >= 20 || std::strlen(st->GetErrorName()) > 20;
+        } else if (type == "STRING") {
+            if (std::string(m->GetDeviceName()) == "applier.force") r.force_text.emplace_back(t, static_cast<igtl::StringMessage*>(m.GetPointer())->GetString());
         } else {
-            r.clip_transforms += std::string(m->GetDeviceName()).rfind("clip", 0) == 0;
+            const std::string name = m->GetDeviceName();
+            r.clip_transforms += name.rfind("clip", 0) == 0;
+            if (name == "applier.pose") {
+                ++r.applier_poses;
+                r.last_applier_pose_t = t;
+                static_cast<igtl::TransformMessage*>(m.GetPointer())->GetMatrix(r.last_applier_pose);
+            }
         }
     }
     return r;
@@ -216,9 +282,11 @@ TEST(Serve, ForcesOverLoopbackEqualTheTextStreamsInDeterministicMode) {
 
     // The server, deterministic, driven by an OpenIGTLink client; then the same in RAS (3D Slicer's frame: x and y
     // negated both ways).
-    for (const bool ras : {false, true}) {
-        SCOPED_TRACE(ras ? "ras" : "bundle frame");
-        test::TempDir d2(ras ? "serve_ras" : "serve_run");
+    // Third: as 3D Slicer's OpenIGTLinkIF talks (RAS, header version 2 with metadata, an empty-named STATUS on
+    // connecting).
+    for (const auto& [ras, slicer] : {std::pair{false, false}, std::pair{true, false}, std::pair{true, true}}) {
+        SCOPED_TRACE(slicer ? "slicer" : ras ? "ras" : "bundle frame");
+        test::TempDir d2(slicer ? "serve_slicer" : ras ? "serve_ras" : "serve_run");
         sim::Simulator sim = make_sim(d2.file(""));
         std::promise<int> port;
         sim::ServeOptions so;
@@ -232,15 +300,26 @@ TEST(Serve, ForcesOverLoopbackEqualTheTextStreamsInDeterministicMode) {
         auto sock = connect_to(port.get_future().get());
         ASSERT_TRUE(sock->GetConnected());
         auto got = std::async(std::launch::async, [&] { return receive_all(sock); });
+        long sent = 0;
+        if (slicer) {
+            auto hello = igtl::StatusMessage::New();
+            hello->SetDeviceName("");
+            hello->SetCode(igtl::StatusMessage::STATUS_OK);
+            send(sock, hello, true);  // a type the server does not take: skipped by its size, counted unknown
+        }
+        std::vector<Sample> sent_samples;
         for (Sample s : samples) {
             if (ras)
                 for (float* v : {s.p, s.axis, s.up}) v[0] = -v[0], v[1] = -v[1];
-            send_sample(sock, s);
+            send_sample(sock, s, slicer);
+            sent += s.action.empty() ? 2 : 3;
+            sent_samples.push_back(s);
         }
         auto stop = igtl::StringMessage::New();
         stop->SetDeviceName("aneusim");
         stop->SetString("stop");
-        send(sock, stop);
+        send(sock, stop, slicer);
+        ++sent;
         const sim::Assessment a = served.get();
         const Received r = got.get();
         sock->CloseSocket();
@@ -248,7 +327,9 @@ TEST(Serve, ForcesOverLoopbackEqualTheTextStreamsInDeterministicMode) {
         EXPECT_EQ(a.clips_used, 1);
         EXPECT_EQ(a.skipped_inputs, 0);
         EXPECT_EQ(c.poses, static_cast<long>(samples.size()));
-        EXPECT_EQ(c.dropped_unknown + c.dropped_malformed + c.dropped_garbage + c.dropped_oversize, 0);
+        EXPECT_EQ(c.dropped_unknown, slicer ? 1 : 0);  // Slicer's STATUS on connecting: read and set aside
+        EXPECT_EQ(c.dropped_malformed + c.dropped_garbage + c.dropped_oversize, 0);
+        EXPECT_EQ(c.v2_messages, slicer ? sent : 0);
         ASSERT_EQ(r.forces.size(), ref.size()) << "one force per haptic tick";
         double worst = 0;
         for (size_t k = 0; k < ref.size(); ++k) {
@@ -266,6 +347,33 @@ TEST(Serve, ForcesOverLoopbackEqualTheTextStreamsInDeterministicMode) {
         EXPECT_NEAR(r.first_point[0], (ras ? -1 : 1) * sim.model().surface.X(0, 0), 1e-5);
         EXPECT_NEAR(r.first_point[1], (ras ? -1 : 1) * sim.model().surface.X(0, 1), 1e-5);
         EXPECT_NEAR(r.first_point[2], sim.model().surface.X(0, 2), 1e-5);
+        // Everything sent is something 3D Slicer converts (SENSOR aside, which also comes as text).
+        for (const auto& [type, n] : r.types)
+            EXPECT_TRUE(type == "SENSOR" || type == "POLYDATA" || type == "TRANSFORM" || type == "STATUS" || type == "STRING") << type;
+        EXPECT_EQ(r.long_names, 0);
+        EXPECT_EQ(r.odd_attributes, 0);
+        EXPECT_EQ(r.odd_status, 0);
+        // The force as text, with each surface, equals the SENSOR force of the same tick; the applier's pose as the
+        // simulator has it comes with each surface too, and ends where the last sample put it.
+        // (the first surface, at t = 0, comes before any input and any haptic tick)
+        ASSERT_GE(static_cast<int>(r.force_text.size()), r.polydata - 1);
+        int matched = 0;
+        for (const auto& [t, text] : r.force_text) {
+            double f[3];
+            ASSERT_EQ(std::sscanf(text.c_str(), "%lf %lf %lf N", &f[0], &f[1], &f[2]), 3) << text;
+            for (const auto& [tf, F] : r.forces)
+                if (std::abs(tf - t) < 1e-9) {
+                    ++matched;
+                    for (int i = 0; i < 3; ++i) EXPECT_NEAR(f[i], F[static_cast<size_t>(i)], 5.1e-5) << text;
+                }
+        }
+        EXPECT_EQ(matched, static_cast<int>(r.force_text.size()));
+        EXPECT_GE(r.applier_poses, r.polydata - 1);
+        const Sample* last = nullptr;  // the sample in effect at the last surface
+        for (const auto& x : sent_samples)
+            if (x.t <= r.last_applier_pose_t + 1e-9) last = &x;
+        ASSERT_NE(last, nullptr);
+        for (int i = 0; i < 3; ++i) EXPECT_NEAR(r.last_applier_pose[i][3], last->p[i], 1e-6);
     }
 }
 

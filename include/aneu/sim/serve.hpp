@@ -34,12 +34,15 @@ struct ServeCounters {
     long dropped_oversize = 0;    ///< a declared body larger than any message this server takes (the client is dropped)
     long dropped_garbage = 0;     ///< bytes that are no OpenIGTLink header (the client is dropped)
     long forces_sent = 0, polydata_sent = 0, transforms_sent = 0, status_sent = 0;
+    long strings_sent = 0;        ///< `<ins>.force` as text at the surface rate (for viewers without SENSOR: 3D Slicer)
+    long v2_messages = 0;         ///< header-version-2 messages (3D Slicer's default) read: content taken, metadata set aside
     long forces_skipped = 0;      ///< haptic ticks whose force a slow client did not take in time (only the latest is kept)
 };
 
 /// Runs the scene (live_input) with poses, openings, buttons and actions from OpenIGTLink clients on loopback, and
-/// sends each client the haptic force per instrument, the deformed surface, the instruments' and clips' poses and a
-/// STATUS per event. Returns when a client sends STRING `aneusim` = `stop`, after idle_seconds without a client, or
+/// sends each client the haptic force per instrument (SENSOR at the haptic rate; STRING at the surface rate), the
+/// deformed surface, the instruments' (`<ins>.pose`) and clips' poses and a STATUS per event. Header versions 1 and 2
+/// are read (version 2's metadata is set aside); everything sent is version 1. Returns when a client sends STRING `aneusim` = `stop`, after idle_seconds without a client, or
 /// after max_seconds; the scene's outputs (log, series, report) are written as by run_scene.
 /// @throws InputError the port cannot be opened
 Assessment serve_scene(Simulator& sim, const ServeOptions& opt, ServeCounters* counters = nullptr);

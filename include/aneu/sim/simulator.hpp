@@ -5,6 +5,7 @@
 /// (ContactSolver), deposited clips, suction, contact-plane haptic force, and the assessment.
 #include <iosfwd>
 #include <functional>
+#include <optional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -120,6 +121,8 @@ public:
     /// physics thread, so other threads ask for region_only.
     Eigen::MatrixX3d deformed_surface(bool region_only = false);
     const std::vector<Clip>& clips() const;
+    /// Each instrument's pose as last set (scene order); none before its first input.
+    std::vector<std::optional<Pose>> instrument_poses() const;
     /// Final assessment (neck closure evaluated now).
     Assessment assess();
     std::vector<std::string> take_messages();  ///< warnings since the last call (skipped actions, ...)
@@ -140,10 +143,10 @@ struct RunOptions {
     /// After each haptic tick: its time and the force per instrument (real-time: on the haptic thread, so it must
     /// not block).
     std::function<void(double t, const std::vector<Eigen::Vector3d>& F)> on_haptic;
-    /// The deformed surface (all vertices) and the instruments' and clips' state at `surface_hz` (deterministic: at
+    /// The deformed surface (all vertices), the clips and the instruments' poses at `surface_hz` (deterministic: at
     /// the ticks that cross each period; real-time: on the output thread).
     double surface_hz = 0.0;
-    std::function<void(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips)> on_surface;
+    std::function<void(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips, const std::vector<std::optional<Pose>>& instruments)> on_surface;
 };
 
 /// Runs a scene to its end and writes the outputs the scene asks for (log, haptic log, series, report).
