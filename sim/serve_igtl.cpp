@@ -344,6 +344,9 @@ private:
                 add([](ServeCounters& c) { ++c.clients_refused; });
                 continue;
             }
+            // A client that takes nothing (its receive buffer full) must not hold a writer, and so the session's
+            // end, forever: a send that cannot go on for 2 s drops it.
+            s->SetSendTimeout(2000);
             auto c = std::make_shared<Client>();
             c->sock = s;
             {  // listed before its reader starts: every output of the poses it sends reaches it
@@ -522,12 +525,12 @@ private:
             }
             long forces = 0, polys = 0, transforms = 0, statuses = 0, strings = 0;
             for (const auto& b : batch) {
-                if (c.sock->Send(b->data(), static_cast<int>(b->size())) == 0) return drop(c, nullptr);
+                if (c.sock->Send(b->data(), static_cast<int>(b->size())) == 0) return drop(c, &ServeCounters::clients_stalled);
                 const std::string type = field(reinterpret_cast<const unsigned char*>(b->data()) + 2, 12);
                 (type == "SENSOR" ? forces : type == "STATUS" ? statuses : type == "POLYDATA" ? polys : type == "STRING" ? strings : transforms) += 1;
             }
             if (surf) {
-                if (c.sock->Send(surf->data(), static_cast<int>(surf->size())) == 0) return drop(c, nullptr);
+                if (c.sock->Send(surf->data(), static_cast<int>(surf->size())) == 0) return drop(c, &ServeCounters::clients_stalled);
                 ++polys;
             }
             add([&](ServeCounters& k) {
@@ -604,7 +607,8 @@ Assessment serve_scene(Simulator& sim, const ServeOptions& opt, ServeCounters* c
                      {"dropped_unknown", c.dropped_unknown}, {"dropped_malformed", c.dropped_malformed}, {"dropped_oversize", c.dropped_oversize},
                      {"dropped_garbage", c.dropped_garbage}, {"forces_sent", c.forces_sent}, {"forces_skipped", c.forces_skipped},
                      {"polydata_sent", c.polydata_sent}, {"transforms_sent", c.transforms_sent}, {"status_sent", c.status_sent},
-                     {"strings_sent", c.strings_sent}, {"v2_messages", c.v2_messages}};
+                     {"strings_sent", c.strings_sent}, {"v2_messages", c.v2_messages},
+                     {"clients_stalled", c.clients_stalled}};
         AtomicTextFile out(rp);
         out.out() << j.dump(2) << '\n';
         out.commit();

@@ -26,6 +26,7 @@ struct ServeOptions {
 /// What the server received, sent and dropped (also in the session report, `igtl` object).
 struct ServeCounters {
     long clients_connected = 0, clients_refused = 0, clients_lost = 0;
+    long clients_stalled = 0;     ///< a send that could not go on for 2 s (a client that reads nothing, or is gone): dropped
     long messages = 0;            ///< well-formed messages received
     long poses = 0;               ///< TRANSFORMs turned into pose samples
     long poses_coalesced = 0;     ///< a newer pose of the same instrument arrived before the haptic loop took it

@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# aneuview's frame rate on the sample case (issue #18): `aneusim serve` on the demo's planned scene (made live:
+# keyframes dropped), aneuview under Xvfb steering the suction tube into the vessel (so every surface differs) for
+# 300 surfaces (10 s at 30 Hz), at two window sizes, capped at 60 Hz (the default: a display shows no more) and
+# uncapped (what the renderer can do). Server, viewer and Xvfb share the machine's cores.
+# usage: bash bench/run_view_bench.sh [SCENE] [OUT.md]    (run `bash scripts/demo.sh` first)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scene=${1:-build/demo/sample/planned_scene.json}
+out=${2:-bench/results/view.md}
+w=$(mktemp -d)
+trap 'rm -rf "$w"' EXIT
+python3 - "$scene" "$w/live.json" <<'PY'
+import json, os, sys
+src, dst = sys.argv[1], sys.argv[2]
+s = json.loads(''.join(l for l in open(src) if not l.lstrip().startswith('//')))
+s['bundle'] = os.path.join(os.path.dirname(os.path.abspath(src)), s['bundle'])
+s['live_input'] = True
+s.pop('outputs', None)
+for i in s['instruments']:
+    i.pop('keyframes', None)
+json.dump(s, open(dst, 'w'), indent=1)
+PY
+keys=$(printf 'i,%.0s' $(seq 12))
+{
+echo "# aneuview frame rate on the sample case (issue #18)"
+echo
+echo "\`bash bench/run_view_bench.sh\` ($(date -u +%F), $(nproc) cores, Xvfb with Mesa's llvmpipe software renderer; scene: $scene made live)."
+echo "aneuview steers the suction tube 3 mm into the vessel (12 key presses) while \`aneusim serve\` streams 30 surfaces/s;"
+echo "the frame rate counts every rendered frame from connecting to the 300th surface; render = time in Render()."
+echo
+echo "| window | --max-fps | surfaces | frames | frame rate (Hz) | render mean (ms) |"
+echo "|---|---|---|---|---|---|"
+} > "$out.tmp"
+for size in 600,500 900,700 1280,800; do
+    for fps in 60 0; do
+        port=$(( 20000 + RANDOM % 20000 ))
+        build/tools/aneusim serve "$w/live.json" --port $port --max-seconds 120 --idle-seconds 3 > "$w/serve.out" 2>&1 &
+        server=$!
+        xvfb-run -a -s "-screen 0 1600x1000x24" build/tools/aneuview --port $port --wait-seconds 60 --steer suction --keys "${keys%,}" \
+            --screenshot "$w/view.png" --after-surfaces 300 --size $size --max-fps $fps > "$w/view.out"
+        wait $server || true
+        v() { awk -v k="$1" '$1 == k {print $2}' "$w/view.out"; }
+        echo "| ${size/,/ x } | $fps | $(v surfaces_received) | $(v frames_rendered) | $(v frame_rate_hz) | $(v render_ms_mean) |" | tee -a "$out.tmp"
+    done
+done
+mv "$out.tmp" "$out"
+echo "written $out"
