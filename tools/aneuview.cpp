@@ -165,6 +165,9 @@ struct View {
     igtl::ClientSocket* sock = nullptr;
     std::string steer, clip_model;
     double p[3] = {0, 0, 0}, axis[3] = {0, 0, -1}, up[3] = {0, 1, 0}, opening = 40;
+    double start_p[3] = {0, 0, 0};  // where the steered instrument was placed
+    double drag_from[3] = {0, 0, 0}, drag_to[3] = {0, 0, 0};  // the last pointer drag's ends (world)
+    bool dragged = false;
     bool button = false, placed = false;
     std::string action;
     std::vector<std::string> keys;  // scripted key presses, one per frame once the instrument is placed
@@ -244,9 +247,41 @@ void steer_key(View& v, const std::string& key) {
     send_steer(v);
 }
 
-/// Each frame: scripted keys (one a frame), then the pose (devices stream theirs continuously).
+/// A pointer drag of (dx, dy) pixels moves the steered instrument in the view plane by as much as the pointer
+/// moves at the instrument's depth (perspective: the view height at that distance over the window's height).
+void drag(View& v, int dx, int dy) {
+    auto* cam = v.ren->GetActiveCamera();
+    double pos[3], fp[3], vup[3], dir[3], right[3];
+    cam->GetPosition(pos);
+    cam->GetFocalPoint(fp);
+    cam->GetViewUp(vup);
+    for (int a = 0; a < 3; ++a) dir[a] = fp[a] - pos[a];
+    vtkMath::Normalize(dir);
+    vtkMath::Cross(dir, vup, right);
+    vtkMath::Normalize(right);
+    vtkMath::Cross(right, dir, vup);
+    double depth = 0;
+    for (int a = 0; a < 3; ++a) depth += (v.p[a] - pos[a]) * dir[a];
+    const int* size = v.ren->GetSize();
+    const double mm_per_px = 2.0 * std::max(depth, 1e-3) * std::tan(vtkMath::RadiansFromDegrees(cam->GetViewAngle()) / 2) / std::max(1, size[1]);
+    for (int a = 0; a < 3; ++a) {
+        v.drag_from[a] = v.p[a];
+        v.p[a] += mm_per_px * (dx * right[a] + dy * vup[a]);
+        v.drag_to[a] = v.p[a];
+    }
+    v.dragged = true;
+    send_steer(v);
+}
+
+/// Each frame: scripted keys (one a frame; `drag:DX:DY` a pointer drag in pixels), then the pose (devices stream
+/// theirs continuously).
 void steer_frame(View& v) {
-    if (v.next_key < v.keys.size()) steer_key(v, v.keys[v.next_key++]);
+    if (v.next_key < v.keys.size()) {
+        const std::string& k = v.keys[v.next_key++];
+        int dx = 0, dy = 0;
+        if (std::sscanf(k.c_str(), "drag:%d:%d", &dx, &dy) == 2) drag(v, dx, dy);
+        else steer_key(v, k);
+    }
     send_steer(v);
 }
 
@@ -323,7 +358,7 @@ void update(View& v) {
                     reach = std::max(reach, proj);
                 }
                 for (int a = 0; a < 3; ++a) {
-                    v.p[a] = c[a] + (reach + 3.0) * d[a];
+                    v.p[a] = v.start_p[a] = c[a] + (reach + 3.0) * d[a];
                     v.axis[a] = -d[a];
                     v.up[a] = V[a][1];
                 }
@@ -429,6 +464,16 @@ void update(View& v) {
                 const double* d = c->GetComputedDoubleDisplayValue(v.ren);
                 o << i << " " << d[0] << " " << d[1] << " " << lab->GetTuple1(i) << " " << p[0] << " " << p[1] << " " << p[2] << "\n";
             }
+            const auto point = [&](const char* what, const double* w) {
+                c->SetValue(w[0], w[1], w[2]);
+                const double* d = c->GetComputedDoubleDisplayValue(v.ren);
+                o << what << " " << v.steer << " 0 " << d[0] << " " << d[1] << " " << w[0] << " " << w[1] << " " << w[2] << "\n";
+            };
+            if (!v.steer.empty() && v.placed) point("start", v.start_p);  // where the steered instrument started
+            if (v.dragged) {  // the last pointer drag's ends
+                point("drag_from", v.drag_from);
+                point("drag_to", v.drag_to);
+            }
             for (const auto& [name, M] : clips) {  // each clip's near end (its hinge) and the bar's middle
                 for (const double along : {0.25, 4.0}) {
                     const double w[3] = {M[3] + along * M[2], M[7] + along * M[6], M[11] + along * M[10]};
@@ -471,13 +516,55 @@ void on_key(vtkObject* caller, unsigned long, void* data, void*) {
     }
 }
 
-/// Trackball camera for the mouse; VTK's character bindings (r reset, c camera mode, w/s wireframe, e/q exit, …)
-/// are off: the keys steer the instrument.
+/// VTK's character bindings (r reset, c camera mode, w/s wireframe, e/q exit, …) are off: the keys steer.
+/// Trackball camera for the mouse; with --steer, Shift + left drag moves the instrument in the view plane (it
+/// follows the pointer at its depth) and Shift + wheel moves it along its axis (0.25 mm a notch).
 class ViewStyle : public vtkInteractorStyleTrackballCamera {
 public:
     static ViewStyle* New();
     vtkTypeMacro(ViewStyle, vtkInteractorStyleTrackballCamera)
+    View* view = nullptr;
     void OnChar() override {}
+    void OnLeftButtonDown() override {
+        if (steering()) {
+            m_drag = true;
+            const int* e = Interactor->GetEventPosition();
+            m_last[0] = e[0];
+            m_last[1] = e[1];
+            return;
+        }
+        vtkInteractorStyleTrackballCamera::OnLeftButtonDown();
+    }
+    void OnLeftButtonUp() override {
+        if (m_drag) {
+            m_drag = false;
+            return;
+        }
+        vtkInteractorStyleTrackballCamera::OnLeftButtonUp();
+    }
+    void OnMouseMove() override {
+        if (m_drag) {
+            const int* e = Interactor->GetEventPosition();
+            drag(*view, e[0] - m_last[0], e[1] - m_last[1]);
+            m_last[0] = e[0];
+            m_last[1] = e[1];
+            return;
+        }
+        vtkInteractorStyleTrackballCamera::OnMouseMove();
+    }
+    void OnMouseWheelForward() override {
+        if (steering()) return steer_key(*view, "i");
+        vtkInteractorStyleTrackballCamera::OnMouseWheelForward();
+    }
+    void OnMouseWheelBackward() override {
+        if (steering()) return steer_key(*view, "k");
+        vtkInteractorStyleTrackballCamera::OnMouseWheelBackward();
+    }
+
+private:
+    bool steering() const { return view && !view->steer.empty() && view->placed && Interactor->GetShiftKey(); }
+    bool m_drag = false;
+    int m_last[2] = {0, 0};
 };
 vtkStandardNewMacro(ViewStyle)
 
@@ -500,7 +587,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"side-by-side"}));
     app.add_option("--steer", steer, "instrument of the scene to steer from the keyboard (e.g. applier, suction); starts 3 mm in front of the vessel");
     app.add_option("--clip-model", clip_model, "clip model the 'l' key loads (a name from the scene's clip_models)");
-    app.add_option("--keys", keys, "with --steer: key presses to apply one a frame (comma separated: Left,Right,Up,Down,i,k,o,c,l,r,g,b) — demos, tests");
+    app.add_option("--keys", keys, "with --steer: key presses to apply one a frame (comma separated: Left,Right,Up,Down,i,k,o,c,l,r,g,b; drag:DX:DY a Shift+drag of DX,DY pixels) — demos, tests");
     app.add_option("--wait-seconds", wait_s, "keep trying to connect this long (the server may still be loading its bundle)")->check(CLI::NonNegativeNumber)->capture_default_str();
     std::string antialias = "none";
     app.add_option("--antialias", antialias, "none, fxaa or msaa (8 samples): smoother edges, at a cost under a software renderer")
@@ -610,6 +697,7 @@ int main(int argc, char** argv) {
         ren->AddActor(arrow);
     }
     vtkNew<ViewStyle> style;
+    style->view = &v;
     iren->SetInteractorStyle(style);
     iren->Initialize();
     vtkNew<vtkCallbackCommand> timer;

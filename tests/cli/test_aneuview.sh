@@ -8,7 +8,7 @@
 # the vessel. Then aneuview renders for 3 s and its frame rate is printed (a figure for the bench, not asserted).
 # Then aneuview steers the suction tube from the keyboard (scripted keys: 20 x 0.25 mm into the view, from 3 mm
 # in front of the vessel): the server's report must show a force. Last, it steers the clip applier: load a clip,
-# 3 mm aside, 2 mm in, close, release, back off and aside; the deposited clip's near end, projected with the pose the server
+# dragged aside with the mouse, 2 mm in, close, release, back off and aside; the deposited clip's near end, projected with the pose the server
 # sent, must show the clip's grey (not the vessel's red or yellow, not the tool's blue, not the background).
 set -eu
 prep=$1 sim=$2 view=$3 w=$4/aneuview
@@ -73,9 +73,9 @@ PY
 # Steering: 20 presses of 'i' move the suction tube 5 mm along its axis, through the wall in front of it.
 keys=$(printf 'i,%.0s' $(seq 20))
 xvfb-run -a "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
-# The clip: l, 12 x Left (3 mm along the view, away from where the suction tube stays), 8 x i (2 mm in), 8 x c
+# The clip: l, a Shift+drag 70 pixels left (away from where the suction tube stays), 8 x i (2 mm in), 8 x c
 # (40 deg to 0), r, 20 x k (5 mm back), 20 x Up (5 mm aside: the tool off the clip).
-keys="l,$(printf 'Left,%.0s' $(seq 12))$(printf 'i,%.0s' $(seq 8))$(printf 'c,%.0s' $(seq 8))r,$(printf 'k,%.0s' $(seq 20))$(printf 'Up,%.0s' $(seq 20))"
+keys="l,drag:-70:0,$(printf 'i,%.0s' $(seq 8))$(printf 'c,%.0s' $(seq 8))r,$(printf 'k,%.0s' $(seq 20))$(printf 'Up,%.0s' $(seq 20))"
 xvfb-run -a "$view" --port $port --steer applier --clip-model straight --keys "${keys%,}" --screenshot "$w/clip.png" --after-surfaces 10 \
     --points "$w/clip_points.txt" --size 600,500 > "$w/clip.out"
 python3 - "$w/clip.png" "$w/clip_points.txt" "$here" <<'PY'
@@ -95,6 +95,11 @@ near = [pixel(x + dx, y + dy) for dx in (-2, 0, 2) for dy in (-2, 0, 2)]
 n = sum(grey(p) for p in near)
 print('aneuview clip: %s near end at (%d, %d): %d/9 grey pixels, centre %s' % (name, x, y, n, pixel(x, y)))
 assert n >= 7, 'the clip is not drawn where its pose puts it'
+# The drag moved the applier's tip with the pointer at its depth: its ends, projected, lie 70 pixels apart, leftwards.
+pt = {l.split()[0]: (float(l.split()[3]), float(l.split()[4])) for l in open(sys.argv[2]) if l.startswith('drag_')}
+ddx, ddy = pt['drag_to'][0] - pt['drag_from'][0], pt['drag_to'][1] - pt['drag_from'][1]
+print('aneuview drag: the tip moved %.2f, %.2f pixels' % (ddx, ddy))
+assert abs(ddx + 70) <= 1 and abs(ddy) <= 1, 'the Shift+drag did not move the instrument with the pointer'
 PY
 wait $server
 trap - EXIT
