@@ -61,10 +61,14 @@ void stamp(igtl::MessageBase* m, double t) {
     m->SetTimeStamp(static_cast<unsigned>(sec), static_cast<unsigned>(std::min(4294967295.0, std::round((t - sec) * 4294967296.0))));
 }
 
-std::uint64_t be64(const unsigned char* p) {
+/// An n-byte big-endian unsigned integer (OpenIGTLink's byte order), read and written.
+std::uint64_t be(const unsigned char* p, int n) {
     std::uint64_t v = 0;
-    for (int k = 0; k < 8; ++k) v = (v << 8) | p[k];
+    for (int k = 0; k < n; ++k) v = (v << 8) | p[k];
     return v;
+}
+void put_be(unsigned char* p, std::uint64_t v, int n) {
+    for (int k = 0; k < n; ++k) p[k] = static_cast<unsigned char>(v >> (8 * (n - 1 - k)));
 }
 
 std::string field(const unsigned char* p, size_t n) {
@@ -375,9 +379,9 @@ private:
         std::string body;
         while (c.alive) {
             if (c.sock->Receive(h, HEADER) != HEADER) return drop(c, nullptr);  // closed
-            const unsigned version = (static_cast<unsigned>(h[0]) << 8) | h[1];
+            const auto version = be(h, 2);
             const std::string type = field(h + 2, 12), name = field(h + 14, 20);
-            const std::uint64_t size = be64(h + 42);
+            const std::uint64_t size = be(h + 42, 8);
             if ((version != 1 && version != 2) || type.empty() || !printable(type) || !printable(name)) return drop(c, &ServeCounters::dropped_garbage);
             if (size > MAX_BODY) return drop(c, &ServeCounters::dropped_oversize);
             igtl::MessageBase::Pointer msg;
@@ -396,25 +400,21 @@ private:
                 // Version 2 (3D Slicer sends it by default): CRC over the whole body, which is an extended header
                 // (u16 its size, u16 metadata header size, u32 metadata size, u32 message id), the content, and the
                 // metadata. The library here speaks version 1: hand it the content under a version-1 header.
-                const auto* b = reinterpret_cast<unsigned char*>(body.data());
-                if (size < 12 || crc64(const_cast<unsigned char*>(b), size, 0) != be64(h + 50)) {
+                auto* b = reinterpret_cast<unsigned char*>(body.data());
+                if (size < 12 || crc64(b, size, 0) != be(h + 50, 8)) {
                     add([](ServeCounters& k) { ++k.dropped_malformed; });
                     continue;
                 }
-                const std::uint64_t ext = (std::uint64_t{b[0]} << 8) | b[1], meta_head = (std::uint64_t{b[2]} << 8) | b[3],
-                                    meta = (std::uint64_t{b[4]} << 24) | (std::uint64_t{b[5]} << 16) | (std::uint64_t{b[6]} << 8) | b[7];
+                const std::uint64_t ext = be(b, 2), meta_head = be(b + 2, 2), meta = be(b + 4, 4);
                 if (ext < 12 || ext + meta_head + meta > size) {
                     add([](ServeCounters& k) { ++k.dropped_malformed; });
                     continue;
                 }
                 body = body.substr(static_cast<size_t>(ext), static_cast<size_t>(size - ext - meta_head - meta));
                 const std::uint64_t n = body.size(), crc = crc64(reinterpret_cast<unsigned char*>(body.data()), n, 0);
-                h[0] = 0;
-                h[1] = 1;
-                for (int k = 0; k < 8; ++k) {
-                    h[42 + k] = static_cast<unsigned char>(n >> (56 - 8 * k));
-                    h[50 + k] = static_cast<unsigned char>(crc >> (56 - 8 * k));
-                }
+                put_be(h, 1, 2);
+                put_be(h + 42, n, 8);
+                put_be(h + 50, crc, 8);
                 add([](ServeCounters& k) { ++k.v2_messages; });
             }
             msg->InitPack();

@@ -172,10 +172,6 @@ struct View {
     std::string action;
     std::vector<std::string> keys;  // scripted key presses, one per frame once the instrument is placed
     size_t next_key = 0;
-    vtkActor* tool = nullptr;
-    vtkLineSource* tool_line = nullptr;
-    vtkActor* arrow = nullptr;
-    vtkLineSource* arrow_line = nullptr;
     // Screenshot mode.
     std::string screenshot, points_out;
     long after_surfaces = 0;
@@ -296,6 +292,39 @@ void write_png(vtkRenderWindow* win, const std::string& path) {
     png->Write();
 }
 
+/// An instrument's drawing: a shaft (a capped tube) back from its tip and its force as a green line; made on first use.
+View::Tool& tool_of(View& v, const std::string& name) {
+    auto& t = v.tools[name];
+    if (!t.line) {
+        t.line = vtkSmartPointer<vtkLineSource>::New();
+        t.arrow_line = vtkSmartPointer<vtkLineSource>::New();
+        vtkNew<vtkTubeFilter> tube;
+        tube->SetInputConnection(t.line->GetOutputPort());
+        tube->SetRadius(0.4);
+        tube->SetNumberOfSides(16);
+        tube->CappingOn();
+        vtkNew<vtkPolyDataMapper> tm, am;
+        tm->SetInputConnection(tube->GetOutputPort());
+        am->SetInputConnection(t.arrow_line->GetOutputPort());
+        vtkNew<vtkActor> ta, aa;
+        ta->SetMapper(tm);
+        ta->GetProperty()->SetColor(0.3, 0.55, 0.85);
+        aa->SetMapper(am);
+        aa->GetProperty()->SetColor(0.1, 0.6, 0.2);
+        aa->GetProperty()->SetLineWidth(3);
+        v.ren->AddActor(ta);
+        v.ren->AddActor(aa);
+    }
+    return t;
+}
+
+void place_tool(View::Tool& t, const double* tip, const double* ax, const std::array<double, 3>& f) {
+    t.line->SetPoint1(tip);
+    t.line->SetPoint2(tip[0] - 15 * ax[0], tip[1] - 15 * ax[1], tip[2] - 15 * ax[2]);
+    t.arrow_line->SetPoint1(tip);
+    t.arrow_line->SetPoint2(tip[0] + 5 * f[0], tip[1] + 5 * f[1], tip[2] + 5 * f[2]);  // 1 N = 5 mm
+}
+
 void update(View& v) {
     Frame f;
     std::map<std::string, std::array<float, 12>> clips, instruments;
@@ -386,36 +415,14 @@ void update(View& v) {
         tf->SetMatrix(e);
         a->SetUserTransform(tf);
     }
+    const auto force_of = [&](const std::string& name) {
+        const auto it = forces.find(name);
+        return it == forces.end() ? std::array<double, 3>{0, 0, 0} : it->second;
+    };
     for (const auto& [name, M] : instruments) {  // the instruments the server reports (the steered one is drawn as steered)
         if (name == v.steer) continue;
-        auto& t = v.tools[name];
-        if (!t.line) {
-            t.line = vtkSmartPointer<vtkLineSource>::New();
-            t.arrow_line = vtkSmartPointer<vtkLineSource>::New();
-            vtkNew<vtkTubeFilter> tube;
-            tube->SetInputConnection(t.line->GetOutputPort());
-            tube->SetRadius(0.4);
-            tube->SetNumberOfSides(16);
-            tube->CappingOn();
-            vtkNew<vtkPolyDataMapper> tm, am;
-            tm->SetInputConnection(tube->GetOutputPort());
-            am->SetInputConnection(t.arrow_line->GetOutputPort());
-            vtkNew<vtkActor> ta, aa;
-            ta->SetMapper(tm);
-            ta->GetProperty()->SetColor(0.3, 0.55, 0.85);
-            aa->SetMapper(am);
-            aa->GetProperty()->SetColor(0.1, 0.6, 0.2);
-            aa->GetProperty()->SetLineWidth(3);
-            v.ren->AddActor(ta);
-            v.ren->AddActor(aa);
-        }
         const double tip[3] = {M[3], M[7], M[11]}, ax[3] = {M[2], M[6], M[10]};
-        t.line->SetPoint1(tip);
-        t.line->SetPoint2(tip[0] - 15 * ax[0], tip[1] - 15 * ax[1], tip[2] - 15 * ax[2]);
-        const auto it = forces.find(name);
-        const std::array<double, 3> fv = it == forces.end() ? std::array<double, 3>{0, 0, 0} : it->second;
-        t.arrow_line->SetPoint1(tip);
-        t.arrow_line->SetPoint2(tip[0] + 5 * fv[0], tip[1] + 5 * fv[1], tip[2] + 5 * fv[2]);  // 1 N = 5 mm
+        place_tool(tool_of(v, name), tip, ax, force_of(name));
     }
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
     std::string line;
@@ -426,12 +433,7 @@ void update(View& v) {
     }
     if (!v.steer.empty() && v.placed) {
         steer_frame(v);
-        v.tool_line->SetPoint1(v.p);
-        v.tool_line->SetPoint2(v.p[0] - 15 * v.axis[0], v.p[1] - 15 * v.axis[1], v.p[2] - 15 * v.axis[2]);
-        const auto it = forces.find(v.steer);
-        const std::array<double, 3> fv = it == forces.end() ? std::array<double, 3>{0, 0, 0} : it->second;
-        v.arrow_line->SetPoint1(v.p);
-        v.arrow_line->SetPoint2(v.p[0] + 5 * fv[0], v.p[1] + 5 * fv[1], v.p[2] + 5 * fv[2]);  // 1 N = 5 mm
+        place_tool(tool_of(v, v.steer), v.p, v.axis, force_of(v.steer));
         char b[128];
         std::snprintf(b, sizeof b, "[%s: arrows/i/k move, o/c open %.0f deg, l load, r release, g grasp, b button%s]   ", v.steer.c_str(), v.opening,
                       v.button ? " ON" : "");
@@ -672,29 +674,6 @@ int main(int argc, char** argv) {
         b = keys.find(',', a);
         if (b == std::string::npos) b = keys.size();
         if (b > a) v.keys.push_back(keys.substr(a, b - a));
-    }
-    vtkNew<vtkLineSource> tool_line, arrow_line;
-    vtkNew<vtkTubeFilter> tool_tube;
-    tool_tube->SetInputConnection(tool_line->GetOutputPort());
-    tool_tube->SetRadius(0.4);
-    tool_tube->SetNumberOfSides(16);
-    tool_tube->CappingOn();
-    vtkNew<vtkPolyDataMapper> tool_map, arrow_map;
-    tool_map->SetInputConnection(tool_tube->GetOutputPort());
-    arrow_map->SetInputConnection(arrow_line->GetOutputPort());
-    vtkNew<vtkActor> tool, arrow;
-    tool->SetMapper(tool_map);
-    tool->GetProperty()->SetColor(0.3, 0.55, 0.85);
-    arrow->SetMapper(arrow_map);
-    arrow->GetProperty()->SetColor(0.1, 0.6, 0.2);
-    arrow->GetProperty()->SetLineWidth(3);
-    v.tool = tool;
-    v.tool_line = tool_line;
-    v.arrow = arrow;
-    v.arrow_line = arrow_line;
-    if (!steer.empty()) {
-        ren->AddActor(tool);
-        ren->AddActor(arrow);
     }
     vtkNew<ViewStyle> style;
     style->view = &v;
