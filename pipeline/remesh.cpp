@@ -213,7 +213,9 @@ SurfaceData remesh(const SurfaceData& in, double edge_mm, const std::string& met
     // relaxation of the interior vertices, projected back onto the surface, then edge flips between nearly
     // flat neighbours.
     collapse_short_boundary_edges(open);
+    collapse_short_interior_edges(open);
     relax_tangentially(open, in, 3);
+    collapse_short_interior_edges(open);  // relaxing can pull an interior vertex close to a loop's
     improve_min_angle(open);
     return open;
 }

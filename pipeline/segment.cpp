@@ -156,6 +156,46 @@ std::vector<std::vector<std::size_t>> border_crossings(const Volume<std::uint8_t
     return patches;
 }
 
+namespace {
+/// Is the lumen's cross-section through `c` normal to `t` a tube: its piece connected to `c` (sampled at a
+/// quarter of the finest spacing in the plane) stays within 2 radii + a voxel of `c`. A sheet or a lump
+/// spreads farther (the flood reaches 3 radii + 2 voxels, where sampling stops).
+bool tubular_section(const Volume<std::uint8_t>& mask, const Eigen::Vector3d& c, const Eigen::Vector3d& t, double r) {
+    const ImageGrid& g = mask.grid;
+    const double smin = std::min({g.spacing[0], g.spacing[1], g.spacing[2]}), smax = std::max({g.spacing[0], g.spacing[1], g.spacing[2]});
+    const double h = 0.25 * smin, R = 3.0 * r + 2.0 * smax, allowed = 2.0 * r + smax;
+    const int m = static_cast<int>(std::ceil(R / h)), w = 2 * m + 1;
+    const Eigen::Vector3d u = t.normalized().unitOrthogonal(), v = t.normalized().cross(u);
+    auto lumen = [&](int a, int b) {
+        const Eigen::Vector3d x = c + (a - m) * h * u + (b - m) * h * v;
+        const auto ci = g.continuous_index({x.x(), x.y(), x.z()});
+        const std::int64_t i = std::llround(ci[0]), j = std::llround(ci[1]), k = std::llround(ci[2]);
+        return i >= 0 && j >= 0 && k >= 0 && i < g.size[0] && j < g.size[1] && k < g.size[2] && mask.data[g.linear(i, j, k)] != 0;
+    };
+    std::vector<char> seen(static_cast<size_t>(w * w), 0);
+    std::vector<std::pair<int, int>> stack;
+    // Start at the lumen sample nearest c (the smoothed centerline may sit a little off the voxels).
+    for (int rr = 0; rr <= static_cast<int>(std::ceil(r / h)) && stack.empty(); ++rr)
+        for (int a = m - rr; a <= m + rr && stack.empty(); ++a)
+            for (int b = m - rr; b <= m + rr && stack.empty(); ++b)
+                if (std::max(std::abs(a - m), std::abs(b - m)) == rr && lumen(a, b)) stack.emplace_back(a, b);
+    if (stack.empty()) return false;
+    seen[static_cast<size_t>(stack[0].first * w + stack[0].second)] = 1;
+    while (!stack.empty()) {
+        const auto [a, b] = stack.back();
+        stack.pop_back();
+        if (std::hypot(a - m, b - m) * h > allowed) return false;
+        for (const auto& [da, db] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+            const int a2 = a + da, b2 = b + db;
+            if (a2 < 0 || b2 < 0 || a2 >= w || b2 >= w || seen[static_cast<size_t>(a2 * w + b2)]) continue;
+            seen[static_cast<size_t>(a2 * w + b2)] = 1;
+            if (lumen(a2, b2)) stack.emplace_back(a2, b2);
+        }
+    }
+    return true;
+}
+}  // namespace
+
 CenterlineResult centerline_from_ends(const Volume<std::uint8_t>& mask, const Volume<float>& dist, const std::vector<std::uint8_t>& roi,
                                       const std::vector<std::vector<std::size_t>>& ends, double inset_mm) {
     const ImageGrid& g = mask.grid;
@@ -321,6 +361,22 @@ CenterlineResult centerline_from_ends(const Volume<std::uint8_t>& mask, const Vo
             }
             const double target = s[at] + 2 * smax;
             while (at + 1 < pts.size() && s[at] < target) ++at;
+            // Where a vessel leaves the image through the skull base, its lumen there can be a sheet or a lump
+            // (the carotid against bone and the venous sinus), not a tube: the plane moves on inwards to the
+            // first cross-section that is tubular, up to MAX_WALK_MM (then it stays, and the count says so).
+            constexpr double MAX_WALK_MM = 12.0;
+            if (!tubular_section(mask, pts[at], tangent_at(at, std::max(rad[at], 2 * smax)), std::max(rad[at], 0.5 * smax))) {
+                const double limit = std::min(s[at] + MAX_WALK_MM, 0.5 * s.back());
+                size_t k = at + 1;
+                for (; k + 1 < pts.size() && s[k] <= limit; ++k)
+                    if (tubular_section(mask, pts[k], tangent_at(k, std::max(rad[k], 2 * smax)), std::max(rad[k], 0.5 * smax))) break;
+                if (k + 1 < pts.size() && s[k] <= limit) {
+                    at = k;
+                    ++res.ends_moved_to_tubular;
+                } else {
+                    ++res.ends_not_tubular;
+                }
+            }
         }
         EndPlane pl;
         pl.id = static_cast<int>(e);
@@ -592,6 +648,11 @@ Segmentation segment_finite(const Volume<float>& ct_in, const SegmentParams& p, 
                  " detected");
     }
     out.qa.emplace_back("planes", static_cast<double>(cl.planes.size()));
+    out.qa.emplace_back("ends_moved_to_tubular", static_cast<double>(cl.ends_moved_to_tubular));
+    out.qa.emplace_back("ends_not_tubular", static_cast<double>(cl.ends_not_tubular));
+    if (cl.ends_moved_to_tubular > 0 || cl.ends_not_tubular > 0)
+        rep.info("segment: " + std::to_string(cl.ends_moved_to_tubular) + " end plane(s) moved inwards past a cross-section that is not tubular" +
+                 (cl.ends_not_tubular ? ", " + std::to_string(cl.ends_not_tubular) + " found none within reach" : std::string()));
 
     ImageData& im = out.image;
     im.grid = g;

@@ -313,6 +313,100 @@ std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v) {
     return q;
 }
 
+namespace {
+/// Dihedral angle (degrees) of tetrahedron X at its edge (i, j), inside the tetrahedron.
+double dihedral_at(const Eigen::Matrix<double, 4, 3>& X, int i, int j) {
+    int o[2], n = 0;
+    for (int k = 0; k < 4; ++k)
+        if (k != i && k != j) o[n++] = k;
+    const Eigen::Vector3d e = (X.row(j) - X.row(i)).transpose().normalized();
+    Eigen::Vector3d a = (X.row(o[0]) - X.row(i)).transpose(), b = (X.row(o[1]) - X.row(i)).transpose();
+    a -= a.dot(e) * e;
+    b -= b.dot(e) * e;
+    return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 / PI;
+}
+}  // namespace
+
+int remove_boundary_slivers(VolumeData& v, const Eigen::MatrixX3i& faces, const Eigen::VectorXi& labels, double min_deg) {
+    using Tri = std::array<int, 3>;
+    auto key = [](int a, int b, int c) {
+        Tri t{a, b, c};
+        std::sort(t.begin(), t.end());
+        return t;
+    };
+    std::map<Tri, int> label_of;  // boundary faces and their labels
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) label_of[key(faces(f, 0), faces(f, 1), faces(f, 2))] = labels[f];
+    std::map<std::pair<int, int>, int> boundary_edges;  // edge -> boundary faces using it
+    auto edge = [](int a, int b) { return std::make_pair(std::min(a, b), std::max(a, b)); };
+    for (const auto& [t, l] : label_of)
+        for (int k = 0; k < 3; ++k) ++boundary_edges[edge(t[static_cast<size_t>(k)], t[static_cast<size_t>((k + 1) % 3)])];
+    std::vector<int> tets_at(static_cast<size_t>(v.nodes.rows()), 0);
+    for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
+        for (int a = 0; a < 4; ++a) ++tets_at[static_cast<size_t>(v.tets(t, a))];
+    std::vector<char> gone(static_cast<size_t>(v.tets.rows()), 0);
+    int removed = 0;
+    for (int pass = 0; pass < 4; ++pass) {
+        int now = 0;
+        for (Eigen::Index t = 0; t < v.tets.rows(); ++t) {
+            if (gone[static_cast<size_t>(t)]) continue;
+            Eigen::Matrix<double, 4, 3> X;
+            for (int a = 0; a < 4; ++a) X.row(a) = v.nodes.row(v.tets(t, a));
+            double tmin = 180;
+            for (int i = 0; i < 4; ++i)
+                for (int j = i + 1; j < 4; ++j) tmin = std::min(tmin, dihedral_at(X, i, j));
+            if (tmin >= min_deg) continue;
+            // Its faces on the boundary: face k leaves out corner k.
+            int on[4], n_on = 0, label = -1;
+            bool same = true;
+            for (int k = 0; k < 4; ++k) {
+                int c[3], m = 0;
+                for (int a = 0; a < 4; ++a)
+                    if (a != k) c[m++] = v.tets(t, a);
+                const auto it = label_of.find(key(c[0], c[1], c[2]));
+                if (it == label_of.end()) continue;
+                same = same && (label < 0 || it->second == label);
+                label = it->second;
+                on[n_on++] = k;
+            }
+            if (n_on != 2 || !same) continue;
+            // The two boundary faces leave out corners c, d; they share the edge (a, b). Removing the tetrahedron
+            // flips the surface's edge ab to cd: only where the two faces are nearly coplanar (a flat sliver, not a
+            // spike), cd is not already a boundary edge, and every node keeps a tetrahedron.
+            const int ic = on[0], id = on[1];
+            int ia = -1, ib = -1;
+            for (int k = 0; k < 4; ++k)
+                if (k != ic && k != id) (ia < 0 ? ia : ib) = k;
+            if (dihedral_at(X, ia, ib) < 150.0) continue;
+            const int a = v.tets(t, ia), b = v.tets(t, ib), c = v.tets(t, ic), d = v.tets(t, id);
+            if (boundary_edges.count(edge(c, d)) && boundary_edges[edge(c, d)] > 0) continue;
+            if (tets_at[static_cast<size_t>(a)] < 2 || tets_at[static_cast<size_t>(b)] < 2 || tets_at[static_cast<size_t>(c)] < 2 ||
+                tets_at[static_cast<size_t>(d)] < 2)
+                continue;
+            for (const Tri& f : {key(a, b, d), key(a, b, c)}) {  // the two boundary faces go
+                label_of.erase(f);
+                for (int k = 0; k < 3; ++k) --boundary_edges[edge(f[static_cast<size_t>(k)], f[static_cast<size_t>((k + 1) % 3)])];
+            }
+            for (const Tri& f : {key(a, c, d), key(b, c, d)}) {  // the two inner faces become boundary
+                label_of[f] = label;
+                for (int k = 0; k < 3; ++k) ++boundary_edges[edge(f[static_cast<size_t>(k)], f[static_cast<size_t>((k + 1) % 3)])];
+            }
+            for (int k = 0; k < 4; ++k) --tets_at[static_cast<size_t>(v.tets(t, k))];
+            gone[static_cast<size_t>(t)] = 1;
+            ++now;
+        }
+        removed += now;
+        if (now == 0) break;
+    }
+    if (removed) {
+        Eigen::MatrixXi kept(v.tets.rows() - removed, 4);
+        Eigen::Index r = 0;
+        for (Eigen::Index t = 0; t < v.tets.rows(); ++t)
+            if (!gone[static_cast<size_t>(t)]) kept.row(r++) = v.tets.row(t);
+        v.tets = kept;
+    }
+    return removed;
+}
+
 VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& rep) {
     validate(p);
     check_closed_surface(wall, "tetmesh: wall surface");
@@ -366,6 +460,18 @@ VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& re
             node_of[static_cast<size_t>(i)] = n;
         }
     }
+    int removed_slivers = 0;
+    {
+        // TetGen keeps the boundary ('Y'), so it cannot flip a flat sliver lying on it (four nearly coplanar
+        // surface vertices): removing it is that edge flip of the surface.
+        Eigen::MatrixX3i bf(wall.F.rows(), 3);
+        for (Eigen::Index f = 0; f < wall.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) bf(f, k) = node_of[static_cast<size_t>(wall.F(f, k))];
+        removed_slivers = remove_boundary_slivers(v, bf, wall.face_label, p.min_dihedral_deg);
+        if (removed_slivers) rep.info("tetmesh: removed " + std::to_string(removed_slivers) + " flat boundary sliver(s) below " + shortest(p.min_dihedral_deg) +
+                           " deg (an edge flip of the surface each)");
+    }
+    const Eigen::Index nt_kept = v.tets.rows();
     std::set<int> inner, outer, fixed;
     for (Eigen::Index f = 0; f < wall.F.rows(); ++f) {
         const int l = wall.face_label[f];
@@ -394,14 +500,15 @@ VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& re
             for (int k = 0; k < 3; ++k) vreg[wall.F(f, k)] = std::max(vreg[wall.F(f, k)], wall.face_region[f]);
     }
     PointGrid sg(wall.V, std::max(mean_edge_length(wall), 1e-6));
-    v.tet_region.resize(nt);
-    for (Eigen::Index t = 0; t < nt; ++t) {
+    v.tet_region.resize(nt_kept);
+    for (Eigen::Index t = 0; t < nt_kept; ++t) {
         Eigen::Vector3d c = Eigen::Vector3d::Zero();
         for (int a = 0; a < 4; ++a) c += v.nodes.row(v.tets(t, a)).transpose() / 4.0;
         v.tet_region[t] = vreg[sg.nearest(c)];
     }
     v.quality = mesh_quality(v);
-    rep.info("tetmesh: " + std::to_string(np) + " nodes, " + std::to_string(nt) + " tets");
+    v.quality.emplace_back("boundary_slivers_removed", removed_slivers);
+    rep.info("tetmesh: " + std::to_string(np) + " nodes, " + std::to_string(nt_kept) + " tets");
     return v;
 }
 

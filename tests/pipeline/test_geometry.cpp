@@ -649,3 +649,49 @@ TEST(Segment, BoneBrighterThanLumenAtSeveralPlacements) {
         EXPECT_LT(value(s.qa, "threshold_hu"), p.lumen_hu) << "bone gap " << gap << " mm";
     }
 }
+
+TEST(SurfaceOps, ShortInteriorEdgesAreCollapsedAndTheBoundaryStays) {
+    // A flat 10 × 10 grid of unit squares (two triangles each) with two vertices pulled next to a neighbour: an
+    // interior one 0.05 from the next interior vertex, and one 0.05 inside the boundary from a boundary vertex.
+    SurfaceData s;
+    const int n = 11;
+    s.V.resize(n * n, 3);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) s.V.row(j * n + i) << i, j, 0;
+    s.F.resize(2 * 10 * 10, 3);
+    int f = 0;
+    for (int j = 0; j < 10; ++j)
+        for (int i = 0; i < 10; ++i) {
+            const int a = j * n + i;
+            s.F.row(f++) << a, a + 1, a + n + 1;
+            s.F.row(f++) << a, a + n + 1, a + n;
+        }
+    s.face_label = Eigen::VectorXi::Zero(s.F.rows());
+    s.label_names = {"surface"};
+    s.V.row(5 * n + 5) << 5.95, 5, 0;   // next to (6, 5)
+    s.V.row(1 * n + 3) << 3, 0.05, 0;   // next to the boundary vertex (3, 0)
+    const auto loops_before = boundary_loops(s);
+    ASSERT_EQ(loops_before.size(), 1u);
+    std::vector<Eigen::Vector3d> rim;
+    for (int v : loops_before[0]) rim.push_back(s.V.row(v).transpose());
+    EXPECT_EQ(collapse_short_interior_edges(s), 2);
+    double area = 0, shortest_edge = 1e9;
+    for (Eigen::Index g = 0; g < s.F.rows(); ++g) {
+        const Eigen::Vector3d A = s.V.row(s.F(g, 0)), B = s.V.row(s.F(g, 1)), C = s.V.row(s.F(g, 2));
+        const Eigen::Vector3d nrm = (B - A).cross(C - A);
+        EXPECT_GT(nrm.z(), 0) << "face " << g << " flipped";
+        area += 0.5 * nrm.norm();
+        for (int k = 0; k < 3; ++k) shortest_edge = std::min(shortest_edge, (s.V.row(s.F(g, k)) - s.V.row(s.F(g, (k + 1) % 3))).norm());
+    }
+    EXPECT_NEAR(area, 100.0, 1e-9);  // flat: collapsing changes no area
+    EXPECT_GT(shortest_edge, 0.25);
+    EXPECT_EQ(s.V.rows(), n * n - 2);
+    const auto loops = boundary_loops(s);  // the rim: same vertices, same places
+    ASSERT_EQ(loops.size(), 1u);
+    ASSERT_EQ(loops[0].size(), rim.size());
+    for (const auto& x : rim) {
+        double d = 1e9;
+        for (int v : loops[0]) d = std::min(d, (s.V.row(v).transpose() - x).norm());
+        EXPECT_EQ(d, 0.0);
+    }
+}

@@ -9,6 +9,7 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
 #include "aneu/fem/element.hpp"
 #include "aneu/pipeline/stages.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
@@ -317,4 +318,59 @@ TEST(Stages, NearDegenerateSurfaceTrianglesGiveSliversThatAreNamed) {
     EXPECT_LT(q, 1e-3);  // measured 4.3e-6
     ASSERT_EQ(warnings.size(), 1u);
     EXPECT_NE(warnings.front().find("sliver tetrahedra"), std::string::npos) << warnings.front();
+}
+
+static double value(const std::vector<std::pair<std::string, double>>& q, const std::string& k) {
+    for (const auto& [n, x] : q)
+        if (n == k) return x;
+    ADD_FAILURE() << "no " << k;
+    return 0;
+}
+
+TEST(TetMesh, FlatBoundarySliverIsRemovedAsAnEdgeFlip) {
+    // A flat sliver (a, b at z = 0; c, d 0.02 below) under two tetrahedra that share the apex e: its faces abc and
+    // abd are the boundary. Removing it flips the bottom's edge ab to cd; the rest stays a closed, manifold mesh.
+    VolumeData v;
+    v.nodes.resize(5, 3);
+    v.nodes << 0, 0, 0, 1, 1, 0, 1, 0, -0.02, 0, 1, -0.02, 0.5, 0.5, 1;
+    v.tets.resize(3, 4);
+    v.tets << 0, 1, 2, 3, 0, 2, 3, 4, 1, 2, 3, 4;
+    for (Eigen::Index t = 0; t < 3; ++t) {
+        Eigen::Matrix<double, 4, 3> X;
+        for (int a = 0; a < 4; ++a) X.row(a) = v.nodes.row(v.tets(t, a));
+        if (fem::tet_volume(X) < 0) std::swap(v.tets(t, 2), v.tets(t, 3));
+    }
+    Eigen::MatrixX3i faces(6, 3);
+    faces << 0, 1, 2, 0, 1, 3, 0, 2, 4, 0, 3, 4, 1, 2, 4, 1, 3, 4;
+    const Eigen::VectorXi one_label = Eigen::VectorXi::Zero(6);
+    const double before = value(mesh_quality(v), "min_dihedral_deg");
+    ASSERT_LT(before, 5.0);
+    {
+        VolumeData w = v;  // its bottom faces carry two labels (a crease between surfaces): kept
+        Eigen::VectorXi two = one_label;
+        two[1] = 1;
+        EXPECT_EQ(remove_boundary_slivers(w, faces, two, 10.0), 0);
+        EXPECT_EQ(w.tets.rows(), 3);
+        EXPECT_EQ(remove_boundary_slivers(w, faces, one_label, before * 0.99), 0);  // not below the bound: kept
+    }
+    {
+        VolumeData w = v;  // cd already a boundary edge elsewhere: the flip would make it non-manifold
+        Eigen::MatrixX3i more(7, 3);
+        more << faces, 2, 3, 4;
+        EXPECT_EQ(remove_boundary_slivers(w, more, Eigen::VectorXi::Zero(7), 10.0), 0);
+    }
+    EXPECT_EQ(remove_boundary_slivers(v, faces, one_label, 10.0), 1);
+    ASSERT_EQ(v.tets.rows(), 2);
+    EXPECT_GT(value(mesh_quality(v), "min_dihedral_deg"), 10.0);
+    // What is left is closed: every face of the two tetrahedra is either shared by both or on the new boundary,
+    // which now has acd and bcd at the bottom instead of abc and abd.
+    const Eigen::MatrixX3i F = fem::boundary_faces(v.tets);
+    EXPECT_EQ(F.rows(), 6);
+    std::set<std::array<int, 3>> bottom;
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+        std::array<int, 3> t{F(f, 0), F(f, 1), F(f, 2)};
+        std::sort(t.begin(), t.end());
+        if (t[2] != 4) bottom.insert(t);
+    }
+    EXPECT_EQ(bottom, (std::set<std::array<int, 3>>{{0, 2, 3}, {1, 2, 3}}));
 }

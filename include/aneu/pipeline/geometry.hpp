@@ -128,6 +128,8 @@ Segmentation segment_volume(const Volume<float>& ct, const SegmentParams& p, Rep
 struct CenterlineResult {
     Centerline centerline;
     std::vector<EndPlane> planes;
+    int ends_moved_to_tubular = 0;  ///< automatic planes moved inwards past a sheet- or lump-like cross-section
+    int ends_not_tubular = 0;       ///< automatic planes with no tubular cross-section within reach (kept)
 };
 CenterlineResult centerline_from_ends(const Volume<std::uint8_t>& mask, const Volume<float>& inside_distance,
                                       const std::vector<std::uint8_t>& roi, const std::vector<std::vector<std::size_t>>& ends,

@@ -90,10 +90,16 @@ NamedValues triangle_quality(const SurfaceData& s);
 int improve_min_angle(SurfaceData& s, double max_dihedral_deg = 10.0, int passes = 5);
 
 /// Collapses, to its midpoint, every boundary edge whose opposite angle is below `min_angle_deg` or that is shorter
-/// than a quarter of the median boundary edge (a short cut-end
+/// than a quarter of the median edge (a short cut-end
 /// segment a remesher left) where the link condition allows; a planar boundary loop stays in its plane.
 /// Unused vertices are dropped. Returns the number of collapses.
 int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg = 15.0);
+
+/// Collapses every interior edge shorter than `fraction` × the median edge (a remesher's tiny triangle next to
+/// a cut end: 0.03 mm among 0.4 mm edges on a real CTA, which TetGen must keep and turns into slivers): to its
+/// midpoint, or onto its end on a boundary loop (loops keep their vertices' positions), where the link condition
+/// holds and every face round it keeps its orientation and a 5° minimum angle. Returns the number of collapses.
+int collapse_short_interior_edges(SurfaceData& s, double fraction = 0.25);
 
 /// Signed volume enclosed by a closed surface (positive when outward-oriented).
 double enclosed_volume(const SurfaceData& s);

@@ -53,6 +53,13 @@ void check_closed_surface(const SurfaceData& s, const std::string& what);
 /// @throws InputError the surface is not closed/manifold/labelled; MeshingError the mesher failed or timed out
 VolumeData tetmesh(const SurfaceData& wall, const TetMeshParams& p, Reporter& rep = null_reporter());
 
+/// Removes flat boundary slivers: tetrahedra with a dihedral angle below min_deg that have exactly two faces on
+/// the boundary (`faces`, node indices, with `labels`), of one label, nearly coplanar (≥ 150° between them inside
+/// the tetrahedron). Each removal flips the boundary's edge between those faces; it is skipped where the opposite
+/// edge is already a boundary edge (non-manifold) or a node would be left without a tetrahedron. Up to 4 passes.
+/// @return how many tetrahedra were removed (the rest keep their order)
+int remove_boundary_slivers(VolumeData& v, const Eigen::MatrixX3i& faces, const Eigen::VectorXi& labels, double min_deg);
+
 /// Quality figures of a tetrahedral mesh: counts, min/max dihedral angle, max radius-edge ratio, slivers
 /// (min dihedral < 5°), layers of elements through the wall (graph distance inner → outer nodes).
 std::vector<std::pair<std::string, double>> mesh_quality(const VolumeData& v);
