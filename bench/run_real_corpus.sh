@@ -5,6 +5,7 @@
 # artery/aneurysm label, the wall by region). Writes bench/results/real/corpus.md and pictures/.
 # usage: bash bench/run_real_corpus.sh   (build first: bash scripts/build.sh; pictures need xvfb-run)
 set -uo pipefail
+shopt -s nullglob
 cd "$(dirname "$0")/.."
 prep=$PWD/build/tools/aneuprep
 w=$PWD/build/bench_real
