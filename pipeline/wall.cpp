@@ -559,6 +559,13 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     double largest_move = 0;
     int refined = 0;
     std::vector<int> plane_of;
+    Eigen::VectorXd t_at_lumen(lumen.V.rows());  // the wall's thickness at each lumen vertex
+    {
+        Eigen::VectorXd bl;
+        const Eigen::VectorXd dA = distance_to_faces(dist_surf.V, FA, lumen.V), dS = sac_distance(lumen.V, bl);
+        for (Eigen::Index v = 0; v < lumen.V.rows(); ++v) t_at_lumen[v] = local_thickness(dA[v], dS[v], bl[v]);
+    }
+    int near_faces = 0;
     auto shape_outer = [&](const RemeshZone* zone) -> std::vector<Eigen::Vector3d> {
         {
             RemeshOutcome rm = remesh_checked(iso, edge, p.remesher, p.timeout_s, zone);
@@ -626,6 +633,18 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
             const int nl = static_cast<int>(lumen.F.rows());
             for (const auto& [fa2, fb2] : pairs)
                 if ((fa2 < nl) != (fb2 < nl)) bad.insert(std::max(fa2, fb2) - nl);  // outer against inner only
+            // Also an outer face that passes within half the local thickness of a lumen vertex without crossing
+            // (the same chord across a crease; a TOF-MRA's thin sac wall: 0.007 mm where 0.14 was meant, and every
+            // tetrahedron through it flat).
+            {
+                Eigen::VectorXi nf;
+                const Eigen::VectorXd d = distance_to_faces(outer.V, outer.F, lumen.V, &nf);
+                for (Eigen::Index v = 0; v < lumen.V.rows(); ++v)
+                    if (d[v] < 0.5 * t_at_lumen[v] && nf[v] >= 0 && !bad.count(nf[v])) {
+                        bad.insert(nf[v]);
+                        if (round == 0) ++near_faces;
+                    }
+            }
             if (bad.empty() || (round > 0 && static_cast<int>(bad.size()) >= last_bad)) break;  // done, or not converging
             last_bad = static_cast<int>(bad.size());
             rep.debug("wall: refinement round " + std::to_string(round) + ": " + std::to_string(bad.size()) + " outer faces meet the lumen");
@@ -724,6 +743,7 @@ WallResult make_wall(const SurfaceData& lumen, const std::vector<EndPlane>& plan
     r.qa.emplace_back("remesher_fallback", remesher_fallback ? 1.0 : 0.0);
     r.qa.emplace_back("projection_largest_move_mm", largest_move);
     r.qa.emplace_back("outer_faces_refined", static_cast<double>(refined));
+    r.qa.emplace_back("outer_faces_too_near_lumen", static_cast<double>(near_faces));
     r.qa.emplace_back("outer_fine_zone_faces", static_cast<double>(zone_faces));
     r.qa.emplace_back("outer_fine_zone_edge_mm", zone_faces > 0 ? zone_edge : 0.0);
     lap("remesh_and_projection");
