@@ -230,35 +230,66 @@ int improve_min_angle(SurfaceData& s, double max_dihedral_deg, int passes) {
     return total;
 }
 
-int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
-    const double limit = min_angle_deg * DEG;
-    int total = 0;
-    for (int pass = 0; pass < 5; ++pass) {
-        std::map<std::pair<int, int>, int> face_of;
-        std::vector<std::set<int>> nb(static_cast<size_t>(s.V.rows()));
+namespace {
+/// Directed edge → face, vertex neighbours and vertex faces of a triangle surface.
+struct Adjacency {
+    std::map<std::pair<int, int>, int> face_of;
+    std::vector<std::set<int>> nb;
+    std::vector<std::vector<int>> vf;
+    explicit Adjacency(const SurfaceData& s) : nb(static_cast<size_t>(s.V.rows())), vf(static_cast<size_t>(s.V.rows())) {
         for (Eigen::Index f = 0; f < s.F.rows(); ++f)
             for (int k = 0; k < 3; ++k) {
                 const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
                 face_of[{a, b}] = static_cast<int>(f);
                 nb[static_cast<size_t>(a)].insert(b);
                 nb[static_cast<size_t>(b)].insert(a);
+                vf[static_cast<size_t>(a)].push_back(static_cast<int>(f));
             }
+    }
+    /// Median length of the edges (each interior edge once, boundary edges once); 0 without faces.
+    double median_edge(const SurfaceData& s) const {
+        std::vector<double> lengths;
+        for (const auto& [e, f] : face_of)
+            if (e.first < e.second || !face_of.count({e.second, e.first})) lengths.push_back((s.V.row(e.first) - s.V.row(e.second)).norm());
+        if (lengths.empty()) return 0.0;
+        std::nth_element(lengths.begin(), lengths.begin() + static_cast<std::ptrdiff_t>(lengths.size() / 2), lengths.end());
+        return lengths[lengths.size() / 2];
+    }
+};
+int common_neighbours(const std::vector<std::set<int>>& nb, int a, int b) {
+    int common = 0;
+    for (int x : nb[static_cast<size_t>(a)]) common += nb[static_cast<size_t>(b)].count(x) ? 1 : 0;
+    return common;
+}
+/// Merges vertex `gone` into `kept`, placed at P (the faces of the collapsed edge are for the caller to drop);
+/// both and their neighbours are touched for the rest of the pass.
+void collapse_vertex(SurfaceData& s, const std::vector<std::vector<int>>& vf, const std::vector<std::set<int>>& nb, std::vector<char>& touched, int kept,
+                     int gone, const Eigen::Vector3d& P) {
+    s.V.row(kept) = P.transpose();
+    for (int g : vf[static_cast<size_t>(gone)])
+        for (int k = 0; k < 3; ++k)
+            if (s.F(g, k) == gone) s.F(g, k) = kept;
+    for (int v : {kept, gone}) {
+        touched[static_cast<size_t>(v)] = 1;
+        for (int x : nb[static_cast<size_t>(v)]) touched[static_cast<size_t>(x)] = 1;
+    }
+}
+}  // namespace
+
+int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
+    const double limit = min_angle_deg * DEG;
+    int total = 0;
+    for (int pass = 0; pass < 5; ++pass) {
+        const Adjacency adj(s);
+        const auto& face_of = adj.face_of;
+        const auto& nb = adj.nb;
+        const auto& vf = adj.vf;
         // Also a boundary edge shorter than a quarter of the median edge, whatever its triangle's angle:
         // a small but well-shaped triangle on a loop still makes a thin triangle where the loop is joined to
         // another (the wall's annular caps: 1.4° on a TOF-MRA's end, from a 0.015 mm loop edge).
         // (A quarter of the median of all edges: a small vessel's loop has short segments throughout, and a quarter of
         // its own median still left 0.037 mm among 0.4 mm edges on a real CTA's A2 end.)
-        std::vector<double> lengths;
-        for (const auto& [e, f] : face_of)
-            if (e.first < e.second || !face_of.count({e.second, e.first})) lengths.push_back((s.V.row(e.first) - s.V.row(e.second)).norm());
-        double short_edge = 0;
-        if (!lengths.empty()) {
-            std::nth_element(lengths.begin(), lengths.begin() + static_cast<std::ptrdiff_t>(lengths.size() / 2), lengths.end());
-            short_edge = 0.25 * lengths[lengths.size() / 2];
-        }
-        std::vector<std::vector<int>> vf(static_cast<size_t>(s.V.rows()));
-        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
-            for (int k = 0; k < 3; ++k) vf[static_cast<size_t>(s.F(f, k))].push_back(static_cast<int>(f));
+        const double short_edge = 0.25 * adj.median_edge(s);
         const auto min_angle = [](const Eigen::Vector3d* P) {
             double m = PI;
             for (int k = 0; k < 3; ++k) {
@@ -297,18 +328,9 @@ int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
                 // cap whatever the triangles round it look like; only no worse than 5° (what the interior collapse keeps).
                 if (after < 5.0 * DEG) continue;
             }
-            // Link condition for a boundary edge: c is the only common neighbour of a and b.
-            int common = 0;
-            for (int x : nb[static_cast<size_t>(a)]) common += nb[static_cast<size_t>(b)].count(x) ? 1 : 0;
-            if (common != 1) continue;
-            s.V.row(a) = (0.5 * (A + B)).transpose();
-            for (Eigen::Index g = 0; g < s.F.rows(); ++g)
-                for (int k = 0; k < 3; ++k)
-                    if (s.F(g, k) == b) s.F(g, k) = a;
+            if (common_neighbours(nb, a, b) != 1) continue;  // link condition for a boundary edge: only c
+            collapse_vertex(s, vf, nb, touched, a, b, 0.5 * (A + B));
             keep[static_cast<size_t>(f)] = 0;
-            for (int v : {a, b, c}) touched[static_cast<size_t>(v)] = 1;
-            for (int x : nb[static_cast<size_t>(a)]) touched[static_cast<size_t>(x)] = 1;
-            for (int x : nb[static_cast<size_t>(b)]) touched[static_cast<size_t>(x)] = 1;
             ++n;
         }
         if (!n) break;
@@ -321,26 +343,15 @@ int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
 int collapse_short_interior_edges(SurfaceData& s, double fraction) {
     int total = 0;
     for (int pass = 0; pass < 5; ++pass) {
-        std::map<std::pair<int, int>, int> face_of;
-        std::vector<std::set<int>> nb(static_cast<size_t>(s.V.rows()));
-        std::vector<std::vector<int>> vf(static_cast<size_t>(s.V.rows()));
-        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
-            for (int k = 0; k < 3; ++k) {
-                const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
-                face_of[{a, b}] = static_cast<int>(f);
-                nb[static_cast<size_t>(a)].insert(b);
-                nb[static_cast<size_t>(b)].insert(a);
-                vf[static_cast<size_t>(a)].push_back(static_cast<int>(f));
-            }
+        const Adjacency adj(s);
+        const auto& face_of = adj.face_of;
+        const auto& nb = adj.nb;
+        const auto& vf = adj.vf;
+        if (face_of.empty()) break;
         std::vector<char> on_boundary(static_cast<size_t>(s.V.rows()), 0);
-        std::vector<double> lengths;
-        for (const auto& [e, f] : face_of) {
+        for (const auto& [e, f] : face_of)
             if (!face_of.count({e.second, e.first})) on_boundary[static_cast<size_t>(e.first)] = on_boundary[static_cast<size_t>(e.second)] = 1;
-            if (e.first < e.second || !face_of.count({e.second, e.first})) lengths.push_back((s.V.row(e.first) - s.V.row(e.second)).norm());
-        }
-        if (lengths.empty()) break;
-        std::nth_element(lengths.begin(), lengths.begin() + static_cast<std::ptrdiff_t>(lengths.size() / 2), lengths.end());
-        const double limit = fraction * lengths[lengths.size() / 2];
+        const double limit = fraction * adj.median_edge(s);
         std::vector<char> keep(static_cast<size_t>(s.F.rows()), 1), touched(static_cast<size_t>(s.V.rows()), 0);
         int n = 0;
         for (const auto& [e, f0] : face_of) {
@@ -353,9 +364,7 @@ int collapse_short_interior_edges(SurfaceData& s, double fraction) {
             const bool ba = on_boundary[static_cast<size_t>(a)], bb = on_boundary[static_cast<size_t>(b)];
             if (ba && bb) continue;  // a chord between two boundary vertices: collapsing it would pinch the loop
             const int f1 = back->second;
-            int common = 0;  // link condition: only the two opposite vertices are common neighbours
-            for (int x : nb[static_cast<size_t>(a)]) common += nb[static_cast<size_t>(b)].count(x) ? 1 : 0;
-            if (common != 2) continue;
+            if (common_neighbours(nb, a, b) != 2) continue;  // link condition: only the two opposite vertices
             const int kept = bb ? b : a, gone = bb ? a : b;
             const Eigen::Vector3d P = ba ? A : bb ? B : Eigen::Vector3d(0.5 * (A + B));
             // Every other face round a and b keeps its orientation and a minimum angle of 5°.
@@ -378,15 +387,8 @@ int collapse_short_interior_edges(SurfaceData& s, double fraction) {
                     ok = n1.dot(n0) > 0.5 * n0.norm() * n1.norm() && m > 5.0 * DEG;
                 }
             if (!ok) continue;
-            s.V.row(kept) = P.transpose();
-            for (int g : vf[static_cast<size_t>(gone)])
-                for (int k = 0; k < 3; ++k)
-                    if (s.F(g, k) == gone) s.F(g, k) = kept;
+            collapse_vertex(s, vf, nb, touched, kept, gone, P);
             keep[static_cast<size_t>(f0)] = keep[static_cast<size_t>(f1)] = 0;
-            for (int v : {a, b}) {
-                touched[static_cast<size_t>(v)] = 1;
-                for (int x : nb[static_cast<size_t>(v)]) touched[static_cast<size_t>(x)] = 1;
-            }
             ++n;
         }
         if (!n) break;
