@@ -281,9 +281,7 @@ int collapse_short_boundary_edges(SurfaceData& s, double min_angle_deg) {
     int total = 0;
     for (int pass = 0; pass < 5; ++pass) {
         const Adjacency adj(s);
-        const auto& face_of = adj.face_of;
-        const auto& nb = adj.nb;
-        const auto& vf = adj.vf;
+        const auto& [face_of, nb, vf] = adj;
         // Also a boundary edge shorter than a quarter of the median edge, whatever its triangle's angle:
         // a small but well-shaped triangle on a loop still makes a thin triangle where the loop is joined to
         // another (the wall's annular caps: 1.4° on a TOF-MRA's end, from a 0.015 mm loop edge).
@@ -344,9 +342,7 @@ int collapse_short_interior_edges(SurfaceData& s, double fraction) {
     int total = 0;
     for (int pass = 0; pass < 5; ++pass) {
         const Adjacency adj(s);
-        const auto& face_of = adj.face_of;
-        const auto& nb = adj.nb;
-        const auto& vf = adj.vf;
+        const auto& [face_of, nb, vf] = adj;
         if (face_of.empty()) break;
         std::vector<char> on_boundary(static_cast<size_t>(s.V.rows()), 0);
         for (const auto& [e, f] : face_of)
