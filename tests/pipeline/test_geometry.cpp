@@ -593,6 +593,62 @@ TEST(SurfaceInput, TheMostProminentSacCandidateIsKept) {
     EXPECT_EQ(near_bump, 0.0) << "the bump is artery";
 }
 
+// Where two vessels touch, the centerline of a real CTA ran along the seam between them and its inscribed radius
+// there was near zero (0.01–0.3 mm in a 0.8 mm vessel): the far side of the vessel stood off it by 5–10 radii and a
+// 55 mm² stretch of vessel was labelled sac. Here: a tube of radius 1.5 mm with a sidewall sac, and a centerline
+// whose radius is 0.3 mm (a fifth of the truth) over 12 mm of the tube. The stretch stands off that radius like a
+// sac, but it lies within d90 ≈ R of the centerline along several times that: a tube, never the sac. The sac is
+// kept; without the sac nothing is labelled.
+TEST(SurfaceInput, AStretchOfVesselWithAnUnderestimatedRadiusIsNotTheSac) {
+    const double R = 1.5, L = 30.0, Rs = 2.5;
+    const Eigen::Vector3d sac(0, 3.4, 6.0);
+    Centerline c;
+    const int n = 131;  // z from -13 to 13, every 0.2 mm
+    c.points.resize(n, 3);
+    c.radius.resize(n);
+    for (int i = 0; i < n; ++i) {
+        const double z = -13.0 + 0.2 * i;
+        c.points.row(i) << 0, 0, z;
+        c.radius[i] = z > -13.5 && z < -1.5 ? 0.3 : R;
+    }
+    c.offsets.resize(2);
+    c.offsets << 0, n;
+    for (const bool with_sac : {true, false}) {
+        const Volume<float> v = implicit_volume({50, 60, 140}, -4.9, [&](const Eigen::Vector3d& p) {
+            return with_sac ? std::max(tube_field(p, R, L), Rs - (p - sac).norm()) : tube_field(p, R, L);
+        });
+        const SurfaceData s = isosurface(v, 0.0, true);
+        SacCandidates cand;
+        const Eigen::VectorXi label = label_aneurysm(s, c, 1.6, 1.4, &cand);
+        int tubes = 0;
+        for (const auto& pc : cand.pieces) {
+            tubes += pc.tube ? 1 : 0;
+            if (pc.tube) {
+                EXPECT_NEAR(pc.d90_mm, R, 0.2) << "the stretch lies about one true radius from the centerline";
+                EXPECT_GT(pc.along_mm, 8.0) << "and along most of the stretch whose windowed radius is too small";
+            }
+        }
+        EXPECT_EQ(tubes, 1) << (with_sac ? "with" : "without") << " the sac";
+        double on_sac = 0, on_stretch = 0;
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+            if (label[f] != 1) continue;
+            const Eigen::Vector3d x = (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+            ((x - sac).norm() < Rs + 0.5 ? on_sac : on_stretch) += 1;
+        }
+        EXPECT_EQ(on_stretch, 0.0) << "no face of the stretch is sac";
+        if (with_sac) {
+            ASSERT_EQ(cand.pieces.size(), 2u);
+            ASSERT_GE(cand.kept, 0);
+            EXPECT_FALSE(cand.pieces[static_cast<size_t>(cand.kept)].tube);
+            EXPECT_LT(cand.pieces[static_cast<size_t>(cand.kept)].along_mm, 2.5 * cand.pieces[static_cast<size_t>(cand.kept)].d90_mm);
+            EXPECT_GT(on_sac, 100.0) << "the sac is labelled";
+        } else {
+            EXPECT_EQ(cand.pieces.size(), 1u);
+            EXPECT_EQ(cand.kept, -1) << "no sac when every candidate is a tube";
+        }
+    }
+}
+
 // A sharp thin tip with the sac's thin wall: a tube of radius 1.5 mm with a needle (a cone from 0.45 mm radius at
 // the tube's wall to a point 2.4 mm out, a TOF-MRA's faded branch) labelled sac, so its wall is a third of the
 // artery's. The outer surface remeshed at the lumen's 0.4 mm edge cuts across the tip's offset (0.13 mm round a

@@ -214,14 +214,21 @@ struct SacCandidates {
     struct Piece {
         double area_mm2 = 0, max_ratio = 0;
         Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+        double d90_mm = 0;    ///< 90th percentile of its faces' distance to the nearest centerline segment
+        double along_mm = 0;  ///< length of centerline its faces project to (0.25 mm bins, per branch)
+        bool tube = false;    ///< along_mm > TUBE_ALONG_PER_DISTANCE × d90_mm: a stretch of vessel, never the sac
     };
     std::vector<Piece> pieces;  ///< in face order of their first face
     int kept = -1;              ///< index into pieces; -1 when there is none
 };
+/// A candidate whose faces stay within d90 of the centerline along more than this many times d90 of it is a
+/// stretch of vessel (real sacs: 0.5–2.2; a thin vessel against another in a real CTA: 10.9).
+inline constexpr double TUBE_ALONG_PER_DISTANCE = 4.0;
 /// Labels every face artery (0) or aneurysm (1): hysteresis on (distance to the centerline) / (local radius),
-/// then one sac: of the connected candidate pieces, the most prominent (area × (largest ratio − 1)) is kept. The
-/// others are bulges the ratio also sees — a junction's, a flattened vessel's sides, a faded branch's blind tip
-/// (measured: up to 11 pieces of 1.6–24 mm² on a real Circle of Willis, 3 beside a real sac) — and become artery.
+/// then one sac: of the connected candidate pieces that are not tubes (above), the most prominent (area ×
+/// (largest ratio − 1)) is kept. The others are bulges the ratio also sees — a junction's, a flattened vessel's
+/// sides, a faded branch's blind tip (measured: up to 11 pieces of 1.6–24 mm² on a real Circle of Willis, 3 beside
+/// a real sac) — and become artery. When every candidate is a tube, no face is aneurysm.
 Eigen::VectorXi label_aneurysm(const SurfaceData& s, const Centerline& c, double ratio_high, double ratio_low, SacCandidates* found = nullptr);
 
 /// Flat caps of a closed surface (the inlet/outlet caps of a CFD lumen mesh): connected sets of faces whose
