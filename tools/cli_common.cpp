@@ -2,6 +2,11 @@
 #include "cli_common.hpp"
 
 #include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+
+#include <unistd.h>
 #include <filesystem>
 #include <map>
 
@@ -92,6 +97,22 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
 }
 
 std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
+
+void reexec_with_huge_pages(char** argv) {
+    const char* opt = std::getenv("ANEU_HUGE_PAGES");
+    if (opt != nullptr && std::string(opt) == "0") return;
+    const char* old = std::getenv("GLIBC_TUNABLES");
+    const std::string tunables = old != nullptr ? old : "";
+    if (tunables.find("glibc.malloc.hugetlb") != std::string::npos) return;  // set already (or by the user: kept)
+    // Only where the kernel gives huge pages on request: with "[always]" it does so without being asked.
+    std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
+    std::string mode((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (mode.find("[madvise]") == std::string::npos) return;
+    const std::string value = (tunables.empty() ? "" : tunables + ":") + "glibc.malloc.hugetlb=1";
+    if (::setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
+    ::execv("/proc/self/exe", argv);
+    // exec failed: go on as we are, with the variable set (children still benefit)
+}
 
 
 
