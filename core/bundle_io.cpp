@@ -271,6 +271,13 @@ void write_surface(H5::Group& parent, const std::string& name, const SurfaceData
         require(s.vertex_thickness.size() == s.V.rows(), ctx + ": vertex_thickness size != number of vertices");
         write_vector<double>(g, "vertex_thickness", s.vertex_thickness, "mm", deflate);
     }
+    if (!s.face_fields.empty()) {
+        H5::Group fg = g.createGroup("face_fields");
+        for (const auto& [fname, m] : s.face_fields) {
+            require(m.rows() == s.F.rows(), ctx + ": face field '" + fname + "' has " + std::to_string(m.rows()) + " rows, expected one per triangle");
+            write_matrix(fg, fname, m, "", deflate);
+        }
+    }
 }
 
 SurfaceData read_surface(const H5::Group& parent, const std::string& name, const Ctx& ctx) {
@@ -295,6 +302,11 @@ SurfaceData read_surface(const H5::Group& parent, const std::string& name, const
     s.loop_end_id = read_vector<int>(lg, p + "/loops", "end_id", -1, ctx, "[loops]");
     if (h5::exists(g, "vertex_thickness")) {
         s.vertex_thickness = read_vector<double>(g, p, "vertex_thickness", s.V.rows(), ctx, "[V] with V = " + std::to_string(s.V.rows()));
+    }
+    if (h5::exists(g, "face_fields")) {
+        const H5::Group fg = g.openGroup("face_fields");
+        for (const auto& fname : h5::child_names(fg))
+            s.face_fields[fname] = read_matrix<double>(fg, p + "/face_fields", fname, nf, -1, ctx, "[F,k] with F = " + std::to_string(nf));
     }
     return s;
 }

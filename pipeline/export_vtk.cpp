@@ -116,6 +116,16 @@ void write_surface_vtk(const SurfaceData& s, bool stl, const std::string& label,
     if (s.face_region.size() == s.F.rows()) poly->GetCellData()->AddArray(int_array("region", pick(s.face_region)));
     poly->GetFieldData()->AddArray(names_array("label_names", s.label_names));
     if (!s.region_names.empty()) poly->GetFieldData()->AddArray(names_array("region_names", s.region_names));
+    for (const auto& [fname, m] : s.face_fields) {  // the flow stage's wall shear stress and pressure, per face
+        if (m.rows() != s.F.rows()) continue;
+        vtkNew<vtkDoubleArray> a;
+        a->SetName(fname.c_str());
+        a->SetNumberOfComponents(static_cast<int>(m.cols()));
+        a->SetNumberOfTuples(static_cast<vtkIdType>(kept.size()));
+        for (size_t k = 0; k < kept.size(); ++k)
+            for (Eigen::Index c = 0; c < m.cols(); ++c) a->SetComponent(static_cast<vtkIdType>(k), static_cast<int>(c), m(kept[k], c));
+        poly->GetCellData()->AddArray(a);
+    }
     if (s.vertex_thickness.size() == s.V.rows()) {
         vtkNew<vtkDoubleArray> t;
         t->SetName("thickness");

@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "aneu/core/error.hpp"
+#include "aneu/pipeline/flow.hpp"
 #include "aneu/pipeline/geometry.hpp"
 #include "aneu/pipeline/phantom.hpp"
 #include "aneu/pipeline/stages.hpp"
@@ -71,6 +72,8 @@ const std::vector<StageInfo>& infos() {
         {"assemble", "linear-elastic stiffness of the wall mesh", true, "input stage file (.h5)", "output stage file (.h5), written atomically"},
         {"condense", "W = (K^-1) on the simulated surface DOFs: the case bundle", true, "input stage file (.h5)",
          "output stage file (.h5), written atomically"},
+        {"flow", "blood flow in the lumen: OpenFOAM mesh and steady solve, flow per end, wall shear stress", true,
+         "stage file with /surface/lumen (surface, wall, ... or the case bundle)", "output stage file (.h5), written atomically"},
         {"tubewall", "closed wall surface of a tube of known dimensions (tests, examples)", false, "", "output stage file (.h5), written atomically"},
     };
     return v;
@@ -150,6 +153,11 @@ std::unique_ptr<StageJob> make_stage_job(const std::string& name) {
                                         [](const CondenseStageParams& p, const std::string& in, const std::string& out, StageRecord r, Reporter& rep) {
                                             condense_file(in, out, p, std::move(r), rep);
                                         });
+    }
+    if (name == "flow") {
+        return job<FlowParams>(name, flow_spec(), [](const FlowParams& p, const std::string& in, const std::string& out, StageRecord r, Reporter& rep) {
+            flow_file(in, out, p, std::move(r), rep);
+        });
     }
     return job<TubeWallParams>(name, tubewall_spec(), [](const TubeWallParams& p, const std::string&, const std::string& out, StageRecord r, Reporter& rep) {
         tubewall_file(p, out, std::move(r), rep);

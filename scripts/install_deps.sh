@@ -18,6 +18,8 @@ PACKAGES=(
   libinsighttoolkit5-dev libgdcm-dev libgdcm-tools libvtk9-dev
   libcgal-dev libgmp-dev libmpfr-dev libboost-dev
   libnglib-dev netgen libtet1.5-dev
+  # residual blood flow (aneuprep flow): OpenFOAM's blockMesh, snappyHexMesh and simpleFoam, run as child processes
+  openfoam
   # off-screen rendering for snapshots (Debian's VTK renders through X11 only)
   xvfb xauth
   # workflow checks: CalculiX (the exported .inp is run in ccx) and headless Chromium (the QA report)

@@ -91,6 +91,8 @@ struct SurfaceData {
     Eigen::VectorXi face_region;           ///< #F or empty: index into region_names (artery/aneurysm)
     std::vector<std::string> region_names; ///< e.g. {"artery","aneurysm"}; empty if face_region is
     Eigen::VectorXd vertex_thickness;      ///< #V or empty: wall thickness at the vertex [mm] (wall stage)
+    /// Per-face data, name -> #F×k, the unit at the end of the name (e.g. wall_shear_stress_pa; flow stage).
+    std::map<std::string, Eigen::MatrixXd> face_fields;
 };
 
 /// /volume: the tetrahedral mesh of the wall.

@@ -1,0 +1,663 @@
+// SPDX-License-Identifier: MIT
+// `aneuprep flow`: the lumen's blood domain, an OpenFOAM case (blockMesh + snappyHexMesh with prism layers at the
+// wall, simpleFoam laminar and Newtonian), run as child processes with a time budget, and its results read back:
+// flow and mean pressure per end, wall shear stress and pressure on the lumen's faces.
+#include "aneu/pipeline/flow.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <thread>
+#include <unordered_map>
+
+#include <fcntl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/core/text.hpp"
+#include "aneu/pipeline/tetmesh.hpp"
+#include "stage_util.hpp"
+
+namespace fs = std::filesystem;
+
+namespace aneu::pipeline {
+
+namespace {
+
+constexpr double PI = 3.14159265358979323846;
+
+double tri_area(const SurfaceData& s, Eigen::Index f) {
+    const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+    return 0.5 * (b - a).cross(c - a).norm();
+}
+
+// ---------------------------------------------------------------- child processes
+
+/// Runs `argv` in `dir` with stdout and stderr into `log`; `on_output` sees each new complete line of the log
+/// while it runs. Killed (its process group) at `deadline`: a stage failure.
+int run_logged(const std::vector<std::string>& argv, const fs::path& dir, const fs::path& log,
+               std::chrono::steady_clock::time_point deadline, const std::function<void(const std::string&)>& on_output) {
+    const pid_t pid = ::fork();
+    if (pid < 0) throw Error("flow: cannot start " + argv[0] + " (fork: " + std::strerror(errno) + ")");
+    if (pid == 0) {
+        ::setpgid(0, 0);
+        const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd >= 0) {
+            ::dup2(fd, 1);
+            ::dup2(fd, 2);
+            ::close(fd);
+        }
+        if (::chdir(dir.c_str()) != 0) ::_exit(126);
+        ::setenv("PWD", dir.c_str(), 1);
+        std::vector<char*> a;
+        for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
+        a.push_back(nullptr);
+        ::execvp(a[0], a.data());
+        ::_exit(127);
+    }
+    std::ifstream in;
+    std::string pending;
+    auto drain = [&] {
+        if (!in.is_open()) in.open(log);
+        if (!in.is_open()) return;
+        in.clear();
+        std::string chunk((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        pending += chunk;
+        size_t start = 0;
+        for (size_t nl; (nl = pending.find('\n', start)) != std::string::npos; start = nl + 1) on_output(pending.substr(start, nl - start));
+        pending.erase(0, start);
+    };
+    int status = 0;
+    while (true) {
+        const pid_t r = ::waitpid(pid, &status, WNOHANG);
+        if (r == pid) break;
+        if (r < 0 && errno != EINTR) throw Error("flow: waiting for " + argv[0] + " failed (" + std::strerror(errno) + ")");
+        drain();
+        if (std::chrono::steady_clock::now() > deadline) {
+            ::kill(-pid, SIGKILL);
+            ::kill(pid, SIGKILL);
+            ::waitpid(pid, &status, 0);
+            throw Error("flow: " + argv[0] + " stopped: past the time budget (--time-budget-s); its log: " + log.string());
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    }
+    drain();
+    if (WIFEXITED(status)) {
+        if (WEXITSTATUS(status) == 127) throw Error("flow: " + argv[0] + " not found (OpenFOAM: apt-get install openfoam)");
+        return WEXITSTATUS(status);
+    }
+    return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+}
+
+// ---------------------------------------------------------------- OpenFOAM ASCII fields
+
+/// The text of a field file, its FoamFile header and comments removed.
+std::string read_text(const fs::path& p) {
+    std::ifstream in(p);
+    if (!in) throw Error("flow: OpenFOAM wrote no " + p.string());
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+}
+
+/// Parses `value`/`internalField` data at `pos` (after the keyword): "uniform x", "uniform (x y z)" or
+/// "nonuniform List<T> N ( ... )"; k = 1 or 3 numbers per entry; n = the expected count for "uniform".
+std::vector<double> parse_field_data(const std::string& t, size_t pos, int k, size_t n_uniform) {
+    while (pos < t.size() && std::isspace(static_cast<unsigned char>(t[pos]))) ++pos;
+    std::vector<double> out;
+    auto read_numbers = [&](size_t& q, int count, std::vector<double>& dst) {
+        for (int i = 0; i < count; ++i) {
+            while (q < t.size() && (std::isspace(static_cast<unsigned char>(t[q])) || t[q] == '(' || t[q] == ')')) ++q;
+            char* end = nullptr;
+            const double v = std::strtod(t.c_str() + q, &end);
+            if (end == t.c_str() + q) throw Error("flow: cannot read an OpenFOAM field (a number expected)");
+            dst.push_back(v);
+            q = static_cast<size_t>(end - t.c_str());
+        }
+    };
+    if (t.compare(pos, 7, "uniform") == 0) {
+        size_t q = pos + 7;
+        std::vector<double> one;
+        read_numbers(q, k, one);
+        for (size_t i = 0; i < n_uniform; ++i) out.insert(out.end(), one.begin(), one.end());
+        return out;
+    }
+    if (t.compare(pos, 10, "nonuniform") != 0) throw Error("flow: cannot read an OpenFOAM field (uniform or nonuniform expected)");
+    size_t q = t.find('>', pos);
+    if (q == std::string::npos) throw Error("flow: cannot read an OpenFOAM field (List<...> expected)");
+    ++q;
+    char* end = nullptr;
+    const long count = std::strtol(t.c_str() + q, &end, 10);
+    q = static_cast<size_t>(end - t.c_str());
+    out.reserve(static_cast<size_t>(count) * static_cast<size_t>(k));
+    read_numbers(q, static_cast<int>(count) * k, out);
+    return out;
+}
+
+/// internalField of a field file.
+std::vector<double> internal_field(const fs::path& p, int k, size_t n) {
+    const std::string t = read_text(p);
+    const size_t pos = t.find("internalField");
+    if (pos == std::string::npos) throw Error("flow: " + p.string() + " has no internalField");
+    return parse_field_data(t, pos + 13, k, n);
+}
+
+/// The `value` of patch `patch` in a field file's boundaryField.
+std::vector<double> patch_field(const fs::path& p, const std::string& patch, int k, size_t n) {
+    const std::string t = read_text(p);
+    const size_t bf = t.find("boundaryField");
+    if (bf == std::string::npos) throw Error("flow: " + p.string() + " has no boundaryField");
+    size_t pos = bf;
+    while (true) {
+        pos = t.find(patch, pos);
+        if (pos == std::string::npos) throw Error("flow: " + p.string() + " has no patch '" + patch + "'");
+        const bool word_start = !(std::isalnum(static_cast<unsigned char>(t[pos - 1])) || t[pos - 1] == '_');
+        const size_t after = pos + patch.size();
+        const bool word_end = after < t.size() && !(std::isalnum(static_cast<unsigned char>(t[after])) || t[after] == '_');
+        if (word_start && word_end) break;
+        pos = after;
+    }
+    const size_t open = t.find('{', pos), close = t.find('}', open);
+    const size_t v = t.find("value", open);
+    if (v == std::string::npos || v > close) throw Error("flow: " + p.string() + ": patch '" + patch + "' has no value");
+    return parse_field_data(t, v + 5, k, n);
+}
+
+/// The last value in column `col` of a function object's .dat file (# comments skipped).
+double last_dat_value(const fs::path& p, int col) {
+    std::ifstream in(p);
+    if (!in) throw Error("flow: OpenFOAM wrote no " + p.string());
+    std::string line, last;
+    while (std::getline(in, line))
+        if (!line.empty() && line[0] != '#') last = line;
+    std::istringstream ls(last);
+    double v = 0;
+    for (int i = 0; i <= col; ++i)
+        if (!(ls >> v)) throw Error("flow: " + p.string() + ": no column " + std::to_string(col));
+    return v;
+}
+
+/// Nearest of a point set, on a uniform bucket grid.
+class NearestPoint {
+public:
+    NearestPoint(const std::vector<Eigen::Vector3d>& pts, double cell) : m_pts(pts), m_h(cell) {
+        for (size_t i = 0; i < pts.size(); ++i) m_grid[key(cell_of(pts[i]))].push_back(static_cast<int>(i));
+    }
+    int nearest(const Eigen::Vector3d& x) const {
+        const Eigen::Vector3i c = cell_of(x);
+        int best = -1;
+        double bd = 1e300;
+        for (int r = 0; r < 64 && (best < 0 || (r - 1) * m_h < std::sqrt(bd)); ++r)
+            for (int i = -r; i <= r; ++i)
+                for (int j = -r; j <= r; ++j)
+                    for (int k = -r; k <= r; ++k) {
+                        if (std::max({std::abs(i), std::abs(j), std::abs(k)}) != r) continue;
+                        const auto it = m_grid.find(key(c + Eigen::Vector3i(i, j, k)));
+                        if (it == m_grid.end()) continue;
+                        for (int q : it->second) {
+                            const double d = (m_pts[static_cast<size_t>(q)] - x).squaredNorm();
+                            if (d < bd) {
+                                bd = d;
+                                best = q;
+                            }
+                        }
+                    }
+        return best;
+    }
+
+private:
+    Eigen::Vector3i cell_of(const Eigen::Vector3d& x) const { return (x / m_h).array().floor().cast<int>(); }
+    static std::int64_t key(const Eigen::Vector3i& c) {
+        return (static_cast<std::int64_t>(c.x() + (1 << 20)) << 42) ^ (static_cast<std::int64_t>(c.y() + (1 << 20)) << 21) ^ (c.z() + (1 << 20));
+    }
+    const std::vector<Eigen::Vector3d>& m_pts;
+    double m_h;
+    std::unordered_map<std::int64_t, std::vector<int>> m_grid;
+};
+
+std::vector<Eigen::Vector3d> as_points(const std::vector<double>& v, double scale) {
+    std::vector<Eigen::Vector3d> p(v.size() / 3);
+    for (size_t i = 0; i < p.size(); ++i) p[i] = scale * Eigen::Vector3d(v[3 * i], v[3 * i + 1], v[3 * i + 2]);
+    return p;
+}
+
+std::string foam_header(const std::string& cls, const std::string& object) {
+    return "FoamFile { version 2.0; format ascii; class " + cls + "; object " + object + "; }\n";
+}
+
+void write_file(const fs::path& p, const std::string& text) {
+    std::ofstream out(p);
+    out << text;
+    if (!out) throw IoError("flow: cannot write " + p.string());
+}
+
+std::string num(double x) {
+    std::ostringstream s;
+    s.precision(10);
+    s << x;
+    return s.str();
+}
+
+std::string vec(const Eigen::Vector3d& v) { return "(" + num(v.x()) + " " + num(v.y()) + " " + num(v.z()) + ")"; }
+
+/// An ASCII STL with one solid per label (the patch names).
+void write_stl_regions(const fs::path& p, const SurfaceData& s) {
+    std::ofstream out(p);
+    out.precision(10);
+    for (size_t l = 0; l < s.label_names.size(); ++l) {
+        out << "solid " << s.label_names[l] << "\n";
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+            if (s.face_label[f] != static_cast<int>(l)) continue;
+            const Eigen::Vector3d a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+            const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+            out << "facet normal " << n.x() << " " << n.y() << " " << n.z() << "\n outer loop\n";
+            for (const auto* v : {&a, &b, &c}) out << "  vertex " << v->x() << " " << v->y() << " " << v->z() << "\n";
+            out << " endloop\nendfacet\n";
+        }
+        out << "endsolid " << s.label_names[l] << "\n";
+    }
+    if (!out) throw IoError("flow: cannot write " + p.string());
+}
+
+struct EndCap {
+    int id = 0;
+    std::string patch;
+    double area_mm2 = 0;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero(), normal = Eigen::Vector3d::Zero();  // normal out of the domain
+};
+
+std::vector<EndCap> caps_of(const SurfaceData& blood) {
+    std::vector<EndCap> caps;
+    for (size_t l = 1; l < blood.label_names.size(); ++l) {
+        EndCap c;
+        c.patch = blood.label_names[l];
+        c.id = std::stoi(c.patch.substr(4));
+        Eigen::Vector3d an = Eigen::Vector3d::Zero();
+        for (Eigen::Index f = 0; f < blood.F.rows(); ++f) {
+            if (blood.face_label[f] != static_cast<int>(l)) continue;
+            const Eigen::Vector3d a = blood.V.row(blood.F(f, 0)), b = blood.V.row(blood.F(f, 1)), cc = blood.V.row(blood.F(f, 2));
+            const Eigen::Vector3d n2 = (b - a).cross(cc - a);
+            an += 0.5 * n2;
+            c.centre += 0.5 * n2.norm() * (a + b + cc) / 3.0;
+            c.area_mm2 += 0.5 * n2.norm();
+        }
+        c.centre /= c.area_mm2;
+        c.normal = an.normalized();
+        caps.push_back(c);
+    }
+    return caps;
+}
+
+}  // namespace
+
+SurfaceData blood_domain(const SurfaceData& lumen) {
+    const Eigen::Index nloops = lumen.loop_end_id.size();
+    if (nloops == 0 || lumen.loop_offsets.size() != nloops + 1)
+        throw InputError("flow: the lumen has no open end: without an inlet there is no flow (a lumen from `aneuprep surface` has one per end plane)");
+    SurfaceData b;
+    b.label_names = {"wall"};
+    const Eigen::Index nv0 = lumen.V.rows(), nf0 = lumen.F.rows();
+    // Directed edges of the lumen: a loop edge a→b that a face has runs b→a in the cap.
+    std::set<std::pair<int, int>> directed;
+    for (Eigen::Index f = 0; f < nf0; ++f)
+        for (int k = 0; k < 3; ++k) directed.insert({lumen.F(f, k), lumen.F(f, (k + 1) % 3)});
+    std::vector<Eigen::RowVector3d> extra_v;
+    std::vector<Eigen::RowVector3i> extra_f;
+    std::vector<int> extra_l;
+    for (Eigen::Index l = 0; l < nloops; ++l) {
+        const int o0 = lumen.loop_offsets[l], o1 = lumen.loop_offsets[l + 1];
+        if (o1 - o0 < 3) throw InputError("flow: end " + std::to_string(lumen.loop_end_id[l]) + "'s loop has fewer than 3 vertices");
+        Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+        for (int i = o0; i < o1; ++i) c += lumen.V.row(lumen.loop_vertices[i]);
+        c /= static_cast<double>(o1 - o0);
+        const int ci = static_cast<int>(nv0 + static_cast<Eigen::Index>(extra_v.size()));
+        extra_v.push_back(c);
+        b.label_names.push_back("end_" + std::to_string(lumen.loop_end_id[l]));
+        for (int i = o0; i < o1; ++i) {
+            const int a = lumen.loop_vertices[i], bb = lumen.loop_vertices[i + 1 < o1 ? i + 1 : o0];
+            extra_f.push_back(directed.count({a, bb}) ? Eigen::RowVector3i(ci, bb, a) : Eigen::RowVector3i(ci, a, bb));
+            extra_l.push_back(static_cast<int>(l) + 1);
+        }
+    }
+    b.V.resize(nv0 + static_cast<Eigen::Index>(extra_v.size()), 3);
+    b.V.topRows(nv0) = lumen.V;
+    for (size_t i = 0; i < extra_v.size(); ++i) b.V.row(nv0 + static_cast<Eigen::Index>(i)) = extra_v[i];
+    b.F.resize(nf0 + static_cast<Eigen::Index>(extra_f.size()), 3);
+    b.F.topRows(nf0) = lumen.F;
+    b.face_label = Eigen::VectorXi::Zero(b.F.rows());
+    for (size_t i = 0; i < extra_f.size(); ++i) {
+        b.F.row(nf0 + static_cast<Eigen::Index>(i)) = extra_f[i];
+        b.face_label[nf0 + static_cast<Eigen::Index>(i)] = extra_l[i];
+    }
+    check_closed_surface(b, "flow: the blood domain (the lumen closed by a flat cap at each end)");
+    return b;
+}
+
+void flow_file(const std::string& in, const std::string& out, const FlowParams& p, StageRecord stage, Reporter& rep) {
+    flow_spec().validate(p);
+    const Stopwatch t0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(p.time_budget_s * 1000));
+    BundleParts parts;
+    parts.volume = false;
+    parts.fem = false;
+    parts.condensed_W = false;
+    Bundle b = read_bundle(in, parts);
+    const auto it = b.surfaces.find("lumen");
+    if (it == b.surfaces.end()) throw InputError(in + ": no /surface/lumen (run `aneuprep surface` first)");
+    SurfaceData blood = blood_domain(it->second);
+    const std::vector<EndCap> caps = caps_of(blood);
+    // The inlet.
+    size_t inlet = 0;
+    if (p.inlet_end >= 0) {
+        const auto f = std::find_if(caps.begin(), caps.end(), [&](const EndCap& c) { return c.id == p.inlet_end; });
+        if (f == caps.end()) {
+            std::string ids;
+            for (const auto& c : caps) ids += (ids.empty() ? "" : ", ") + std::to_string(c.id);
+            throw InputError("flow: --inlet-end " + std::to_string(p.inlet_end) + ": the lumen has no such end (its ends: " + ids + ")");
+        }
+        inlet = static_cast<size_t>(f - caps.begin());
+    } else {
+        for (size_t i = 1; i < caps.size(); ++i)
+            if (caps[i].area_mm2 > caps[inlet].area_mm2) inlet = i;
+    }
+    if (caps.size() < 2) throw InputError("flow: the lumen has one open end: the blood needs an inlet and at least one outlet");
+    // Cells: an eighth of the inlet's radius (the parent vessel; a real tree's smallest outlets would make the
+    // mesh 10× larger: C0096 at a fifth of its 0.4 mm outlet, 1.3 M cells and 510 s of snappyHexMesh).
+    const double h = p.cell_mm > 0 ? p.cell_mm : std::clamp(std::sqrt(caps[inlet].area_mm2 / PI) / 8.0, 0.1, 0.3);
+    // Background box of cells 4h (snappyHexMesh refines twice, to h, at the wall and everywhere inside the blood,
+    // so the cell count follows the lumen's volume, not its box), a coarse cell of margin. Refuse an impossible
+    // size before any work: the lumen's volume in cells of h.
+    const double hb = 4 * h;
+    Eigen::Vector3d lo = blood.V.colwise().minCoeff().transpose(), hi = blood.V.colwise().maxCoeff().transpose();
+    lo.array() -= hb;
+    hi.array() += hb;
+    const Eigen::Vector3i nb = ((hi - lo) / hb).array().ceil().cast<int>();
+    double volume = 0;
+    for (Eigen::Index f = 0; f < blood.F.rows(); ++f) {
+        const Eigen::Vector3d a = blood.V.row(blood.F(f, 0)), bb = blood.V.row(blood.F(f, 1)), c = blood.V.row(blood.F(f, 2));
+        volume += a.dot(bb.cross(c)) / 6.0;
+    }
+    const double n_cells = volume / (h * h * h);
+    constexpr double MAX_CELLS = 4e6;
+    if (n_cells > MAX_CELLS)
+        throw InputError("flow: --cell-mm " + shortest(h) + " in a lumen of " + shortest(std::round(volume)) + " mm³ means " +
+                         shortest(std::round(n_cells / 1e5) / 10) + " million cells (at most " + shortest(MAX_CELLS / 1e6) +
+                         " million on this machine class): give a larger --cell-mm");
+    rep.info("flow: blood domain " + std::to_string(blood.F.rows()) + " triangles, " + std::to_string(caps.size()) + " ends, inlet end " +
+             std::to_string(caps[inlet].id) + " (" + shortest(std::round(caps[inlet].area_mm2 * 100) / 100) + " mm²); cells " + shortest(h) + " mm, " +
+             std::to_string(p.layers) + " wall layers");
+
+    // The case folder.
+    const bool keep = !p.case_dir.empty();
+    const fs::path dir = keep ? fs::absolute(p.case_dir) : fs::temp_directory_path() / ("aneu_flow_" + std::to_string(::getpid()));
+    struct Cleanup {
+        fs::path d;
+        bool keep;
+        ~Cleanup() {
+            std::error_code ec;
+            if (!keep) fs::remove_all(d, ec);
+        }
+    } cleanup{dir, keep};
+    std::error_code ec;
+    fs::remove_all(dir, ec);
+    fs::create_directories(dir / "system");
+    fs::create_directories(dir / "constant" / "triSurface");
+    fs::create_directories(dir / "0");
+    write_file(dir / "case.foam", "");
+    write_stl_regions(dir / "constant" / "triSurface" / "blood.stl", blood);
+    const double nu = BLOOD_VISCOSITY_PA_S / BLOOD_DENSITY_KG_M3;
+    const double U = p.inflow_cm_s / 100.0;
+    // A point inside the blood: from the inlet's centre, inwards, off the cell faces.
+    const EndCap& ic = caps[inlet];
+    const Eigen::Vector3d inside =
+        ic.centre - ic.normal * std::min(0.5 * std::sqrt(ic.area_mm2 / PI), 4 * h) + Eigen::Vector3d(0.0137, 0.0291, 0.0173) * h;
+    {
+        std::string s = foam_header("dictionary", "blockMeshDict") + "convertToMeters 0.001;\nvertices (";
+        for (int k = 0; k < 8; ++k) {
+            const Eigen::Vector3d v(k & 1 ? lo.x() + nb.x() * hb : lo.x(), k & 2 ? lo.y() + nb.y() * hb : lo.y(), k & 4 ? lo.z() + nb.z() * hb : lo.z());
+            s += vec(v) + " ";
+        }
+        s += ");\nblocks (hex (0 1 3 2 4 5 7 6) (" + std::to_string(nb.x()) + " " + std::to_string(nb.y()) + " " + std::to_string(nb.z()) +
+             ") simpleGrading (1 1 1));\nedges ();\nboundary ();\n";
+        write_file(dir / "system" / "blockMeshDict", s);
+    }
+    {
+        std::string regions, patch_info;
+        for (const auto& name : blood.label_names) {
+            regions += name + " { name " + name + "; } ";
+            if (name != "wall") patch_info += name + " { level (2 2); patchInfo { type patch; } } ";
+        }
+        std::string s = foam_header("dictionary", "snappyHexMeshDict");
+        s += "castellatedMesh true; snap true; addLayers " + std::string(p.layers > 0 ? "true" : "false") + ";\n";
+        s += "geometry { blood.stl { type triSurfaceMesh; scale 0.001; name blood; regions { " + regions + "} } }\n";
+        s += "castellatedMeshControls { maxLocalCells 20000000; maxGlobalCells 40000000; minRefinementCells 0; nCellsBetweenLevels 2;\n"
+             "  resolveFeatureAngle 30; features ();\n"
+             "  refinementSurfaces { blood { level (2 2); patchInfo { type wall; } regions { " + patch_info + "} } }\n"
+             "  refinementRegions { blood { mode inside; levels ((1e15 2)); } } locationInMesh " + vec(inside * 1e-3) + "; allowFreeStandingZoneFaces false; }\n";
+        s += "snapControls { nSmoothPatch 3; tolerance 2.0; nSolveIter 100; nRelaxIter 5; nFeatureSnapIter 10; implicitFeatureSnap true; explicitFeatureSnap false; }\n";
+        s += "addLayersControls { relativeSizes true; layers { wall { nSurfaceLayers " + std::to_string(p.layers) +
+             "; } } expansionRatio 1.2; finalLayerThickness 0.4;\n"
+             "  minThickness 0.05; nGrow 0; featureAngle 130; slipFeatureAngle 30; nRelaxIter 3; nSmoothSurfaceNormals 1; nSmoothNormals 3;\n"
+             "  nSmoothThickness 10; maxFaceThicknessRatio 0.5; maxThicknessToMedialRatio 0.3; minMedialAxisAngle 90; nBufferCellsNoExtrude 0;\n"
+             "  nLayerIter 50; }\n";
+        s += "meshQualityControls { maxNonOrtho 65; maxBoundarySkewness 20; maxInternalSkewness 4; maxConcave 80; minVol 1e-20; minTetQuality 1e-15;\n"
+             "  minArea -1; minTwist 0.02; minDeterminant 0.001; minFaceWeight 0.05; minVolRatio 0.01; minTriangleTwist -1; nSmoothScale 4;\n"
+             "  errorReduction 0.75; relaxed { maxNonOrtho 75; } }\nmergeTolerance 1e-6;\n";
+        write_file(dir / "system" / "snappyHexMeshDict", s);
+        write_file(dir / "system" / "meshQualityDict", foam_header("dictionary", "meshQualityDict") + "#includeEtc \"caseDicts/mesh/generation/meshQualityDict\"\n");
+    }
+    {
+        std::string fo;
+        for (const auto& c : caps) {
+            fo += "  " + c.patch + "_p { type surfaceFieldValue; libs (\"libfieldFunctionObjects.so\"); regionType patch; name " + c.patch +
+                  "; operation areaAverage; fields (p); writeFields false; log false; writeControl timeStep; writeInterval 1; }\n";
+            fo += "  " + c.patch + "_phi { type surfaceFieldValue; libs (\"libfieldFunctionObjects.so\"); regionType patch; name " + c.patch +
+                  "; operation sum; fields (phi); writeFields false; log false; writeControl timeStep; writeInterval 1; }\n";
+        }
+        fo += "  wss { type wallShearStress; libs (\"libfieldFunctionObjects.so\"); patches (wall); writeControl writeTime; log false; }\n";
+        write_file(dir / "system" / "controlDict", foam_header("dictionary", "controlDict") + "application simpleFoam; startFrom startTime; startTime 0; stopAt endTime; endTime " +
+                                                       std::to_string(p.max_iterations) + "; deltaT 1;\nwriteControl timeStep; writeInterval " +
+                                                       std::to_string(p.max_iterations) +
+                                                       "; purgeWrite 0; writeFormat ascii; writePrecision 10; runTimeModifiable false;\nfunctions {\n" + fo + "}\n");
+        write_file(dir / "system" / "fvSchemes", foam_header("dictionary", "fvSchemes") +
+                                                     "ddtSchemes { default steadyState; }\ngradSchemes { default Gauss linear; }\n"
+                                                     "divSchemes { default none; div(phi,U) bounded Gauss linearUpwind grad(U); div((nuEff*dev2(T(grad(U))))) Gauss linear; }\n"
+                                                     "laplacianSchemes { default Gauss linear limited corrected 0.5; }\ninterpolationSchemes { default linear; }\n"
+                                                     "snGradSchemes { default limited corrected 0.5; }\nwallDist { method meshWave; }\n");
+        write_file(dir / "system" / "fvSolution", foam_header("dictionary", "fvSolution") +
+                                                      "solvers {\n  p { solver GAMG; smoother GaussSeidel; tolerance 1e-10; relTol 0.05; }\n"
+                                                      "  U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-11; relTol 0.1; }\n}\n"
+                                                      "SIMPLE { nNonOrthogonalCorrectors 2; consistent yes; residualControl { p " + num(p.residual) + "; U " +
+                                                      num(p.residual / 10) + "; } }\nrelaxationFactors { equations { U 0.9; } }\n");
+        write_file(dir / "constant" / "transportProperties", foam_header("dictionary", "transportProperties") + "transportModel Newtonian; nu " + num(nu) + ";\n");
+        write_file(dir / "constant" / "turbulenceProperties", foam_header("dictionary", "turbulenceProperties") + "simulationType laminar;\n");
+        std::string ub = "  wall { type noSlip; }\n", pb = "  wall { type zeroGradient; }\n";
+        for (size_t i = 0; i < caps.size(); ++i) {
+            if (i == inlet) {
+                ub += "  " + caps[i].patch + " { type fixedValue; value uniform " + vec(-U * caps[i].normal) + "; }\n";
+                pb += "  " + caps[i].patch + " { type zeroGradient; }\n";
+            } else {
+                ub += "  " + caps[i].patch + " { type inletOutlet; inletValue uniform (0 0 0); value uniform (0 0 0); }\n";
+                pb += "  " + caps[i].patch + " { type fixedValue; value uniform 0; }\n";
+            }
+        }
+        write_file(dir / "0" / "U", foam_header("volVectorField", "U") + "dimensions [0 1 -1 0 0 0 0]; internalField uniform (0 0 0);\nboundaryField {\n" + ub + "}\n");
+        write_file(dir / "0" / "p", foam_header("volScalarField", "p") + "dimensions [0 2 -2 0 0 0 0]; internalField uniform 0;\nboundaryField {\n" + pb + "}\n");
+    }
+    if (std::getenv("WM_PROJECT_DIR") == nullptr) ::setenv("WM_PROJECT_DIR", "/usr/share/openfoam", 1);
+    const auto ignore = [](const std::string&) {};
+    // Mesh.
+    const Stopwatch tm;
+    rep.info("flow: meshing (blockMesh, snappyHexMesh)");
+    if (run_logged({"blockMesh"}, dir, dir / "log.blockMesh", deadline, ignore) != 0)
+        throw MeshingError("flow: blockMesh failed (log: " + (dir / "log.blockMesh").string() + (keep ? "" : "; keep it with --case-dir") + ")");
+    int snappy_phase = 0;
+    if (run_logged({"snappyHexMesh", "-overwrite"}, dir, dir / "log.snappyHexMesh", deadline, [&](const std::string& l) {
+            const int ph = l.rfind("Castellated mesh", 0) == 0 ? 1 : l.rfind("Morph input mesh", 0) == 0 ? 2 : l.rfind("Shrinking and layer", 0) == 0 ? 3 : 0;
+            if (ph > snappy_phase) {
+                snappy_phase = ph;
+                rep.progress("flow: snappyHexMesh", ph, 4);
+            }
+        }) != 0)
+        throw MeshingError("flow: snappyHexMesh failed (log: " + (dir / "log.snappyHexMesh").string() + (keep ? "" : "; keep it with --case-dir") + ")");
+    rep.progress("flow: snappyHexMesh", 4, 4);
+    long cells = 0;
+    run_logged({"checkMesh"}, dir, dir / "log.checkMesh", deadline, [&](const std::string& l) {
+        const auto q = l.find("cells:");
+        if (q != std::string::npos && cells == 0) cells = std::atol(l.c_str() + q + 6);
+    });
+    if (cells <= 0) throw MeshingError("flow: snappyHexMesh made no cells inside the lumen (log: " + (dir / "log.snappyHexMesh").string() + ")");
+    const double mesh_s = tm.seconds();
+    rep.info("flow: " + std::to_string(cells) + " cells in " + shortest(std::round(mesh_s * 10) / 10) + " s; solving (simpleFoam, laminar, blood)");
+    // Solve, with the residual history.
+    const Stopwatch ts;
+    std::vector<std::array<double, 2>> history;  // per iteration: initial residual of p, largest of U's
+    bool converged = false, diverged = false;
+    int iteration = 0;
+    const int rc = run_logged({"simpleFoam"}, dir, dir / "log.simpleFoam", deadline, [&](const std::string& l) {
+        if (l.rfind("Time = ", 0) == 0) {
+            iteration = std::atoi(l.c_str() + 7);
+            history.push_back({0.0, 0.0});
+            if (iteration % 25 == 0) rep.progress("flow: simpleFoam", iteration, p.max_iterations);
+            return;
+        }
+        const auto q = l.find("Initial residual = ");
+        if (q != std::string::npos && !history.empty()) {
+            const double r = std::atof(l.c_str() + q + 19);
+            if (!std::isfinite(r)) diverged = true;
+            if (l.find("for p,") != std::string::npos)
+                history.back()[0] = std::max(history.back()[0], r);
+            else if (l.find("for U") != std::string::npos)
+                history.back()[1] = std::max(history.back()[1], r);
+        }
+        if (l.find("SIMPLE solution converged") != std::string::npos) converged = true;
+        if (q != std::string::npos && (l.find("nan", q) != std::string::npos || l.find("inf", q) != std::string::npos)) diverged = true;
+    });
+    const double solve_s = ts.seconds();
+    {
+        std::string csv = "iteration,p_initial_residual,U_initial_residual\n";
+        for (size_t i = 0; i < history.size(); ++i) csv += std::to_string(i + 1) + "," + num(history[i][0]) + "," + num(history[i][1]) + "\n";
+        write_file(dir / "residuals.csv", csv);
+    }
+    if (rc != 0 || diverged) {
+        // Keep what shows why: the residual history and the solver's log, beside the output.
+        const fs::path kept = fs::path(out).string() + ".failed-flow-case";
+        std::error_code e2;
+        if (!keep) {
+            fs::remove_all(kept, e2);
+            fs::copy(dir, kept, fs::copy_options::recursive, e2);
+        }
+        const std::string last = history.empty() ? "none" : "p " + num(history.back()[0]) + ", U " + num(history.back()[1]);
+        throw NumericalError("flow: simpleFoam " + std::string(diverged ? "diverged" : "failed (exit " + std::to_string(rc) + ")") + " at iteration " +
+                             std::to_string(iteration) + " (last initial residuals: " + last + "); residual history and log in " +
+                             (keep ? dir : kept).string());
+    }
+    if (!converged)
+        rep.warn("flow: not converged in " + std::to_string(p.max_iterations) + " iterations (initial residuals p " + num(history.back()[0]) + ", U " +
+                 num(history.back()[1]) + " against " + num(p.residual) + "): raise --max-iterations");
+    rep.info("flow: " + std::to_string(iteration) + " iterations in " + shortest(std::round(solve_s * 10) / 10) + " s" + (converged ? ", converged" : ""));
+    if (run_logged({"postProcess", "-func", "writeCellCentres", "-latestTime"}, dir, dir / "log.writeCellCentres", deadline, ignore) != 0)
+        throw Error("flow: postProcess writeCellCentres failed (log: " + (dir / "log.writeCellCentres").string() + ")");
+    // Results: the last time folder.
+    std::string last_time;
+    double last_t = -1;
+    for (const auto& e : fs::directory_iterator(dir)) {
+        if (!e.is_directory()) continue;
+        char* end = nullptr;
+        const std::string name = e.path().filename().string();
+        const double t = std::strtod(name.c_str(), &end);
+        if (end != name.c_str() && *end == '\0' && t > last_t) {
+            last_t = t;
+            last_time = name;
+        }
+    }
+    if (last_t <= 0) throw Error("flow: simpleFoam wrote no result (log: " + (dir / "log.simpleFoam").string() + ")");
+    const fs::path td = dir / last_time;
+    const double rho = BLOOD_DENSITY_KG_M3;
+    std::vector<std::pair<std::string, double>> qa;
+    double inflow = 0, net = 0, p_in = 0, p_out_mean = 0;
+    for (size_t i = 0; i < caps.size(); ++i) {
+        const double q = last_dat_value(dir / "postProcessing" / (caps[i].patch + "_phi") / "0" / "surfaceFieldValue.dat", 1);
+        const double pk = last_dat_value(dir / "postProcessing" / (caps[i].patch + "_p") / "0" / "surfaceFieldValue.dat", 1);
+        net += q;
+        if (i == inlet) {
+            inflow = -q;
+            p_in = pk * rho;
+        } else {
+            p_out_mean += pk * rho / static_cast<double>(caps.size() - 1);
+        }
+        qa.emplace_back("flow_ml_s_end_" + std::to_string(caps[i].id), q * 1e6);
+        qa.emplace_back("pressure_pa_end_" + std::to_string(caps[i].id), pk * rho);
+        qa.emplace_back("area_mm2_end_" + std::to_string(caps[i].id), caps[i].area_mm2);
+    }
+    // The wall: face centres and wall shear stress (kinematic in OpenFOAM: × density); pressure from the nearest cell.
+    const std::vector<double> cw = patch_field(td / "C", "wall", 3, 0);
+    const std::vector<double> ww = patch_field(td / "wallShearStress", "wall", 3, cw.size() / 3);
+    const std::vector<double> cc = internal_field(td / "C", 3, 0);
+    const std::vector<double> pc = internal_field(td / "p", 1, cc.size() / 3);
+    if (ww.size() != cw.size() || pc.size() * 3 != cc.size()) throw Error("flow: OpenFOAM's wall or cell fields disagree in size");
+    const auto wall_pts = as_points(cw, 1e3), cell_pts = as_points(cc, 1e3);
+    const NearestPoint near_wall(wall_pts, 2 * h), near_cell(cell_pts, 2 * h);
+    const Eigen::Index nf = blood.F.rows();
+    Eigen::MatrixXd wss = Eigen::MatrixXd::Zero(nf, 1), wssv = Eigen::MatrixXd::Zero(nf, 3), pres = Eigen::MatrixXd::Zero(nf, 1);
+    std::vector<double> wall_wss;
+    double wall_area = 0, wss_area = 0;
+    for (Eigen::Index f = 0; f < nf; ++f) {
+        const Eigen::Vector3d x = (blood.V.row(blood.F(f, 0)) + blood.V.row(blood.F(f, 1)) + blood.V.row(blood.F(f, 2))).transpose() / 3.0;
+        const int c = near_cell.nearest(x);
+        if (c >= 0) pres(f, 0) = pc[static_cast<size_t>(c)] * rho;
+        if (blood.face_label[f] != 0) continue;
+        const int w = near_wall.nearest(x);
+        if (w < 0) continue;
+        const Eigen::Vector3d v = rho * Eigen::Vector3d(ww[3 * static_cast<size_t>(w)], ww[3 * static_cast<size_t>(w) + 1], ww[3 * static_cast<size_t>(w) + 2]);
+        wssv.row(f) = v.transpose();
+        wss(f, 0) = v.norm();
+        const double a = tri_area(blood, f);
+        wall_area += a;
+        wss_area += a * v.norm();
+        wall_wss.push_back(v.norm());
+    }
+    std::sort(wall_wss.begin(), wall_wss.end());
+    blood.face_fields["wall_shear_stress_pa"] = wss;
+    blood.face_fields["wall_shear_stress_vector_pa"] = wssv;
+    blood.face_fields["pressure_pa"] = pres;
+    const double imbalance = inflow > 0 ? std::abs(net) / inflow : 0.0;
+    qa.insert(qa.begin(), {{"cells", static_cast<double>(cells)},
+                           {"cell_mm", h},
+                           {"iterations", static_cast<double>(iteration)},
+                           {"converged", converged ? 1.0 : 0.0},
+                           {"final_residual_p", history.empty() ? 0.0 : history.back()[0]},
+                           {"final_residual_U", history.empty() ? 0.0 : history.back()[1]},
+                           {"inlet_end", static_cast<double>(caps[inlet].id)},
+                           {"inflow_ml_s", inflow * 1e6},
+                           {"mass_imbalance", imbalance},
+                           {"pressure_drop_pa", p_in - p_out_mean},
+                           {"wss_mean_pa", wall_area > 0 ? wss_area / wall_area : 0.0},
+                           {"wss_median_pa", wall_wss.empty() ? 0.0 : wall_wss[wall_wss.size() / 2]},
+                           {"wss_max_pa", wall_wss.empty() ? 0.0 : wall_wss.back()},
+                           {"time_mesh_s", mesh_s},
+                           {"time_solve_s", solve_s}});
+    rep.info("flow: inflow " + shortest(std::round(inflow * 1e8) / 100) + " mL/s, mass imbalance " + shortest(imbalance) + ", pressure drop " +
+             shortest(std::round((p_in - p_out_mean) * 100) / 100) + " Pa, wall shear stress mean " + shortest(std::round(wss_area / std::max(wall_area, 1e-300) * 1000) / 1000) + " Pa");
+    for (auto& q : qa) stage.qa.push_back(q);
+    b.surfaces["blood"] = std::move(blood);
+    b.volume.reset();
+    b.fem.reset();
+    b.condensed.reset();
+    finish(b, stage, t0, out, rep);
+}
+
+}  // namespace aneu::pipeline
