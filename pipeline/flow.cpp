@@ -301,6 +301,75 @@ std::vector<EndCap> caps_of(const SurfaceData& blood) {
     return caps;
 }
 
+/// The neck of the labelled sac: the longest loop of edges between sac (label 1) and artery faces, its
+/// centroid, the area of the fan it spans and the direction into the sac. Area 0 when there is no sac.
+struct SacNeck {
+    std::vector<Eigen::Vector3d> loop;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero(), into_sac = Eigen::Vector3d::Zero();
+    double area_mm2 = 0;
+};
+
+SacNeck sac_neck(const SurfaceData& s) {
+    SacNeck n;
+    if (s.face_label.size() != s.F.rows()) return n;
+    std::map<std::pair<int, int>, int> face_of;  // directed edge -> face
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) face_of[{s.F(f, k), s.F(f, (k + 1) % 3)}] = static_cast<int>(f);
+    std::map<int, int> next;  // border edge a -> b, oriented as in the sac's face
+    Eigen::Vector3d sac_c = Eigen::Vector3d::Zero();
+    double sac_a = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        if (s.face_label[f] != 1) continue;
+        const double a = tri_area(s, f);
+        sac_c += a * (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
+        sac_a += a;
+        for (int k = 0; k < 3; ++k) {
+            const int a0 = s.F(f, k), b0 = s.F(f, (k + 1) % 3);
+            const auto g = face_of.find({b0, a0});
+            if (g != face_of.end() && s.face_label[g->second] != 1) next[a0] = b0;
+        }
+    }
+    if (sac_a <= 0 || next.empty()) return n;
+    sac_c /= sac_a;
+    std::set<int> used;
+    std::vector<int> best;
+    double best_len = 0;
+    for (const auto& [start, nb] : next) {
+        if (used.count(start)) continue;
+        std::vector<int> loop{start};
+        used.insert(start);
+        int v = start;
+        double len = 0;
+        bool closed = false;
+        for (size_t guard = 0; guard < next.size() + 1; ++guard) {
+            const auto it = next.find(v);
+            if (it == next.end()) break;
+            len += (s.V.row(it->second) - s.V.row(v)).norm();
+            v = it->second;
+            if (v == start) {
+                closed = true;
+                break;
+            }
+            if (used.count(v)) break;
+            used.insert(v);
+            loop.push_back(v);
+        }
+        if (closed && len > best_len) {
+            best_len = len;
+            best = loop;
+        }
+    }
+    if (best.size() < 3) return n;
+    for (int v : best) {
+        n.loop.push_back(s.V.row(v).transpose());
+        n.centre += n.loop.back();
+    }
+    n.centre /= static_cast<double>(best.size());
+    for (size_t i = 0; i < n.loop.size(); ++i) n.area_mm2 += 0.5 * (n.loop[i] - n.centre).cross(n.loop[(i + 1) % n.loop.size()] - n.centre).norm();
+    n.into_sac = (sac_c - n.centre).normalized();
+    return n;
+}
+
 }  // namespace
 
 SurfaceData blood_domain(const SurfaceData& lumen) {
@@ -357,7 +426,8 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     Bundle b = read_bundle(in, parts);
     const auto it = b.surfaces.find("lumen");
     if (it == b.surfaces.end()) throw InputError(in + ": no /surface/lumen (run `aneuprep surface` first)");
-    SurfaceData blood = blood_domain(it->second);
+    const SurfaceData lumen = it->second;
+    SurfaceData blood = blood_domain(lumen);
     const std::vector<EndCap> caps = caps_of(blood);
     // The inlet.
     size_t inlet = 0;
@@ -631,6 +701,42 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         wall_wss.push_back(v.norm());
     }
     std::sort(wall_wss.begin(), wall_wss.end());
+    // The flow into the sac: through the neck, the disc spanned by the border between the sac's faces and the
+    // artery's (a fan from its centroid), sampled every half cell with the velocity of the nearest cell. Into a
+    // sac without an outlet the net flux is zero; what enters (and leaves again) is the sac inflow.
+    const SacNeck neck = sac_neck(lumen);
+    if (neck.area_mm2 > 0) {
+        const std::vector<double> uc = internal_field(td / "U", 3, cell_pts.size());
+        double q_in = 0, q_out = 0;
+        for (size_t i = 0; i < neck.loop.size(); ++i) {
+            const Eigen::Vector3d a = neck.centre, b1 = neck.loop[i], c1 = neck.loop[(i + 1) % neck.loop.size()];
+            Eigen::Vector3d n = (b1 - a).cross(c1 - a);
+            const double area = 0.5 * n.norm();
+            if (area <= 0) continue;
+            n.normalize();
+            if (n.dot(neck.into_sac) < 0) n = -n;
+            const int k = std::max(2, static_cast<int>(std::ceil(std::max((b1 - a).norm(), (c1 - a).norm()) / (0.5 * h))));
+            const double da = area / (k * k);  // k² sub-triangles of equal area
+            for (int ii = 0; ii < k; ++ii)
+                for (int jj = 0; jj < k - ii; ++jj)
+                    for (int up = 0; up < (jj < k - ii - 1 ? 2 : 1); ++up) {
+                        // centroid of sub-triangle (ii, jj, up) in barycentric steps of 1/k
+                        const double u = (ii + (up ? 2.0 / 3 : 1.0 / 3)) / k, v = (jj + (up ? 2.0 / 3 : 1.0 / 3)) / k;
+                        const Eigen::Vector3d x = a + u * (b1 - a) + v * (c1 - a);
+                        const int c = near_cell.nearest(x);
+                        if (c < 0) continue;
+                        const Eigen::Vector3d vel(uc[3 * static_cast<size_t>(c)], uc[3 * static_cast<size_t>(c) + 1], uc[3 * static_cast<size_t>(c) + 2]);
+                        const double q = vel.dot(n) * da * 1e-6;  // m³/s
+                        (q > 0 ? q_in : q_out) += q;
+                    }
+        }
+        qa.emplace_back("neck_area_mm2", neck.area_mm2);
+        qa.emplace_back("sac_inflow_ml_s", q_in * 1e6);
+        qa.emplace_back("sac_outflow_ml_s", -q_out * 1e6);
+        qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
+        rep.info("flow: sac inflow " + shortest(std::round(q_in * 1e8) / 100) + " mL/s (" + shortest(std::round(q_in / inflow * 1000) / 10) +
+                 " % of the inflow) through a neck of " + shortest(std::round(neck.area_mm2 * 100) / 100) + " mm²");
+    }
     blood.face_fields["wall_shear_stress_pa"] = wss;
     blood.face_fields["wall_shear_stress_vector_pa"] = wssv;
     blood.face_fields["pressure_pa"] = pres;
