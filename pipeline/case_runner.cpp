@@ -24,7 +24,7 @@ namespace aneu::pipeline {
 namespace fs = std::filesystem;
 
 const std::vector<std::string>& all_case_stages() {
-    static const std::vector<std::string> s{"phantom", "segment", "surface", "wall", "tetmesh", "assemble", "condense"};
+    static const std::vector<std::string> s{"phantom", "segment", "surface", "wall", "tetmesh", "assemble", "condense", "flow"};
     return s;
 }
 
@@ -64,10 +64,13 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
         throw InputError("case config '" + config + "': " + e.what());
     }
     std::string cfg_out, cfg_source;
-    bool has_phantom = false;
+    bool has_phantom = false, has_flow = false;
     const auto& stages = all_case_stages();
     for (const auto& it : items) {
-        if (it.name == "++" || it.name == "--") continue;  // CLI11's section markers
+        if (it.name == "++" || it.name == "--") {  // CLI11's section markers: an empty [flow] asks for the stage too
+            if (!it.parents.empty() && it.parents[0] == "flow") has_flow = true;
+            continue;
+        }
         if (it.parents.empty()) throw InputError("case config '" + config + "': " + it.name + ": a key outside any [section]");
         const std::string& section = it.parents[0];
         if (section == "run") {
@@ -85,6 +88,7 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
             throw InputError("case config '" + config + "': [" + section + "]: not a stage (expected run, " + joined(stages) + ")");
         }
         if (section == "phantom") has_phantom = true;
+        if (section == "flow") has_flow = true;
         c.options[section].emplace_back(it.name, it.inputs);
     }
     c.out_dir = !out_dir.empty() ? out_dir : !cfg_out.empty() ? cfg_out : "out/cases/" + c.id;
@@ -114,6 +118,8 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
     c.steps.push_back({"tetmesh", file("wall.h5"), file("volume.h5"), file("volume.h5")});
     c.steps.push_back({"assemble", file("volume.h5"), file("fem.h5"), file("fem.h5")});
     c.steps.push_back({"condense", file("fem.h5"), file("case.h5"), file("case.h5")});
+    // The pre-clip blood flow, only where the config asks for it ([flow]): it needs the lumen only.
+    if (has_flow) c.steps.push_back({"flow", file("surface.h5"), file("flow.h5"), file("flow.h5")});
 
     for (const auto& s : sets) {
         const size_t dot = s.find('.');
@@ -262,7 +268,9 @@ void write_make_rules(const CaseRunOptions& o, const CaseChain& chain, const std
         const fs::path stamp = stamps / (s.stage + ".txt");
         write_if_changed(stamp, params_text(plans[i]));
         std::string deps = make_word(stamp.string(), "stamp") + " $(PREP)";
-        if (i > 0) {
+        if (s.stage == "flow") {  // the lumen only: a changed wall or condensation does not rerun it
+            deps = make_word(s.input, "input") + " " + deps;
+        } else if (i > 0) {
             deps = chain.steps[i - 1].provenance_file + " " + deps;
         } else if (!s.input.empty()) {
             deps = make_word(s.input, "source") + " " + deps;
@@ -272,6 +280,7 @@ void write_make_rules(const CaseRunOptions& o, const CaseChain& chain, const std
              "' >> $(FAILED); exit 1; }\n";
     }
     r += "BUNDLES += " + chain.bundle() + "\n";
+    if (const CaseStep* f = chain.find("flow")) r += "BUNDLES += " + f->provenance_file + "\n";
     write_if_changed(o.make_rules, r);
 }
 
@@ -306,7 +315,7 @@ CaseRunResult run_case(const CaseRunOptions& o, const CaseEvents& ev, Reporter& 
     for (const auto* opt : {&o.stage, &o.from}) {
         if (!opt->empty() && std::find(names.begin(), names.end(), *opt) == names.end()) {
             throw InputError((opt == &o.stage ? "--stage '" : "--from '") + *opt +
-                             "': expected phantom, segment, surface, wall, tetmesh, assemble or condense");
+                             "': expected phantom, segment, surface, wall, tetmesh, assemble, condense or flow");
         }
     }
     CaseRunResult res;

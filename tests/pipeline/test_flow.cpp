@@ -11,6 +11,7 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/pipeline/case_runner.hpp"
 #include "aneu/pipeline/flow.hpp"
 #include "aneu/pipeline/geometry.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -207,4 +208,31 @@ TEST(Flow, BadInputsAndABudgetTooShort) {
         EXPECT_NE(std::string(e.what()).find("time budget"), std::string::npos) << e.what();
     }
     EXPECT_FALSE(fs::exists(out));
+}
+
+// A case config with a [flow] section gets a flow stage after the case bundle, fed by the lumen (surface.h5), so a
+// changed wall or condensation does not rerun it; without the section there is none, and --set cannot add one.
+TEST(Flow, ACaseConfigWithAFlowSectionHasAFlowStage) {
+    const TempDir d;
+    write_tube_stl(d.p / "tube.stl", 2.0, 10.0, 24, 20);
+    const std::string src = "[run]\nsource = \"" + (d.p / "tube.stl").string() + "\"\n";
+    {
+        std::ofstream(d.p / "plain.toml") << src;
+        std::ofstream(d.p / "with_flow.toml") << src << "[flow]\ninflow-cm-s = 5\n";
+    }
+    const CaseChain plain = make_case_chain((d.p / "plain.toml").string(), (d.p / "a").string(), "", {});
+    EXPECT_EQ(plain.find("flow"), nullptr);
+    EXPECT_EQ(plain.bundle(), (d.p / "a" / "case.h5").string());
+    EXPECT_THROW(make_case_chain((d.p / "plain.toml").string(), (d.p / "a").string(), "", {"flow.inflow-cm-s=5"}), InputError);
+    const CaseChain c = make_case_chain((d.p / "with_flow.toml").string(), (d.p / "b").string(), "", {});
+    ASSERT_NE(c.find("flow"), nullptr);
+    EXPECT_EQ(c.steps.back().stage, "flow");
+    EXPECT_EQ(c.find("flow")->input, (d.p / "b" / "surface.h5").string());
+    EXPECT_EQ(c.find("flow")->output, (d.p / "b" / "flow.h5").string());
+    EXPECT_EQ(c.bundle(), (d.p / "b" / "case.h5").string()) << "the case bundle is still condense's output";
+    ASSERT_EQ(c.options.at("flow").size(), 1u);
+    EXPECT_EQ(c.options.at("flow")[0].first, "inflow-cm-s");
+    std::ofstream(d.p / "empty_flow.toml") << src << "[flow]\n";
+    EXPECT_NE(make_case_chain((d.p / "empty_flow.toml").string(), (d.p / "c").string(), "", {}).find("flow"), nullptr)
+        << "an empty [flow] section asks for the stage with its defaults";
 }

@@ -39,8 +39,8 @@ struct CaseChain {
     std::map<std::string, std::vector<std::pair<std::string, std::string>>> sets;
 
     const CaseStep* find(const std::string& stage) const;
-    /// The bundle (output of the last stage).
-    const std::string& bundle() const { return steps.back().output; }
+    /// The case bundle (the condense stage's output; a [flow] stage may follow it).
+    const std::string& bundle() const { return find("condense") ? find("condense")->output : steps.back().output; }
 };
 
 /// The stages a case can have, in pipeline order.
