@@ -2,8 +2,8 @@
 # SPDX-License-Identifier: MIT
 # `aneuprep flow` on the sample case (pre-clip) at the default cell size and one refinement (cells × 0.75), and on
 # the real basilar-tip case C0096 at the default: cells, mesh and solve time, iterations, sac inflow, pressure drop,
-# wall shear stress; the sac inflow's change between the two meshes (issue #17: ≤ 5 %). Pictures of the wall shear
-# stress and pressure need tools outside the product; the figures go to bench/results/flow/flow.md.
+# wall shear stress; the sac inflow's change between the two meshes (issue #17: ≤ 5 %). Figures to
+# bench/results/flow/flow.md; pictures of C0096's wall shear stress and pressure (aneuprep snapshot --color-by) to pictures/.
 # usage: bash bench/run_flow_bench.sh   (build first: bash scripts/build.sh; about 12 minutes on 2 cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,6 +27,10 @@ run sample_default "$w/sample/surface.h5"
 h=$(python3 -c "import json; d=json.load(open('$w/sample_default.json')); print(d['provenance'][-1]['qa']['cell_mm'] * 0.75)")
 run sample_fine "$w/sample/surface.h5" --cell-mm "$h"
 run C0096_default "$c96"
+mkdir -p bench/results/flow/pictures
+for f in wall_shear_stress_pa:wss pressure_pa:pressure; do
+  xvfb-run -a "$P" snapshot "$w/C0096_default.h5" --surface blood --color-by "${f%%:*}" -o "bench/results/flow/pictures/C0096_basilar_tip_${f##*:}.png" -q || true
+done
 python3 - "$w" <<'PY'
 import json, sys
 w = sys.argv[1]

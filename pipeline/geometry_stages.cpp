@@ -40,7 +40,7 @@ bool has_ext(const std::string& path, const std::string& ext) {
 SnapshotScene segment_scene(const ImageData& im, const std::string& title) {
     Volume<float> m{im.grid, std::vector<float>(im.mask.begin(), im.mask.end())};
     SnapshotScene sc;
-    SnapshotLayer layer{isosurface(m, 0.5, true, false), ColorBy::LABEL, 0.45, false};
+    SnapshotLayer layer{isosurface(m, 0.5, true, false), ColorBy::LABEL, 0.45, false, ""};
     layer.surface.label_names = {"lumen mask"};
     sc.layers.push_back(std::move(layer));
     sc.centerline = im.centerline;
@@ -51,7 +51,7 @@ SnapshotScene segment_scene(const ImageData& im, const std::string& title) {
 
 SnapshotScene surface_scene(const SurfaceData& lumen, const std::vector<EndPlane>& planes, const std::string& title) {
     SnapshotScene sc;
-    sc.layers.push_back({lumen, ColorBy::LABEL, 1.0, true});
+    sc.layers.push_back({lumen, ColorBy::LABEL, 1.0, true, ""});
     sc.planes = planes;
     sc.title = title;
     return sc;
@@ -61,7 +61,7 @@ SnapshotScene wall_thickness_scene(const SurfaceData& w, const std::string& titl
     std::vector<char> outer(static_cast<size_t>(w.F.rows()));
     for (Eigen::Index f = 0; f < w.F.rows(); ++f) outer[static_cast<size_t>(f)] = w.face_label[f] != 0;  // outer and caps
     SnapshotScene sc;
-    sc.layers.push_back({sub_surface(w, outer), ColorBy::THICKNESS, 1.0, true});
+    sc.layers.push_back({sub_surface(w, outer), ColorBy::THICKNESS, 1.0, true, ""});
     sc.title = title;
     return sc;
 }

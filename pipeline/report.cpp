@@ -319,13 +319,13 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
         const SnapshotScene sc = wall_thickness_scene(w, "wall thickness");
         pg.picture({"wall", "outer wall surface and end caps coloured by the measured thickness [mm].", render(sc)});
         SnapshotScene sl;
-        sl.layers.push_back({w, ColorBy::LABEL, 1.0, true});
+        sl.layers.push_back({w, ColorBy::LABEL, 1.0, true, ""});
         sl.title = "wall labels";
         pg.picture({"wall", "closed wall surface by label: inner, outer and one annular cap per vessel end.", render(sl)});
     }
     if (files.count("tetmesh") && files["tetmesh"].surfaces.count("wall")) {
         SnapshotScene sc;
-        sc.layers.push_back({files["tetmesh"].surfaces["wall"], ColorBy::REGION, 1.0, true});
+        sc.layers.push_back({files["tetmesh"].surfaces["wall"], ColorBy::REGION, 1.0, true, ""});
         sc.title = "tetmesh regions";
         pg.picture({"tetmesh", "boundary of the tetrahedral mesh coloured by material region (artery/aneurysm).", render(sc)});
     }

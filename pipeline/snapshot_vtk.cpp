@@ -98,6 +98,34 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
             bar->SetWidth(0.1);
             bar->SetHeight(0.8);
             ren->AddActor2D(bar);
+        } else if (layer.by == ColorBy::FIELD) {
+            const auto f = s.face_fields.find(layer.field);
+            if (f == s.face_fields.end() || f->second.rows() != s.F.rows()) throw InputError("snapshot: the surface has no face field '" + layer.field + "'");
+            vtkNew<vtkDoubleArray> t;
+            t->SetName(layer.field.c_str());
+            std::vector<double> v;
+            for (Eigen::Index i = 0; i < s.F.rows(); ++i) v.push_back(f->second.cols() == 1 ? f->second(i, 0) : f->second.row(i).norm());
+            for (double x : v) t->InsertNextValue(x);
+            poly->GetCellData()->SetScalars(t);
+            std::vector<double> sorted = v;
+            std::sort(sorted.begin(), sorted.end());
+            const double lo = sorted.front(), hi = std::max(lo + 1e-12, sorted[static_cast<size_t>(0.98 * static_cast<double>(sorted.size() - 1))]);
+            lut->SetHueRange(0.66, 0.0);  // low = blue, high = red
+            lut->SetTableRange(lo, hi);
+            lut->Build();
+            mapper->SetLookupTable(lut);
+            mapper->SetScalarRange(lo, hi);
+            mapper->SetScalarModeToUseCellData();
+            vtkNew<vtkScalarBarActor> bar;
+            bar->SetLookupTable(lut);
+            bar->SetTitle(layer.field.c_str());
+            bar->SetNumberOfLabels(5);
+            bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
+            bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
+            bar->SetPosition(0.85, 0.1);
+            bar->SetWidth(0.12);
+            bar->SetHeight(0.8);
+            ren->AddActor2D(bar);
         } else {
             const bool region = layer.by == ColorBy::REGION && s.face_region.size() == s.F.rows();
             const Eigen::VectorXi& c = region ? s.face_region : s.face_label;
@@ -241,9 +269,9 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
     out.commit();
 }
 
-void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width, int height) {
+void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width, int height, const std::string& field) {
     SnapshotScene scene;
-    scene.layers.push_back({s, by, 1.0, true});
+    scene.layers.push_back({s, by, 1.0, true, field});
     snapshot_scene(scene, png, width, height);
 }
 

@@ -164,7 +164,8 @@ void add_snapshot_command(CLI::App& app, std::function<int()>& action) {
     auto* c = app.add_subcommand("snapshot", "render a surface of a stage file to PNG (needs X: use xvfb-run -a)");
     c->add_option("file", o->file, "stage file (.h5)")->required();
     c->add_option("--surface", o->surface, "which /surface/<name>")->capture_default_str();
-    c->add_option("--color-by", o->color_by, "label or region")->check(CLI::IsMember({"label", "region"}))->capture_default_str();
+    c->add_option("--color-by", o->color_by, "label, region, or a face field of the surface (e.g. wall_shear_stress_pa of the flow stage's blood surface)")
+        ->capture_default_str();
     c->add_option("-o,--output", o->png, "PNG file")->required();
     c->callback([o, &action] {
         action = [o] {
@@ -174,7 +175,17 @@ void add_snapshot_command(CLI::App& app, std::function<int()>& action) {
                 const Bundle b = read_bundle(o->file, parts);
                 const auto it = b.surfaces.find(o->surface);
                 if (it == b.surfaces.end()) throw InputError(o->file + ": no /surface/" + o->surface);
-                pipeline::snapshot_surface(it->second, o->color_by == "region" ? pipeline::ColorBy::REGION : pipeline::ColorBy::LABEL, o->png);
+                const SurfaceData& sf = it->second;
+                if (o->color_by == "label" || o->color_by == "region") {
+                    pipeline::snapshot_surface(sf, o->color_by == "region" ? pipeline::ColorBy::REGION : pipeline::ColorBy::LABEL, o->png);
+                } else {
+                    if (!sf.face_fields.count(o->color_by)) {
+                        std::string names = "label, region";
+                        for (const auto& [n, m] : sf.face_fields) names += ", " + n;
+                        throw InputError("--color-by '" + o->color_by + "': expected one of " + names + " (/surface/" + o->surface + " of " + o->file + ")");
+                    }
+                    pipeline::snapshot_surface(sf, pipeline::ColorBy::FIELD, o->png, 1000, 800, o->color_by);
+                }
             });
         };
     });

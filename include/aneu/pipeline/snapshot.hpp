@@ -10,7 +10,7 @@
 namespace aneu::pipeline {
 
 /// What colours the faces of a surface snapshot.
-enum class ColorBy { LABEL, REGION, THICKNESS };
+enum class ColorBy { LABEL, REGION, THICKNESS, FIELD };
 
 /// One surface of a snapshot.
 struct SnapshotLayer {
@@ -18,6 +18,9 @@ struct SnapshotLayer {
     ColorBy by = ColorBy::LABEL;  ///< THICKNESS uses SurfaceData::vertex_thickness (colour bar in mm)
     double opacity = 1.0;
     bool edges = true;
+    /// FIELD: the face field (SurfaceData::face_fields; its magnitude when it has 3 columns), coloured blue (low)
+    /// to red (high) up to its 98th percentile, so that one extreme (a plug inlet's rim) does not wash out the rest.
+    std::string field;
 };
 /// A picture: surfaces, optionally a centerline (tubes) and end planes (discs with their normals), a title.
 struct SnapshotScene {
@@ -46,6 +49,6 @@ void require_snapshot_display();
 /// centre along −y with +z up, one view. Debian's VTK renders through X11 only: needs a display
 /// (run under `xvfb-run -a`).
 /// @throws InputError no X display (DISPLAY unset); IoError the PNG cannot be written
-void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width = 1000, int height = 800);
+void snapshot_surface(const SurfaceData& s, ColorBy by, const std::string& png, int width = 1000, int height = 800, const std::string& field = "");
 
 }  // namespace aneu::pipeline
