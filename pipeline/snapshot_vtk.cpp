@@ -22,6 +22,7 @@
 #include <vtkRenderWindow.h>
 #include <vtkRenderer.h>
 #include <vtkScalarBarActor.h>
+#include <vtkSmartPointer.h>
 #include <vtkTextActor.h>
 #include <vtkTextProperty.h>
 #include <vtkTransform.h>
@@ -40,6 +41,28 @@
 namespace aneu::pipeline {
 
 namespace {
+
+/// A lookup table's range [lo, hi] on a mapper.
+void colour_scale(vtkLookupTable* lut, vtkPolyDataMapper* mapper, double lo, double hi) {
+    lut->SetTableRange(lo, hi);
+    lut->Build();
+    mapper->SetLookupTable(lut);
+    mapper->SetScalarRange(lo, hi);
+}
+
+/// A colour bar at the right edge: `x` its left edge, `width` its width (fractions of the window).
+vtkSmartPointer<vtkScalarBarActor> scalar_bar(vtkLookupTable* lut, const std::string& title, double x, double width) {
+    auto bar = vtkSmartPointer<vtkScalarBarActor>::New();
+    bar->SetLookupTable(lut);
+    bar->SetTitle(title.c_str());
+    bar->SetNumberOfLabels(5);
+    bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
+    bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
+    bar->SetPosition(x, 0.1);
+    bar->SetWidth(width);
+    bar->SetHeight(0.8);
+    return bar;
+}
 
 const double PALETTE[8][3] = {{0.85, 0.33, 0.27}, {0.95, 0.80, 0.35}, {0.30, 0.55, 0.85}, {0.40, 0.75, 0.45},
                               {0.70, 0.50, 0.80}, {0.95, 0.55, 0.20}, {0.45, 0.80, 0.85}, {0.60, 0.60, 0.60}};
@@ -83,21 +106,9 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
             poly->GetPointData()->SetScalars(t);
             const double lo = s.vertex_thickness.minCoeff(), hi = std::max(lo + 1e-6, s.vertex_thickness.maxCoeff());
             lut->SetHueRange(0.0, 0.66);  // thin = red, thick = blue
-            lut->SetTableRange(lo, hi);
-            lut->Build();
-            mapper->SetLookupTable(lut);
-            mapper->SetScalarRange(lo, hi);
+            colour_scale(lut, mapper, lo, hi);
             mapper->SetScalarModeToUsePointData();
-            vtkNew<vtkScalarBarActor> bar;
-            bar->SetLookupTable(lut);
-            bar->SetTitle("thickness [mm]");
-            bar->SetNumberOfLabels(5);
-            bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
-            bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
-            bar->SetPosition(0.88, 0.1);
-            bar->SetWidth(0.1);
-            bar->SetHeight(0.8);
-            ren->AddActor2D(bar);
+            ren->AddActor2D(scalar_bar(lut, "thickness [mm]", 0.88, 0.1));
         } else if (layer.by == ColorBy::FIELD) {
             const auto f = s.face_fields.find(layer.field);
             if (f == s.face_fields.end() || f->second.rows() != s.F.rows()) throw InputError("snapshot: the surface has no face field '" + layer.field + "'");
@@ -111,21 +122,9 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
             std::sort(sorted.begin(), sorted.end());
             const double lo = sorted.front(), hi = std::max(lo + 1e-12, sorted[static_cast<size_t>(0.98 * static_cast<double>(sorted.size() - 1))]);
             lut->SetHueRange(0.66, 0.0);  // low = blue, high = red
-            lut->SetTableRange(lo, hi);
-            lut->Build();
-            mapper->SetLookupTable(lut);
-            mapper->SetScalarRange(lo, hi);
+            colour_scale(lut, mapper, lo, hi);
             mapper->SetScalarModeToUseCellData();
-            vtkNew<vtkScalarBarActor> bar;
-            bar->SetLookupTable(lut);
-            bar->SetTitle(layer.field.c_str());
-            bar->SetNumberOfLabels(5);
-            bar->GetTitleTextProperty()->SetColor(0.1, 0.1, 0.1);
-            bar->GetLabelTextProperty()->SetColor(0.1, 0.1, 0.1);
-            bar->SetPosition(0.85, 0.1);
-            bar->SetWidth(0.12);
-            bar->SetHeight(0.8);
-            ren->AddActor2D(bar);
+            ren->AddActor2D(scalar_bar(lut, layer.field, 0.85, 0.12));
         } else {
             const bool region = layer.by == ColorBy::REGION && s.face_region.size() == s.F.rows();
             const Eigen::VectorXi& c = region ? s.face_region : s.face_label;
