@@ -599,6 +599,9 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     int iteration = 0;
     const int rc = run_logged({"simpleFoam"}, dir, dir / "log.simpleFoam", deadline, [&](const std::string& l) {
         if (l.rfind("Time = ", 0) == 0) {
+            if (!history.empty() && iteration % 100 == 0)  // the residuals of the iteration just finished
+                rep.info("flow: iteration " + std::to_string(iteration) + ", initial residuals p " + num(history.back()[0]) + ", U " +
+                         num(history.back()[1]) + " (converged below " + num(p.residual) + ", " + num(p.residual / 10) + ")");
             iteration = std::atoi(l.c_str() + 7);
             history.push_back({0.0, 0.0});
             if (iteration % 25 == 0) rep.progress("flow: simpleFoam", iteration, p.max_iterations);
