@@ -642,8 +642,9 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         rep.warn("flow: not converged in " + std::to_string(p.max_iterations) + " iterations (initial residuals p " + num(history.back()[0]) + ", U " +
                  num(history.back()[1]) + " against " + num(p.residual) + "): raise --max-iterations");
     rep.info("flow: " + std::to_string(iteration) + " iterations in " + shortest(std::round(solve_s * 10) / 10) + " s" + (converged ? ", converged" : ""));
-    if (run_logged({"postProcess", "-func", "writeCellCentres", "-latestTime"}, dir, dir / "log.writeCellCentres", deadline, ignore) != 0)
-        throw Error("flow: postProcess writeCellCentres failed (log: " + (dir / "log.writeCellCentres").string() + ")");
+    for (const char* fn : {"writeCellCentres", "writeCellVolumes"})
+        if (run_logged({"postProcess", "-func", fn, "-latestTime"}, dir, dir / (std::string("log.") + fn), deadline, ignore) != 0)
+            throw Error(std::string("flow: postProcess ") + fn + " failed (log: " + (dir / (std::string("log.") + fn)).string() + ")");
     // Results: the last time folder.
     std::string last_time;
     double last_t = -1;
@@ -737,8 +738,25 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         qa.emplace_back("sac_inflow_ml_s", q_in * 1e6);
         qa.emplace_back("sac_outflow_ml_s", -q_out * 1e6);
         qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
+        // Mean speed in the sac, by cell volume: the cells beyond the neck's plane whose nearest lumen face is sac.
+        const std::vector<double> vol = internal_field(td / "V", 1, cell_pts.size());
+        std::vector<Eigen::Vector3d> lumen_c(static_cast<size_t>(lumen.F.rows()));
+        for (Eigen::Index f = 0; f < lumen.F.rows(); ++f)
+            lumen_c[static_cast<size_t>(f)] = (lumen.V.row(lumen.F(f, 0)) + lumen.V.row(lumen.F(f, 1)) + lumen.V.row(lumen.F(f, 2))).transpose() / 3.0;
+        const NearestPoint near_face(lumen_c, 2 * h);
+        double v_sum = 0, vs_sum = 0;
+        for (size_t c = 0; c < cell_pts.size(); ++c) {
+            if (neck.into_sac.dot(cell_pts[c] - neck.centre) <= 0) continue;
+            const int f = near_face.nearest(cell_pts[c]);
+            if (f < 0 || lumen.face_label[f] != 1) continue;
+            v_sum += vol[c];
+            vs_sum += vol[c] * Eigen::Vector3d(uc[3 * c], uc[3 * c + 1], uc[3 * c + 2]).norm();
+        }
+        qa.emplace_back("sac_volume_mm3", v_sum * 1e9);
+        qa.emplace_back("sac_mean_speed_cm_s", v_sum > 0 ? vs_sum / v_sum * 100 : 0.0);
         rep.info("flow: sac inflow " + shortest(std::round(q_in * 1e8) / 100) + " mL/s (" + shortest(std::round(q_in / inflow * 1000) / 10) +
-                 " % of the inflow) through a neck of " + shortest(std::round(neck.area_mm2 * 100) / 100) + " mm²");
+                 " % of the inflow) through a neck of " + shortest(std::round(neck.area_mm2 * 100) / 100) + " mm²; mean speed in the sac " +
+                 shortest(std::round(vs_sum / std::max(v_sum, 1e-300) * 1000) / 10) + " cm/s over " + shortest(std::round(v_sum * 1e10) / 10) + " mm³");
     }
     blood.face_fields["wall_shear_stress_pa"] = wss;
     blood.face_fields["wall_shear_stress_vector_pa"] = wssv;

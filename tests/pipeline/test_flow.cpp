@@ -175,6 +175,15 @@ TEST(Flow, SacInflowThroughTheNeckOfASidewallSac) {
     EXPECT_GT(frac, 0.001);
     EXPECT_LT(frac, 0.5);
     EXPECT_NEAR(q_in, q_out, 0.1 * q_in) << "what enters a closed sac leaves it";
+    // The sac's volume seen by the fluid mesh: between half and all of the sphere (its part inside the parent and
+    // below the neck's plane is not sac); the flow in it is slower than the parent's mean.
+    const double sphere = 4.0 / 3.0 * PI * Rs * Rs * Rs;
+    std::printf("sidewall sac: volume %.1f mm³ (sphere %.1f), mean speed %.2f cm/s (parent mean 10)\n", qa_of(b, "sac_volume_mm3"), sphere,
+                qa_of(b, "sac_mean_speed_cm_s"));
+    EXPECT_GT(qa_of(b, "sac_volume_mm3"), 0.5 * sphere);
+    EXPECT_LT(qa_of(b, "sac_volume_mm3"), 1.0 * sphere);
+    EXPECT_GT(qa_of(b, "sac_mean_speed_cm_s"), 0.0);
+    EXPECT_LT(qa_of(b, "sac_mean_speed_cm_s"), 10.0);
 }
 
 // Errors: an end that does not exist and a lumen without open ends are the input's fault; a time budget too short
