@@ -27,7 +27,9 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/core/label_loops.hpp"
 #include "aneu/core/text.hpp"
+#include "aneu/pipeline/surface_ops.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
 #include "stage_util.hpp"
 
@@ -301,60 +303,37 @@ std::vector<EndCap> caps_of(const SurfaceData& blood) {
     return caps;
 }
 
-/// The neck of the labelled sac: the longest loop of edges between sac (label 1) and artery faces, its
+/// The neck of the labelled sac: the longest loop of edges between sac ("aneurysm") and artery faces, its
 /// centroid, the area of the fan it spans and the direction into the sac. Area 0 when there is no sac.
 struct SacNeck {
     std::vector<Eigen::Vector3d> loop;
     Eigen::Vector3d centre = Eigen::Vector3d::Zero(), into_sac = Eigen::Vector3d::Zero();
     double area_mm2 = 0;
+    int sac_label = -1;
 };
 
 SacNeck sac_neck(const SurfaceData& s) {
     SacNeck n;
-    if (s.face_label.size() != s.F.rows()) return n;
-    std::map<std::pair<int, int>, int> face_of;  // directed edge -> face
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) face_of[{s.F(f, k), s.F(f, (k + 1) % 3)}] = static_cast<int>(f);
-    std::map<int, int> next;  // border edge a -> b, oriented as in the sac's face
+    const auto it = std::find(s.label_names.begin(), s.label_names.end(), "aneurysm");
+    if (it == s.label_names.end() || s.face_label.size() != s.F.rows()) return n;
+    const int sac = static_cast<int>(it - s.label_names.begin());
     Eigen::Vector3d sac_c = Eigen::Vector3d::Zero();
     double sac_a = 0;
     for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        if (s.face_label[f] != 1) continue;
+        if (s.face_label[f] != sac) continue;
         const double a = tri_area(s, f);
         sac_c += a * (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3.0;
         sac_a += a;
-        for (int k = 0; k < 3; ++k) {
-            const int a0 = s.F(f, k), b0 = s.F(f, (k + 1) % 3);
-            const auto g = face_of.find({b0, a0});
-            if (g != face_of.end() && s.face_label[g->second] != 1) next[a0] = b0;
-        }
     }
-    if (sac_a <= 0 || next.empty()) return n;
+    if (sac_a <= 0) return n;
     sac_c /= sac_a;
-    std::set<int> used;
+    // The neck: the longest border loop of the sac (the simulator's neck line, aneu/core/label_loops.hpp).
     std::vector<int> best;
     double best_len = 0;
-    for (const auto& [start, nb] : next) {
-        if (used.count(start)) continue;
-        std::vector<int> loop{start};
-        used.insert(start);
-        int v = start;
+    for (const auto& loop : label_border_loops(s.F, s.face_label, sac)) {
         double len = 0;
-        bool closed = false;
-        for (size_t guard = 0; guard < next.size() + 1; ++guard) {
-            const auto it = next.find(v);
-            if (it == next.end()) break;
-            len += (s.V.row(it->second) - s.V.row(v)).norm();
-            v = it->second;
-            if (v == start) {
-                closed = true;
-                break;
-            }
-            if (used.count(v)) break;
-            used.insert(v);
-            loop.push_back(v);
-        }
-        if (closed && len > best_len) {
+        for (size_t i = 0; i < loop.size(); ++i) len += (s.V.row(loop[(i + 1) % loop.size()]) - s.V.row(loop[i])).norm();
+        if (len > best_len) {
             best_len = len;
             best = loop;
         }
@@ -367,6 +346,7 @@ SacNeck sac_neck(const SurfaceData& s) {
     n.centre /= static_cast<double>(best.size());
     for (size_t i = 0; i < n.loop.size(); ++i) n.area_mm2 += 0.5 * (n.loop[i] - n.centre).cross(n.loop[(i + 1) % n.loop.size()] - n.centre).norm();
     n.into_sac = (sac_c - n.centre).normalized();
+    n.sac_label = sac;
     return n;
 }
 
@@ -740,15 +720,19 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
         // Mean speed in the sac, by cell volume: the cells beyond the neck's plane whose nearest lumen face is sac.
         const std::vector<double> vol = internal_field(td / "V", 1, cell_pts.size());
-        std::vector<Eigen::Vector3d> lumen_c(static_cast<size_t>(lumen.F.rows()));
-        for (Eigen::Index f = 0; f < lumen.F.rows(); ++f)
-            lumen_c[static_cast<size_t>(f)] = (lumen.V.row(lumen.F(f, 0)) + lumen.V.row(lumen.F(f, 1)) + lumen.V.row(lumen.F(f, 2))).transpose() / 3.0;
-        const NearestPoint near_face(lumen_c, 2 * h);
+        // Only the cells beyond the neck's plane need their nearest lumen face (CGAL AABB tree).
+        std::vector<size_t> beyond;
+        for (size_t c = 0; c < cell_pts.size(); ++c)
+            if (neck.into_sac.dot(cell_pts[c] - neck.centre) > 0) beyond.push_back(c);
+        Eigen::MatrixX3d q(static_cast<Eigen::Index>(beyond.size()), 3);
+        for (size_t i = 0; i < beyond.size(); ++i) q.row(static_cast<Eigen::Index>(i)) = cell_pts[beyond[i]].transpose();
+        Eigen::VectorXi nearest_face;
+        distance_to_faces(lumen.V, lumen.F, q, &nearest_face);
         double v_sum = 0, vs_sum = 0;
-        for (size_t c = 0; c < cell_pts.size(); ++c) {
-            if (neck.into_sac.dot(cell_pts[c] - neck.centre) <= 0) continue;
-            const int f = near_face.nearest(cell_pts[c]);
-            if (f < 0 || lumen.face_label[f] != 1) continue;
+        for (size_t i = 0; i < beyond.size(); ++i) {
+            const size_t c = beyond[i];
+            const int f = nearest_face[static_cast<Eigen::Index>(i)];
+            if (f < 0 || lumen.face_label[f] != neck.sac_label) continue;
             v_sum += vol[c];
             vs_sum += vol[c] * Eigen::Vector3d(uc[3 * c], uc[3 * c + 1], uc[3 * c + 2]).norm();
         }

@@ -15,6 +15,7 @@
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/core/label_loops.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/sim/shapes.hpp"
 
@@ -34,56 +35,11 @@ std::string fmt3(const Eigen::Vector3d& p) {
     return buf;
 }
 
-// Chains the undirected edges into closed loops (edges of a vertex used twice at most are expected).
-std::vector<std::vector<int>> chain_loops(const std::vector<std::array<int, 2>>& edges) {
-    std::unordered_map<int, std::vector<int>> nb;
-    for (const auto& e : edges) {
-        nb[e[0]].push_back(e[1]);
-        nb[e[1]].push_back(e[0]);
-    }
-    std::vector<int> starts;
-    for (const auto& [v, l] : nb) starts.push_back(v);
-    std::sort(starts.begin(), starts.end());  // deterministic
-    std::unordered_map<int, char> used;
-    std::vector<std::vector<int>> loops;
-    for (int s : starts) {
-        if (used[s]) continue;
-        std::vector<int> loop{s};
-        used[s] = 1;
-        int prev = -1, cur = s;
-        for (;;) {
-            int next = -1;
-            for (int w : nb[cur])
-                if (w != prev && !used[w]) {
-                    next = w;
-                    break;
-                }
-            if (next < 0) break;
-            used[next] = 1;
-            loop.push_back(next);
-            prev = cur;
-            cur = next;
-        }
-        if (loop.size() >= 3) loops.push_back(std::move(loop));
-    }
-    return loops;
-}
-
-// Neck: the edges between an aneurysm face and a face of another region, chained into loops.
+// Neck: the loops between "aneurysm" faces and the others (aneu/core/label_loops.hpp).
 std::vector<std::vector<int>> neck_loops_of(const Eigen::MatrixX3i& F, const Eigen::VectorXi& face_region, const std::vector<std::string>& region_names) {
     const auto it = std::find(region_names.begin(), region_names.end(), "aneurysm");
     if (it == region_names.end()) return {};
-    const int sac = static_cast<int>(it - region_names.begin());
-    std::map<std::pair<int, int>, std::array<int, 2>> edge_faces;  // (min,max) -> (#sac faces, #other faces)
-    for (Eigen::Index f = 0; f < F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            auto& c = edge_faces[std::minmax(F(f, k), F(f, (k + 1) % 3))];
-            ++c[face_region[f] == sac ? 0 : 1];
-        }
-    std::vector<std::array<int, 2>> neck;
-    for (const auto& [e, c] : edge_faces)
-        if (c[0] == 1 && c[1] == 1) neck.push_back({e.first, e.second});
-    return chain_loops(neck);
+    return label_border_loops(F, face_region, static_cast<int>(it - region_names.begin()));
 }
 
 }  // namespace
