@@ -149,17 +149,28 @@ std::vector<double> parse_field_data(const std::string& t, size_t pos, int k, si
     return out;
 }
 
+/// A field file of the last time folder, read once.
+struct FieldFile {
+    fs::path path;
+    std::string text;
+    explicit FieldFile(fs::path p) : path(std::move(p)), text(read_text(path)) {}
+    std::vector<double> internal(int k, size_t n) const;
+    std::vector<double> patch(const std::string& name, int k, size_t n) const;
+};
+
 /// internalField of a field file.
-std::vector<double> internal_field(const fs::path& p, int k, size_t n) {
-    const std::string t = read_text(p);
+std::vector<double> FieldFile::internal(int k, size_t n) const {
+    const std::string& t = text;
+    const fs::path& p = path;
     const size_t pos = t.find("internalField");
     if (pos == std::string::npos) throw Error("flow: " + p.string() + " has no internalField");
     return parse_field_data(t, pos + 13, k, n);
 }
 
 /// The `value` of patch `patch` in a field file's boundaryField.
-std::vector<double> patch_field(const fs::path& p, const std::string& patch, int k, size_t n) {
-    const std::string t = read_text(p);
+std::vector<double> FieldFile::patch(const std::string& patch, int k, size_t n) const {
+    const std::string& t = text;
+    const fs::path& p = path;
     const size_t bf = t.find("boundaryField");
     if (bf == std::string::npos) throw Error("flow: " + p.string() + " has no boundaryField");
     size_t pos = bf;
@@ -658,10 +669,11 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         qa.emplace_back("area_mm2_end_" + std::to_string(caps[i].id), caps[i].area_mm2);
     }
     // The wall: face centres and wall shear stress (kinematic in OpenFOAM: × density); pressure from the nearest cell.
-    const std::vector<double> cw = patch_field(td / "C", "wall", 3, 0);
-    const std::vector<double> ww = patch_field(td / "wallShearStress", "wall", 3, cw.size() / 3);
-    const std::vector<double> cc = internal_field(td / "C", 3, 0);
-    const std::vector<double> pc = internal_field(td / "p", 1, cc.size() / 3);
+    const FieldFile centres(td / "C");
+    const std::vector<double> cw = centres.patch("wall", 3, 0);
+    const std::vector<double> ww = FieldFile(td / "wallShearStress").patch("wall", 3, cw.size() / 3);
+    const std::vector<double> cc = centres.internal(3, 0);
+    const std::vector<double> pc = FieldFile(td / "p").internal(1, cc.size() / 3);
     if (ww.size() != cw.size() || pc.size() * 3 != cc.size()) throw Error("flow: OpenFOAM's wall or cell fields disagree in size");
     const auto wall_pts = as_points(cw, 1e3), cell_pts = as_points(cc, 1e3);
     const NearestPoint near_wall(wall_pts, 2 * h), near_cell(cell_pts, 2 * h);
@@ -690,7 +702,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     // sac without an outlet the net flux is zero; what enters (and leaves again) is the sac inflow.
     const SacNeck neck = sac_neck(lumen);
     if (neck.area_mm2 > 0) {
-        const std::vector<double> uc = internal_field(td / "U", 3, cell_pts.size());
+        const std::vector<double> uc = FieldFile(td / "U").internal(3, cell_pts.size());
         double q_in = 0, q_out = 0;
         for (size_t i = 0; i < neck.loop.size(); ++i) {
             const Eigen::Vector3d a = neck.centre, b1 = neck.loop[i], c1 = neck.loop[(i + 1) % neck.loop.size()];
@@ -719,7 +731,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         qa.emplace_back("sac_outflow_ml_s", -q_out * 1e6);
         qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
         // Mean speed in the sac, by cell volume: the cells beyond the neck's plane whose nearest lumen face is sac.
-        const std::vector<double> vol = internal_field(td / "V", 1, cell_pts.size());
+        const std::vector<double> vol = FieldFile(td / "V").internal(1, cell_pts.size());
         // Only the cells beyond the neck's plane need their nearest lumen face (CGAL AABB tree).
         std::vector<size_t> beyond;
         for (size_t c = 0; c < cell_pts.size(); ++c)

@@ -222,7 +222,7 @@ struct SacCandidates {
     int kept = -1;              ///< index into pieces; -1 when there is none
 };
 /// A candidate whose faces stay within d90 of the centerline along more than this many times d90 of it is a
-/// stretch of vessel (real sacs: 0.5–2.2; a thin vessel against another in a real CTA: 10.9).
+/// stretch of vessel (real sacs: 0.5–2.2; a thin vessel against another in a real CTA: 17).
 inline constexpr double TUBE_ALONG_PER_DISTANCE = 4.0;
 /// Labels every face artery (0) or aneurysm (1): hysteresis on (distance to the centerline) / (local radius),
 /// then one sac: of the connected candidate pieces that are not tubes (above), the most prominent (area ×
