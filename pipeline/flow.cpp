@@ -13,6 +13,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <sstream>
@@ -24,11 +25,13 @@
 #include <unistd.h>
 
 #include <Eigen/Geometry>
+#include <H5Cpp.h>
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/label_loops.hpp"
 #include "aneu/core/text.hpp"
+#include "aneu/fem/static_solve.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
 #include "aneu/pipeline/tetmesh.hpp"
 #include "stage_util.hpp"
@@ -187,6 +190,32 @@ std::vector<double> FieldFile::patch(const std::string& patch, int k, size_t n) 
     const size_t v = t.find("value", open);
     if (v == std::string::npos || v > close) throw Error("flow: " + p.string() + ": patch '" + patch + "' has no value");
     return parse_field_data(t, v + 5, k, n);
+}
+
+/// A labelList file of the mesh (constant/polyMesh/owner, neighbour): "N ( i0 i1 ... )" after the header.
+std::vector<int> read_label_list(const fs::path& p) {
+    const std::string t = read_text(p);
+    const size_t hdr = t.find("FoamFile");
+    const size_t start = hdr == std::string::npos ? 0 : t.find('}', hdr) + 1;
+    const size_t open = t.find('(', start);
+    if (open == std::string::npos) throw Error("flow: " + p.string() + ": no list");
+    size_t e = open;
+    while (e > start && std::isspace(static_cast<unsigned char>(t[e - 1]))) --e;
+    size_t b = e;
+    while (b > start && std::isdigit(static_cast<unsigned char>(t[b - 1]))) --b;
+    if (b == e) throw Error("flow: " + p.string() + ": no list size");
+    const long n = std::strtol(t.c_str() + b, nullptr, 10);
+    std::vector<int> out;
+    out.reserve(static_cast<size_t>(n));
+    const char* q = t.c_str() + open + 1;
+    for (long i = 0; i < n; ++i) {
+        char* end = nullptr;
+        const long v = std::strtol(q, &end, 10);
+        if (end == q) throw Error("flow: " + p.string() + ": fewer than " + std::to_string(n) + " labels");
+        out.push_back(static_cast<int>(v));
+        q = end;
+    }
+    return out;
 }
 
 /// The last value in column `col` of a function object's .dat file (# comments skipped).
@@ -406,20 +435,73 @@ SurfaceData blood_domain(const SurfaceData& lumen) {
     return b;
 }
 
-void flow_file(const std::string& in, const std::string& out, const FlowParams& p, StageRecord stage, Reporter& rep) {
-    flow_spec().validate(p);
+namespace {
+
+/// What one solve gives: the QA figures, the blood surface with its face fields, the flows of interest.
+struct Solved {
+    std::vector<std::pair<std::string, double>> qa;
+    SurfaceData blood;
+    double inflow_m3_s = 0, sac_inflow_m3_s = -1;  // -1: no sac
+    double seconds = 0;
+};
+
+/// The capped lumen's part reachable from `seed` as a clean closed surface, its faces labelled like the capped
+/// surface's: a face in a cap's plane (within 0.6 of the grid's spacing, normal within 25°) and disc is that end's.
+/// Ends that the reachable part does not touch are dropped from the labels (returned in `lost`).
+SurfaceData reachable_blood(const SurfaceData& capped, const std::vector<EndCap>& caps, const Eigen::Vector3d& seed, double g, Volume<float>& field,
+                            std::vector<int>& lost, Reporter& rep) {
+    ReachableStats st;
+    constexpr std::size_t MAX_VOXELS = 150'000'000;  // about 1.5 GB of grids
+    field = reachable_distance(capped, seed, g, MAX_VOXELS, &st);
+    SurfaceData iso = isosurface(field, 0.0, true, true);
+    std::vector<double> rmax(caps.size(), 0);
+    for (Eigen::Index f = 0; f < capped.F.rows(); ++f) {
+        const int l = capped.face_label[f];
+        if (l <= 0) continue;
+        for (int k = 0; k < 3; ++k)
+            rmax[static_cast<size_t>(l - 1)] = std::max(rmax[static_cast<size_t>(l - 1)], (capped.V.row(capped.F(f, k)).transpose() - caps[static_cast<size_t>(l - 1)].centre).norm());
+    }
+    iso.face_label = Eigen::VectorXi::Zero(iso.F.rows());
+    std::vector<Eigen::Index> count(caps.size(), 0);
+    for (Eigen::Index f = 0; f < iso.F.rows(); ++f) {
+        const Eigen::Vector3d a = iso.V.row(iso.F(f, 0)), b = iso.V.row(iso.F(f, 1)), c = iso.V.row(iso.F(f, 2));
+        const Eigen::Vector3d x = (a + b + c) / 3.0, n = (b - a).cross(c - a).normalized();
+        for (size_t e = 0; e < caps.size(); ++e) {
+            const double off = caps[e].normal.dot(x - caps[e].centre);
+            if (std::abs(off) > 0.6 * g || n.dot(caps[e].normal) < std::cos(25 * PI / 180)) continue;
+            if ((x - caps[e].centre - off * caps[e].normal).norm() > rmax[e] + g) continue;
+            iso.face_label[f] = static_cast<int>(e) + 1;
+            ++count[e];
+            break;
+        }
+    }
+    // Labels of the ends reached, renumbered.
+    iso.label_names = {"wall"};
+    std::vector<int> relabel(caps.size() + 1, 0);
+    for (size_t e = 0; e < caps.size(); ++e) {
+        if (count[e] == 0) {
+            lost.push_back(caps[e].id);
+            continue;
+        }
+        iso.label_names.push_back(caps[e].patch);
+        relabel[e + 1] = static_cast<int>(iso.label_names.size()) - 1;
+    }
+    for (Eigen::Index f = 0; f < iso.F.rows(); ++f) iso.face_label[f] = relabel[static_cast<size_t>(iso.face_label[f])];
+    rep.info("flow: reachable blood domain on a " + std::to_string(field.grid.size[0]) + "x" + std::to_string(field.grid.size[1]) + "x" +
+             std::to_string(field.grid.size[2]) + " grid of " + shortest(g) + " mm: " + std::to_string(st.reachable) + " voxels reached, " +
+             std::to_string(st.blocked) + " of " + std::to_string(st.segment_tests) + " links near the wall blocked; " + std::to_string(iso.F.rows()) +
+             " triangles");
+    return iso;
+}
+
+/// Meshes and solves one lumen in `dir`. `what` names it in the log ("pre-clip", "frame 12").
+Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, const fs::path& dir, bool keep, const std::string& out,
+                   std::chrono::steady_clock::time_point deadline, Reporter& rep, const std::string& what) {
     const Stopwatch t0;
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(p.time_budget_s * 1000));
-    BundleParts parts;
-    parts.volume = false;
-    parts.fem = false;
-    parts.condensed_W = false;
-    Bundle b = read_bundle(in, parts);
-    const auto it = b.surfaces.find("lumen");
-    if (it == b.surfaces.end()) throw InputError(in + ": no /surface/lumen (run `aneuprep surface` first)");
-    const SurfaceData lumen = it->second;
+    Solved res;
     SurfaceData blood = blood_domain(lumen);
-    const std::vector<EndCap> caps = caps_of(blood);
+    std::vector<EndCap> caps = caps_of(blood);
+    if (caps.size() < 2) throw InputError("flow: the lumen has one open end: the blood needs an inlet and at least one outlet");
     // The inlet.
     size_t inlet = 0;
     if (p.inlet_end >= 0) {
@@ -434,10 +516,49 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         for (size_t i = 1; i < caps.size(); ++i)
             if (caps[i].area_mm2 > caps[inlet].area_mm2) inlet = i;
     }
-    if (caps.size() < 2) throw InputError("flow: the lumen has one open end: the blood needs an inlet and at least one outlet");
     // Cells: an eighth of the inlet's radius (the parent vessel; a real tree's smallest outlets would make the
     // mesh 10× larger: C0096 at a fifth of its 0.4 mm outlet, 1.3 M cells and 510 s of snappyHexMesh).
     const double h = p.cell_mm > 0 ? p.cell_mm : std::clamp(std::sqrt(caps[inlet].area_mm2 / PI) / 8.0, 0.1, 0.3);
+    // A point inside the blood: from the inlet's centre, inwards, off the cell faces.
+    const EndCap ic = caps[inlet];
+    const Eigen::Vector3d inside =
+        ic.centre - ic.normal * std::min(0.5 * std::sqrt(ic.area_mm2 / PI), 4 * h) + Eigen::Vector3d(0.0137, 0.0291, 0.0173) * h;
+    const double lumen_volume = enclosed_volume(blood);
+    // The reachable part (a pinched lumen), on a grid of half cells.
+    Volume<float> field;
+    if (voxel) {
+        std::vector<int> lost;
+        blood = reachable_blood(blood, caps, inside, 0.5 * h, field, lost, rep);
+        std::vector<EndCap> kept;
+        for (const EndCap& c : caps)
+            if (std::find(lost.begin(), lost.end(), c.id) == lost.end()) kept.push_back(c);
+        if (std::find(lost.begin(), lost.end(), ic.id) != lost.end())
+            throw Error("flow: " + what + ": the inlet end " + std::to_string(ic.id) + " is not part of the reachable blood domain");
+        if (kept.size() < 2)
+            throw Error("flow: " + what + ": no outlet is reachable from the inlet end " + std::to_string(ic.id) +
+                        ": the lumen is closed off (the parent vessel occluded); nothing to solve");
+        if (!lost.empty()) {
+            std::string ids;
+            for (int id : lost) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+            rep.warn("flow: " + what + ": the ends " + ids + " are not reachable from the inlet (closed off): no flow through them");
+        }
+        // The caps as the clean surface has them (areas of the isosurface's cap faces).
+        const std::vector<EndCap> measured = caps_of(blood);
+        caps = measured;
+        inlet = static_cast<size_t>(std::find_if(caps.begin(), caps.end(), [&](const EndCap& c) { return c.id == ic.id; }) - caps.begin());
+        // The cap's plane and centre are the lumen's (the isosurface rounds the rim by a grid cell).
+        for (EndCap& c : caps)
+            for (const EndCap& o : kept)
+                if (o.id == c.id) {
+                    c.normal = o.normal;
+                    c.centre = o.centre;
+                }
+        res.qa.emplace_back("ends_closed_off", static_cast<double>(lost.size()));
+    }
+    const double domain_volume = enclosed_volume(blood);
+    res.qa.emplace_back("domain_voxel", voxel ? 1.0 : 0.0);
+    res.qa.emplace_back("lumen_volume_mm3", lumen_volume);
+    res.qa.emplace_back("domain_volume_mm3", domain_volume);
     // Background box of cells 4h (snappyHexMesh refines twice, to h, at the wall and everywhere inside the blood,
     // so the cell count follows the lumen's volume, not its box), a coarse cell of margin. Refuse an impossible
     // size before any work: the lumen's volume in cells of h.
@@ -446,32 +567,17 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     lo.array() -= hb;
     hi.array() += hb;
     const Eigen::Vector3i nb = ((hi - lo) / hb).array().ceil().cast<int>();
-    double volume = 0;
-    for (Eigen::Index f = 0; f < blood.F.rows(); ++f) {
-        const Eigen::Vector3d a = blood.V.row(blood.F(f, 0)), bb = blood.V.row(blood.F(f, 1)), c = blood.V.row(blood.F(f, 2));
-        volume += a.dot(bb.cross(c)) / 6.0;
-    }
-    const double n_cells = volume / (h * h * h);
+    const double n_cells = domain_volume / (h * h * h);
     constexpr double MAX_CELLS = 4e6;
     if (n_cells > MAX_CELLS)
-        throw InputError("flow: --cell-mm " + shortest(h) + " in a lumen of " + shortest(std::round(volume)) + " mm³ means " +
+        throw InputError("flow: --cell-mm " + shortest(h) + " in a lumen of " + shortest(std::round(domain_volume)) + " mm³ means " +
                          shortest(std::round(n_cells / 1e5) / 10) + " million cells (at most " + shortest(MAX_CELLS / 1e6) +
                          " million on this machine class): give a larger --cell-mm");
-    rep.info("flow: blood domain " + std::to_string(blood.F.rows()) + " triangles, " + std::to_string(caps.size()) + " ends, inlet end " +
+    rep.info("flow: " + what + ": blood domain " + std::to_string(blood.F.rows()) + " triangles, " + std::to_string(caps.size()) + " ends, inlet end " +
              std::to_string(caps[inlet].id) + " (" + shortest(std::round(caps[inlet].area_mm2 * 100) / 100) + " mm²); cells " + shortest(h) + " mm, " +
              std::to_string(p.layers) + " wall layers");
 
     // The case folder.
-    const bool keep = !p.case_dir.empty();
-    const fs::path dir = keep ? fs::absolute(p.case_dir) : fs::temp_directory_path() / ("aneu_flow_" + std::to_string(::getpid()));
-    struct Cleanup {
-        fs::path d;
-        bool keep;
-        ~Cleanup() {
-            std::error_code ec;
-            if (!keep) fs::remove_all(d, ec);
-        }
-    } cleanup{dir, keep};
     std::error_code ec;
     fs::remove_all(dir, ec);
     fs::create_directories(dir / "system");
@@ -481,10 +587,6 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     write_stl_regions(dir / "constant" / "triSurface" / "blood.stl", blood);
     const double nu = BLOOD_VISCOSITY_PA_S / BLOOD_DENSITY_KG_M3;
     const double U = p.inflow_cm_s / 100.0;
-    // A point inside the blood: from the inlet's centre, inwards, off the cell faces.
-    const EndCap& ic = caps[inlet];
-    const Eigen::Vector3d inside =
-        ic.centre - ic.normal * std::min(0.5 * std::sqrt(ic.area_mm2 / PI), 4 * h) + Eigen::Vector3d(0.0137, 0.0291, 0.0173) * h;
     {
         std::string s = foam_header("dictionary", "blockMeshDict") + "convertToMeters 0.001;\nvertices (";
         for (int k = 0; k < 8; ++k) {
@@ -543,12 +645,32 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
                                                       "  U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-11; relTol 0.1; }\n}\n"
                                                       "SIMPLE { nNonOrthogonalCorrectors 2; consistent yes; residualControl { p " + num(p.residual) + "; U " +
                                                       num(p.residual / 10) + "; } }\nrelaxationFactors { equations { U 0.9; } }\n");
-        write_file(dir / "constant" / "transportProperties", foam_header("dictionary", "transportProperties") + "transportModel Newtonian; nu " + num(nu) + ";\n");
+        // Carreau–Yasuda as OpenFOAM's BirdCarreau with its exponent a (kinematic: μ / ρ).
+        const std::string transport =
+            p.viscosity == "carreau-yasuda"
+                ? "transportModel BirdCarreau;\nBirdCarreauCoeffs { nu0 " + num(CY_MU0_PA_S / BLOOD_DENSITY_KG_M3) + "; nuInf " + num(CY_MUINF_PA_S / BLOOD_DENSITY_KG_M3) +
+                      "; k " + num(CY_LAMBDA_S) + "; n " + num(CY_N) + "; a " + num(CY_A) + "; }\n"
+                : "transportModel Newtonian; nu " + num(nu) + ";\n";
+        write_file(dir / "constant" / "transportProperties", foam_header("dictionary", "transportProperties") + transport);
         write_file(dir / "constant" / "turbulenceProperties", foam_header("dictionary", "turbulenceProperties") + "simulationType laminar;\n");
         std::string ub = "  wall { type noSlip; }\n", pb = "  wall { type zeroGradient; }\n";
+        // Murray's law: Q_i = Q r_i³ / Σ r_j³ over the outlets, r from each outlet's area; the largest outlet keeps
+        // p = 0 (and so takes its share as the rest).
+        const double q_in = U * caps[inlet].area_mm2 * 1e-6;  // m³/s
+        double r3_sum = 0;
+        size_t largest_out = caps.size();
+        for (size_t i = 0; i < caps.size(); ++i) {
+            if (i == inlet) continue;
+            r3_sum += std::pow(caps[i].area_mm2 / PI, 1.5);
+            if (largest_out == caps.size() || caps[i].area_mm2 > caps[largest_out].area_mm2) largest_out = i;
+        }
         for (size_t i = 0; i < caps.size(); ++i) {
             if (i == inlet) {
                 ub += "  " + caps[i].patch + " { type fixedValue; value uniform " + vec(-U * caps[i].normal) + "; }\n";
+                pb += "  " + caps[i].patch + " { type zeroGradient; }\n";
+            } else if (p.outlets == "murray" && i != largest_out) {
+                const double qi = q_in * std::pow(caps[i].area_mm2 / PI, 1.5) / r3_sum;
+                ub += "  " + caps[i].patch + " { type flowRateOutletVelocity; volumetricFlowRate constant " + num(qi) + "; value uniform (0 0 0); }\n";
                 pb += "  " + caps[i].patch + " { type zeroGradient; }\n";
             } else {
                 ub += "  " + caps[i].patch + " { type inletOutlet; inletValue uniform (0 0 0); value uniform (0 0 0); }\n";
@@ -558,11 +680,10 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         write_file(dir / "0" / "U", foam_header("volVectorField", "U") + "dimensions [0 1 -1 0 0 0 0]; internalField uniform (0 0 0);\nboundaryField {\n" + ub + "}\n");
         write_file(dir / "0" / "p", foam_header("volScalarField", "p") + "dimensions [0 2 -2 0 0 0 0]; internalField uniform 0;\nboundaryField {\n" + pb + "}\n");
     }
-    if (std::getenv("WM_PROJECT_DIR") == nullptr) ::setenv("WM_PROJECT_DIR", "/usr/share/openfoam", 1);
     const auto ignore = [](const std::string&) {};
     // Mesh.
     const Stopwatch tm;
-    rep.info("flow: meshing (blockMesh, snappyHexMesh)");
+    rep.info("flow: " + what + ": meshing (blockMesh, snappyHexMesh)");
     if (run_logged({"blockMesh"}, dir, dir / "log.blockMesh", deadline, ignore) != 0)
         throw MeshingError("flow: blockMesh failed (log: " + (dir / "log.blockMesh").string() + (keep ? "" : "; keep it with --case-dir") + ")");
     int snappy_phase = 0;
@@ -652,7 +773,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     if (last_t <= 0) throw Error("flow: simpleFoam wrote no result (log: " + (dir / "log.simpleFoam").string() + ")");
     const fs::path td = dir / last_time;
     const double rho = BLOOD_DENSITY_KG_M3;
-    std::vector<std::pair<std::string, double>> qa;
+    std::vector<std::pair<std::string, double>>& qa = res.qa;
     double inflow = 0, net = 0, p_in = 0, p_out_mean = 0;
     for (size_t i = 0; i < caps.size(); ++i) {
         const double q = last_dat_value(dir / "postProcessing" / (caps[i].patch + "_phi") / "0" / "surfaceFieldValue.dat", 1);
@@ -702,37 +823,9 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
     // sac without an outlet the net flux is zero; what enters (and leaves again) is the sac inflow.
     const SacNeck neck = sac_neck(lumen);
     if (neck.area_mm2 > 0) {
+        // The sac's cells: beyond the neck's plane, their nearest lumen face sac (CGAL AABB tree).
         const std::vector<double> uc = FieldFile(td / "U").internal(3, cell_pts.size());
-        double q_in = 0, q_out = 0;
-        for (size_t i = 0; i < neck.loop.size(); ++i) {
-            const Eigen::Vector3d a = neck.centre, b1 = neck.loop[i], c1 = neck.loop[(i + 1) % neck.loop.size()];
-            Eigen::Vector3d n = (b1 - a).cross(c1 - a);
-            const double area = 0.5 * n.norm();
-            if (area <= 0) continue;
-            n.normalize();
-            if (n.dot(neck.into_sac) < 0) n = -n;
-            const int k = std::max(2, static_cast<int>(std::ceil(std::max((b1 - a).norm(), (c1 - a).norm()) / (0.5 * h))));
-            const double da = area / (k * k);  // k² sub-triangles of equal area
-            for (int ii = 0; ii < k; ++ii)
-                for (int jj = 0; jj < k - ii; ++jj)
-                    for (int up = 0; up < (jj < k - ii - 1 ? 2 : 1); ++up) {
-                        // centroid of sub-triangle (ii, jj, up) in barycentric steps of 1/k
-                        const double u = (ii + (up ? 2.0 / 3 : 1.0 / 3)) / k, v = (jj + (up ? 2.0 / 3 : 1.0 / 3)) / k;
-                        const Eigen::Vector3d x = a + u * (b1 - a) + v * (c1 - a);
-                        const int c = near_cell.nearest(x);
-                        if (c < 0) continue;
-                        const Eigen::Vector3d vel(uc[3 * static_cast<size_t>(c)], uc[3 * static_cast<size_t>(c) + 1], uc[3 * static_cast<size_t>(c) + 2]);
-                        const double q = vel.dot(n) * da * 1e-6;  // m³/s
-                        (q > 0 ? q_in : q_out) += q;
-                    }
-        }
-        qa.emplace_back("neck_area_mm2", neck.area_mm2);
-        qa.emplace_back("sac_inflow_ml_s", q_in * 1e6);
-        qa.emplace_back("sac_outflow_ml_s", -q_out * 1e6);
-        qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
-        // Mean speed in the sac, by cell volume: the cells beyond the neck's plane whose nearest lumen face is sac.
         const std::vector<double> vol = FieldFile(td / "V").internal(1, cell_pts.size());
-        // Only the cells beyond the neck's plane need their nearest lumen face (CGAL AABB tree).
         std::vector<size_t> beyond;
         for (size_t c = 0; c < cell_pts.size(); ++c)
             if (neck.into_sac.dot(cell_pts[c] - neck.centre) > 0) beyond.push_back(c);
@@ -740,17 +833,39 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         for (size_t i = 0; i < beyond.size(); ++i) q.row(static_cast<Eigen::Index>(i)) = cell_pts[beyond[i]].transpose();
         Eigen::VectorXi nearest_face;
         distance_to_faces(lumen.V, lumen.F, q, &nearest_face);
+        std::vector<char> in_sac(cell_pts.size(), 0);
         double v_sum = 0, vs_sum = 0;
         for (size_t i = 0; i < beyond.size(); ++i) {
             const size_t c = beyond[i];
             const int f = nearest_face[static_cast<Eigen::Index>(i)];
             if (f < 0 || lumen.face_label[f] != neck.sac_label) continue;
+            in_sac[c] = 1;
             v_sum += vol[c];
             vs_sum += vol[c] * Eigen::Vector3d(uc[3 * c], uc[3 * c + 1], uc[3 * c + 2]).norm();
         }
+        // The flow into the sac: the solver's own face fluxes (phi) through the faces between sac cells and the
+        // others. Into a sac without an outlet what enters leaves again (in = out up to the solver's
+        // convergence); a sac closed off by the clip has no cell and no inflow.
+        const std::vector<int> owner = read_label_list(dir / "constant" / "polyMesh" / "owner");
+        const std::vector<int> neighbour = read_label_list(dir / "constant" / "polyMesh" / "neighbour");
+        const std::vector<double> phi = FieldFile(td / "phi").internal(1, neighbour.size());
+        if (phi.size() != neighbour.size() || owner.size() < neighbour.size()) throw Error("flow: OpenFOAM's faces and fluxes disagree in size");
+        double q_in = 0, q_out = 0;
+        for (size_t f = 0; f < neighbour.size(); ++f) {
+            const auto o = static_cast<size_t>(owner[f]), n = static_cast<size_t>(neighbour[f]);
+            if (o >= in_sac.size() || n >= in_sac.size()) throw Error("flow: OpenFOAM's face " + std::to_string(f) + " names a cell beyond the mesh");
+            if (in_sac[o] == in_sac[n]) continue;
+            const double into = in_sac[n] ? phi[f] : -phi[f];  // phi runs from owner to neighbour [m³/s]
+            (into > 0 ? q_in : q_out) += into;
+        }
+        qa.emplace_back("neck_area_mm2", neck.area_mm2);
+        qa.emplace_back("sac_inflow_ml_s", q_in * 1e6);
+        qa.emplace_back("sac_outflow_ml_s", -q_out * 1e6);
+        qa.emplace_back("sac_inflow_fraction", inflow > 0 ? q_in / inflow : 0.0);
+        res.sac_inflow_m3_s = q_in;
         qa.emplace_back("sac_volume_mm3", v_sum * 1e9);
         qa.emplace_back("sac_mean_speed_cm_s", v_sum > 0 ? vs_sum / v_sum * 100 : 0.0);
-        rep.info("flow: sac inflow " + shortest(std::round(q_in * 1e8) / 100) + " mL/s (" + shortest(std::round(q_in / inflow * 1000) / 10) +
+        rep.info("flow: " + what + ": sac inflow " + shortest(std::round(q_in * 1e9) / 1000) + " mL/s (" + shortest(std::round(q_in / inflow * 1000) / 10) +
                  " % of the inflow) through a neck of " + shortest(std::round(neck.area_mm2 * 100) / 100) + " mm²; mean speed in the sac " +
                  shortest(std::round(vs_sum / std::max(v_sum, 1e-300) * 1000) / 10) + " cm/s over " + shortest(std::round(v_sum * 1e10) / 10) + " mm³");
     }
@@ -773,10 +888,140 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
                            {"wss_max_pa", wall_wss.empty() ? 0.0 : wall_wss.back()},
                            {"time_mesh_s", mesh_s},
                            {"time_solve_s", solve_s}});
-    rep.info("flow: inflow " + shortest(std::round(inflow * 1e8) / 100) + " mL/s, mass imbalance " + shortest(imbalance) + ", pressure drop " +
+    rep.info("flow: " + what + ": inflow " + shortest(std::round(inflow * 1e8) / 100) + " mL/s, mass imbalance " + shortest(imbalance) + ", pressure drop " +
              shortest(std::round((p_in - p_out_mean) * 100) / 100) + " Pa, wall shear stress mean " + shortest(std::round(wss_area / std::max(wall_area, 1e-300) * 1000) / 1000) + " Pa");
+    res.inflow_m3_s = inflow;
+    res.blood = std::move(blood);
+    res.seconds = t0.seconds();
+    return res;
+}
+
+}  // namespace
+
+SurfaceData deformed_lumen(const Bundle& bundle, const SurfaceData& lumen, const std::string& series, int frame, Reporter& rep, int* frame_used) {
+    if (!bundle.volume || !bundle.fem)
+        throw InputError("flow: --series needs the case bundle (CASE.h5, with /volume and /fem) as input, not a surface file");
+    const VolumeData& vol = *bundle.volume;
+    const FemData& fem = *bundle.fem;
+    std::vector<int> node;
+    std::vector<float> disp;
+    int steps = 0;
+    try {
+        H5::Exception::dontPrint();
+        H5::H5File f(series, H5F_ACC_RDONLY);
+        if (!f.nameExists("node"))
+            throw InputError(series + ": no /node (the simulated surface's mesh nodes): written by an older aneusim; run the scene again");
+        H5::DataSet dn = f.openDataSet("node");
+        node.resize(static_cast<size_t>(dn.getSpace().getSimpleExtentNpoints()));
+        dn.read(node.data(), H5::PredType::NATIVE_INT);
+        steps = static_cast<int>(f.openGroup("steps").getNumObjs());
+        if (steps == 0) throw InputError(series + ": the series has no frame");
+        const int k = frame < 0 ? steps - 1 : frame;
+        if (k >= steps) throw InputError("flow: --frame " + std::to_string(frame) + ": " + series + " has frames 0 to " + std::to_string(steps - 1));
+        if (frame_used != nullptr) *frame_used = k;
+        H5::DataSet dd = f.openDataSet("steps/" + std::to_string(k) + "/displacement");
+        if (static_cast<size_t>(dd.getSpace().getSimpleExtentNpoints()) != 3 * node.size())
+            throw InputError(series + ": frame " + std::to_string(k) + " has " + std::to_string(dd.getSpace().getSimpleExtentNpoints() / 3) +
+                             " displacements for " + std::to_string(node.size()) + " nodes");
+        disp.resize(3 * node.size());
+        dd.read(disp.data(), H5::PredType::NATIVE_FLOAT);
+    } catch (const H5::Exception& e) {
+        throw InputError(series + ": not a simulator series (" + e.getDetailMsg() + ")");
+    }
+    // The whole mesh's displacement with the simulated surface's nodes prescribed (the condensed model's own
+    // field: no load elsewhere, the ends fixed).
+    const Eigen::Index n_nodes = vol.nodes.rows();
+    std::set<int> fixed(fem.fixed_dofs.data(), fem.fixed_dofs.data() + fem.fixed_dofs.size());
+    std::vector<std::pair<int, double>> prescribed;
+    std::set<int> seen;
+    for (size_t s = 0; s < node.size(); ++s) {
+        if (node[s] < 0 || node[s] >= n_nodes)
+            throw InputError(series + ": node " + std::to_string(node[s]) + " is not in the case's mesh (" + std::to_string(n_nodes) +
+                             " nodes): the series belongs to another case");
+        if (!seen.insert(node[s]).second) continue;
+        for (int a = 0; a < 3; ++a) {
+            const int dof = 3 * node[s] + a;
+            if (!fixed.count(dof)) prescribed.emplace_back(dof, static_cast<double>(disp[3 * s + static_cast<size_t>(a)]));
+        }
+    }
+    const Eigen::VectorXd u = fem::solve_dirichlet(fem, prescribed).u;
+    // The lumen's vertices are mesh nodes (TetGen keeps its input's vertices).
+    std::vector<Eigen::Vector3d> pts(static_cast<size_t>(n_nodes));
+    for (Eigen::Index i = 0; i < n_nodes; ++i) pts[static_cast<size_t>(i)] = vol.nodes.row(i).transpose();
+    const NearestPoint near(pts, 0.5);
+    SurfaceData moved = lumen;
+    double max_u = 0;
+    for (Eigen::Index v = 0; v < lumen.V.rows(); ++v) {
+        const Eigen::Vector3d x = lumen.V.row(v).transpose();
+        const int n = near.nearest(x);
+        if (n < 0 || (pts[static_cast<size_t>(n)] - x).norm() > 1e-3)
+            throw InputError("flow: the lumen's vertex " + std::to_string(v) + " is not a node of the case's mesh: the case bundle's surfaces and volume disagree");
+        const Eigen::Vector3d d = u.segment<3>(3 * static_cast<Eigen::Index>(n));
+        moved.V.row(v) += d.transpose();
+        max_u = std::max(max_u, d.norm());
+    }
+    rep.info("flow: the lumen moved by the wall's deformation in frame " + std::to_string(frame_used ? *frame_used : frame) + " of " + series + " (" +
+             std::to_string(prescribed.size()) + " prescribed DOFs, largest lumen displacement " + shortest(std::round(max_u * 1000) / 1000) + " mm)");
+    return moved;
+}
+
+void flow_file(const std::string& in, const std::string& out, const FlowParams& p, StageRecord stage, Reporter& rep) {
+    flow_spec().validate(p);
+    const Stopwatch t0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(static_cast<std::int64_t>(p.time_budget_s * 1000));
+    const bool with_series = !p.series.empty();
+    BundleParts parts;
+    parts.volume = with_series;
+    parts.fem = with_series;
+    parts.condensed_W = false;
+    Bundle b = read_bundle(in, parts);
+    const auto it = b.surfaces.find("lumen");
+    if (it == b.surfaces.end()) throw InputError(in + ": no /surface/lumen (run `aneuprep surface` first)");
+    const SurfaceData lumen = it->second;
+    const bool voxel = p.domain == "voxel" || (p.domain == "auto" && with_series);
+    // The case folder(s).
+    const bool keep = !p.case_dir.empty();
+    const fs::path dir = keep ? fs::absolute(p.case_dir) : fs::temp_directory_path() / ("aneu_flow_" + std::to_string(::getpid()));
+    struct Cleanup {
+        fs::path d;
+        bool keep;
+        ~Cleanup() {
+            std::error_code ec;
+            if (!keep) fs::remove_all(d, ec);
+        }
+    } cleanup{dir, keep};
+    if (std::getenv("WM_PROJECT_DIR") == nullptr) ::setenv("WM_PROJECT_DIR", "/usr/share/openfoam", 1);
+    std::vector<std::pair<std::string, double>> qa;
+    if (!with_series) {
+        Solved r = solve_lumen(lumen, p, voxel, dir, keep, out, deadline, rep, "lumen");
+        qa = std::move(r.qa);
+        b.surfaces["blood"] = std::move(r.blood);
+    } else {
+        int frame = p.frame;
+        SurfaceData moved = deformed_lumen(b, lumen, p.series, p.frame, rep, &frame);
+        const std::string what = "frame " + std::to_string(frame);
+        // The pre-clip baseline first, by the same domain method (the ratio compares like with like).
+        Solved pre = solve_lumen(lumen, p, voxel, dir / "pre_clip", keep, out, deadline, rep, "pre-clip");
+        Solved fr = solve_lumen(moved, p, voxel, dir / ("frame_" + std::to_string(frame)), keep, out, deadline, rep, what);
+        qa = std::move(fr.qa);
+        qa.insert(qa.begin(), {"frame", static_cast<double>(frame)});
+        for (const auto& [k, v] : pre.qa)
+            if (k == "inflow_ml_s" || k == "sac_inflow_ml_s" || k == "sac_inflow_fraction" || k == "sac_mean_speed_cm_s" || k == "cells" ||
+                k == "domain_volume_mm3" || k == "pressure_drop_pa" || k == "mass_imbalance")
+                qa.emplace_back("pre_clip_" + k, v);
+        if (pre.sac_inflow_m3_s > 0 && fr.sac_inflow_m3_s >= 0) {
+            const double ratio = fr.sac_inflow_m3_s / pre.sac_inflow_m3_s;
+            qa.emplace_back("residual_sac_inflow_ratio", ratio);
+            rep.info("flow: residual sac inflow " + shortest(std::round(ratio * 1000) / 10) + " % of pre-clip (" + shortest(std::round(fr.sac_inflow_m3_s * 1e9) / 1000) +
+                     " of " + shortest(std::round(pre.sac_inflow_m3_s * 1e9) / 1000) + " mL/s)");
+        } else {
+            rep.warn("flow: no sac inflow to compare (no labelled sac, or none before the clip)");
+        }
+        b.surfaces["blood"] = std::move(fr.blood);
+        b.surfaces["blood_pre_clip"] = std::move(pre.blood);
+        b.surfaces["lumen_deformed"] = std::move(moved);
+    }
     for (auto& q : qa) stage.qa.push_back(q);
-    b.surfaces["blood"] = std::move(blood);
     b.volume.reset();
     b.fem.reset();
     b.condensed.reset();

@@ -2,6 +2,10 @@
 // CGAL side of the geometry stages: isotropic remeshing (with boundary loops kept as polylines),
 // point-to-surface distance queries through an AABB tree, and the self-intersection check. One
 // SurfaceData → Surface_mesh conversion serves all three.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <deque>
 #include <limits>
 
 #include <CGAL/AABB_face_graph_triangle_primitive.h>
@@ -157,6 +161,106 @@ Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::Matrix
         (*nearest_face)[i] = static_cast<int>(it - tris.cbegin());
     }
     return d;
+}
+
+Volume<float> reachable_distance(const SurfaceData& closed, const Eigen::Vector3d& seed, double g, std::size_t max_voxels, ReachableStats* stats) {
+    if (!(g > 0) || closed.F.rows() == 0) throw InputError("reachable_distance: a positive spacing and a non-empty surface are needed");
+    Eigen::Vector3d lo = closed.V.colwise().minCoeff().transpose(), hi = closed.V.colwise().maxCoeff().transpose();
+    lo.array() -= 2 * g;
+    hi.array() += 2 * g;
+    Volume<float> out;
+    ImageGrid& grid = out.grid;
+    for (int k = 0; k < 3; ++k) {
+        grid.size[static_cast<size_t>(k)] = static_cast<std::int64_t>(std::ceil((hi[k] - lo[k]) / g)) + 1;
+        grid.origin[static_cast<size_t>(k)] = lo[k];
+        grid.spacing[static_cast<size_t>(k)] = g;
+    }
+    const std::size_t n = grid.voxel_count();
+    if (n > max_voxels)
+        throw InputError("reachable_distance: a grid of " + std::to_string(grid.size[0]) + "x" + std::to_string(grid.size[1]) + "x" +
+                         std::to_string(grid.size[2]) + " voxels of " + std::to_string(g) + " mm exceeds " + std::to_string(max_voxels) +
+                         ": give a larger cell size");
+    std::vector<K::Triangle_3> tris;
+    tris.reserve(static_cast<size_t>(closed.F.rows()));
+    auto pt = [&](int v) { return Point(closed.V(v, 0), closed.V(v, 1), closed.V(v, 2)); };
+    for (Eigen::Index f = 0; f < closed.F.rows(); ++f) tris.emplace_back(pt(closed.F(f, 0)), pt(closed.F(f, 1)), pt(closed.F(f, 2)));
+    using Primitive = CGAL::AABB_triangle_primitive<K, std::vector<K::Triangle_3>::const_iterator>;
+    using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
+    Tree tree(tris.cbegin(), tris.cend());
+    tree.accelerate_distance_queries();
+    const auto nx = grid.size[0], ny = grid.size[1], nz = grid.size[2];
+    auto centre = [&](std::int64_t i, std::int64_t j, std::int64_t k) { return Point(lo.x() + g * i, lo.y() + g * j, lo.z() + g * k); };
+    // The band: voxels within one spacing of a face lie in that face's box grown by a spacing.
+    const float FAR = static_cast<float>(2 * g);
+    std::vector<float> dist(n, FAR);
+    std::vector<std::size_t> band;
+    {
+        std::vector<std::uint8_t> mark(n, 0);
+        for (const auto& t : tris) {
+            const auto bb = t.bbox();
+            const std::int64_t i0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((bb.xmin() - g - lo.x()) / g)));
+            const std::int64_t j0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((bb.ymin() - g - lo.y()) / g)));
+            const std::int64_t k0 = std::max<std::int64_t>(0, static_cast<std::int64_t>(std::floor((bb.zmin() - g - lo.z()) / g)));
+            const std::int64_t i1 = std::min<std::int64_t>(nx - 1, static_cast<std::int64_t>(std::ceil((bb.xmax() + g - lo.x()) / g)));
+            const std::int64_t j1 = std::min<std::int64_t>(ny - 1, static_cast<std::int64_t>(std::ceil((bb.ymax() + g - lo.y()) / g)));
+            const std::int64_t k1 = std::min<std::int64_t>(nz - 1, static_cast<std::int64_t>(std::ceil((bb.zmax() + g - lo.z()) / g)));
+            for (std::int64_t k = k0; k <= k1; ++k)
+                for (std::int64_t j = j0; j <= j1; ++j)
+                    for (std::int64_t i = i0; i <= i1; ++i) {
+                        const std::size_t v = grid.linear(i, j, k);
+                        if (!mark[v]) {
+                            mark[v] = 1;
+                            band.push_back(v);
+                        }
+                    }
+        }
+    }
+#pragma omp parallel for schedule(dynamic, 4096)
+    for (std::size_t b = 0; b < band.size(); ++b) {
+        const std::size_t v = band[b];
+        const auto i = static_cast<std::int64_t>(v % static_cast<std::size_t>(nx)), j = static_cast<std::int64_t>((v / static_cast<std::size_t>(nx)) % static_cast<std::size_t>(ny)),
+                   k = static_cast<std::int64_t>(v / static_cast<std::size_t>(nx * ny));
+        dist[v] = std::min(FAR, static_cast<float>(std::sqrt(tree.squared_distance(centre(i, j, k)))));
+    }
+    // Flood fill from the voxel nearest the seed.
+    ReachableStats st;
+    st.voxels = n;
+    std::vector<std::uint8_t> reached(n, 0);
+    const auto clampi = [](double x, std::int64_t m) { return std::clamp<std::int64_t>(static_cast<std::int64_t>(std::llround(x)), 0, m - 1); };
+    const std::int64_t si = clampi((seed.x() - lo.x()) / g, nx), sj = clampi((seed.y() - lo.y()) / g, ny), sk = clampi((seed.z() - lo.z()) / g, nz);
+    const Point sp(seed.x(), seed.y(), seed.z());
+    if (tree.squared_distance(sp) < 1e-12 || tree.do_intersect(K::Segment_3(sp, centre(si, sj, sk))))
+        throw InputError("reachable_distance: the seed point lies on the surface or cannot reach its nearest grid point");
+    std::deque<std::size_t> queue{grid.linear(si, sj, sk)};
+    reached[queue.front()] = 1;
+    const double near = g;  // a link can meet a face only if one of its ends is within its length of it
+    while (!queue.empty()) {
+        const std::size_t v = queue.front();
+        queue.pop_front();
+        ++st.reachable;
+        const auto i = static_cast<std::int64_t>(v % static_cast<std::size_t>(nx)), j = static_cast<std::int64_t>((v / static_cast<std::size_t>(nx)) % static_cast<std::size_t>(ny)),
+                   k = static_cast<std::int64_t>(v / static_cast<std::size_t>(nx * ny));
+        static constexpr int step[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+        for (const auto& s : step) {
+            const std::int64_t a = i + s[0], b = j + s[1], c = k + s[2];
+            if (a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz) continue;
+            const std::size_t w = grid.linear(a, b, c);
+            if (reached[w]) continue;
+            if (dist[v] < near || dist[w] < near) {
+                ++st.segment_tests;
+                if (tree.do_intersect(K::Segment_3(centre(i, j, k), centre(a, b, c)))) {
+                    ++st.blocked;
+                    continue;
+                }
+            }
+            reached[w] = 1;
+            queue.push_back(w);
+        }
+    }
+    out.data.resize(n);
+    for (std::size_t v = 0; v < n; ++v) out.data[v] = reached[v] ? dist[v] : -dist[v];
+    if (stats != nullptr) *stats = st;
+    return out;
 }
 
 std::vector<std::pair<int, int>> self_intersections(const SurfaceData& s, std::size_t max_pairs) {

@@ -69,6 +69,10 @@ public:
             write(m_file, "triangles", tri.data(), {static_cast<hsize_t>(s.F.rows()), 3}, H5::PredType::NATIVE_INT);
             std::vector<int> reg(s.face_region.data(), s.face_region.data() + s.face_region.size());
             write(m_file, "face_region", reg.data(), {reg.size()}, H5::PredType::NATIVE_INT);
+            // The volume node of each vertex: `aneuprep flow --series` recovers the whole wall's deformation
+            // (and so the lumen's) from these nodes' displacements.
+            std::vector<int> node(s.node.data(), s.node.data() + s.node.size());
+            write(m_file, "node", node.data(), {node.size()}, H5::PredType::NATIVE_INT);
             m_file.createGroup("/steps");
             m_F = s.F.rows();
         } catch (const H5::Exception& e) {

@@ -154,4 +154,24 @@ NearestOnSurface nearest_on_surface(const SurfaceData& s, const Eigen::MatrixX3d
 /// With `nearest_face`, also the row of F nearest to each point (−1 when F is empty).
 Eigen::VectorXd distance_to_faces(const Eigen::MatrixX3d& V, const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& points, Eigen::VectorXi* nearest_face = nullptr);
 
+/// What reachable_distance found.
+struct ReachableStats {
+    std::size_t voxels = 0;          ///< grid size
+    std::size_t reachable = 0;       ///< voxels reached from the seed
+    std::size_t segment_tests = 0;   ///< neighbour links near the surface tested against it
+    std::size_t blocked = 0;         ///< of them, crossing the surface
+};
+
+/// The part of a closed, possibly self-intersecting surface's inside that blood reaches from `seed` without
+/// crossing the surface (a lumen pinched by a clip: walls that pass through each other or touch close off what
+/// lies beyond), as a signed distance on an axis-aligned grid of spacing `spacing` covering the surface's box
+/// plus two spacings: +d on reached voxels, −d elsewhere, d the exact distance to the surface (CGAL AABB tree),
+/// clamped at 2 spacings. Reachability: a flood fill over the 6-neighbour links; a link with an end nearer the
+/// surface than one spacing is followed only when the segment between the two centres does not meet a face.
+/// The isosurface at 0 is the reachable region's boundary, free of self-intersections, on the surface to
+/// within the linear interpolation of an exact distance.
+/// @throws InputError the grid would exceed `max_voxels`, or the seed lies on the surface
+Volume<float> reachable_distance(const SurfaceData& closed, const Eigen::Vector3d& seed, double spacing, std::size_t max_voxels,
+                                 ReachableStats* stats = nullptr);
+
 }  // namespace aneu::pipeline
