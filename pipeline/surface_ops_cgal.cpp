@@ -258,7 +258,9 @@ Volume<float> reachable_distance(const SurfaceData& closed, const Eigen::Vector3
         }
     }
     out.data.resize(n);
-    for (std::size_t v = 0; v < n; ++v) out.data[v] = reached[v] ? dist[v] : -dist[v];
+    // Never exactly 0 at a sample: the isosurface would get vertices of zero-area triangles there.
+    const float tiny = static_cast<float>(1e-4 * g);
+    for (std::size_t v = 0; v < n; ++v) out.data[v] = reached[v] ? std::max(dist[v], tiny) : -std::max(dist[v], tiny);
     if (stats != nullptr) *stats = st;
     return out;
 }

@@ -149,6 +149,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                     {"source", "configs/clips/README.md: placeholder within the 1-2.5 N of issue #15"}}}};
     const std::string model = std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm";
     j["outputs"] = {{"log", stem + "_log.csv"}, {"series", stem + "_series"}, {"report", stem + "_report.json"}};
+    if (o.flow) j["outputs"]["flow"] = stem + "_flow.h5";
     nlohmann::ordered_json ap;
     ap["name"] = "applier";
     ap["kind"] = "clip_applier";

@@ -447,12 +447,15 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
     log.out.finish();
     hlog.out.finish();
     series.finish();
-    if (!sc.report.empty()) write_report(sc.report, sc, sim.model(), a, frames, &htime);
+    ResidualFlow flow;
+    if (!sc.flow.empty()) flow = residual_flow(sc);
+    if (!sc.report.empty()) write_report(sc.report, sc, sim.model(), a, frames, &htime, sc.flow.empty() ? nullptr : &flow);
+    if (!flow.error.empty()) throw Error(flow.error);
     return a;
 }
 
 void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
-                  const std::vector<FrameStats>& frames, const HapticTiming* haptic) {
+                  const std::vector<FrameStats>& frames, const HapticTiming* haptic, const ResidualFlow* flow) {
     auto stats = [&](auto get) {
         std::vector<double> v;
         for (const auto& f : frames) v.push_back(get(f) * 1e3);
@@ -542,6 +545,28 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         haptic_line = hb;
         if (a.total_time_s > 0) j["physics_rate_hz"] = static_cast<double>(a.frames) / a.total_time_s;
     }
+    std::string flow_line;
+    if (flow != nullptr) {
+        j["residual_flow"] = {{"file", flow->file}, {"seconds", flow->seconds}};
+        if (!flow->error.empty()) {
+            j["residual_flow"]["error"] = flow->error;
+            flow_line = "  residual sac inflow        not computed: " + flow->error + "\n";
+        } else {
+            j["residual_flow"]["sac_inflow_ml_s"] = flow->sac_inflow_ml_s;
+            j["residual_flow"]["pre_clip_sac_inflow_ml_s"] = flow->pre_clip_sac_inflow_ml_s;
+            j["residual_flow"]["sac_volume_reached_mm3"] = flow->sac_volume_mm3;
+            j["residual_flow"]["ends_closed_off"] = flow->ends_closed_off;
+            if (flow->ratio >= 0) j["residual_flow"]["residual_sac_inflow_ratio"] = flow->ratio;
+            char fb[320];
+            if (flow->ratio >= 0)
+                std::snprintf(fb, sizeof fb, "  residual sac inflow        %.1f %% of pre-clip (%.3g of %.3g mL/s; sac volume reached %.3g mm3)%s\n", 100 * flow->ratio,
+                              flow->sac_inflow_ml_s, flow->pre_clip_sac_inflow_ml_s, flow->sac_volume_mm3,
+                              flow->ends_closed_off > 0 ? "; a vessel end closed off" : "");
+            else
+                std::snprintf(fb, sizeof fb, "  residual sac inflow        no labelled sac to compare\n");
+            flow_line = fb;
+        }
+    }
     TextOut js(path);
     js.out() << j.dump(2) << '\n';
     js.finish();
@@ -579,6 +604,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                       scene.linear_limit > 0 && a.max_displacement_to_thickness > scene.linear_limit ? "  BEYOND" : "");
         o << buf;
     }
+    o << flow_line;
     o << haptic_line;
     tx.finish();
 }

@@ -263,6 +263,8 @@ Scene read_scene(const std::string& path) {
         s.haptic_log = resolve(dir, o.str("haptic_log", ""));
         s.series = resolve(dir, o.str("series", ""));
         s.report = resolve(dir, o.str("report", ""));
+        s.flow = resolve(dir, o.str("flow", ""));
+        if (!s.flow.empty() && s.series.empty()) o.fail("\"flow\" needs \"series\": the residual flow is computed on the series' last frame");
         o.done();
     }
     s.duration_s = top.num("duration_s", 0.0, 0.0, 1e6);

@@ -55,6 +55,8 @@ int main(int argc, char** argv) {
     std::string plan_bundle, plan_out;
     plan->add_option("bundle", plan_bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
     plan->add_option("-o,--output", plan_out, "scene file to write (JSON); its outputs are named after it")->required();
+    bool plan_flow = false;
+    plan->add_flag("--flow", plan_flow, "the scene's outputs include the residual blood flow after the session (aneuprep flow, OpenFOAM: about a minute for the sample)");
 
     // aneusim serve SCENE: the simulator behind an OpenIGTLink server.
     auto* serve = app.add_subcommand("serve", "run a scene with poses from OpenIGTLink clients (a device bridge, a viewer, 3D Slicer) and send them "
@@ -104,7 +106,9 @@ int main(int argc, char** argv) {
             const auto m = aneu::sim::load_model(plan_bundle, lo);
             const fs::path out = fs::absolute(plan_out);
             const std::string ref = fs::relative(fs::absolute(plan_bundle), out.parent_path()).string();
-            const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string());
+            aneu::sim::PlanOptions po;
+            po.flow = plan_flow;
+            const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;
             f.commit();

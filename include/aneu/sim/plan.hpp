@@ -28,6 +28,7 @@ NeckFrame neck_frame(const SimModel& m);
 struct PlanOptions {
     double approach_mm = 12.0;    ///< the applier starts this far back along the long axis
     double max_opening_deg = 60.0;
+    bool flow = false;            ///< outputs.flow = STEM_flow.h5: the residual sac inflow after the session (aneuprep flow)
 };
 
 /// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the

@@ -131,6 +131,9 @@ struct Scene {
     double neck_gap_mm = 0.05;            ///< the neck is closed where the opposite inner walls are this close (or touch)
     // outputs ("" = not written); resolved against the scene file's directory unless absolute
     std::string log, haptic_log, series, report;
+    /// After the run (never inside it): `aneuprep flow BUNDLE --series SERIES.h5 -o flow` for the last frame, the
+    /// residual sac inflow against the pre-clip lumen's, into the report. Needs `series`.
+    std::string flow;
 };
 
 /// Reads and checks a scene. Relative paths are taken from the scene file's directory.

@@ -160,10 +160,25 @@ struct HapticTiming {
     std::vector<double> output_s;  ///< writing one frame of the surface series (and the log line with it) [s]
 };
 
+/// The residual blood flow of a session (scene output "flow"): `aneuprep flow` on the series' last frame.
+struct ResidualFlow {
+    std::string file;                  ///< FLOW.h5
+    double ratio = -1;                 ///< residual sac inflow / pre-clip sac inflow (-1: none)
+    double sac_inflow_ml_s = 0, pre_clip_sac_inflow_ml_s = 0;
+    double sac_volume_mm3 = 0;         ///< the sac's volume blood still reaches
+    double ends_closed_off = 0;        ///< vessel ends no longer reachable from the inlet
+    double seconds = 0;
+    std::string error;                 ///< non-empty: aneuprep flow failed (its message went to the terminal)
+};
+
+/// Runs `aneuprep flow BUNDLE --series SERIES.h5 -o FLOW` (the aneuprep beside this executable, else on PATH) after
+/// a session and reads its figures back. Offline: minutes, never inside the real-time loop.
+ResidualFlow residual_flow(const Scene& scene);
+
 /// Writes the assessment as JSON and a readable summary (report path; the summary goes to path + ".txt").
 /// `haptic` adds the output time per series frame and (threaded runs) the haptic loop's rate, period
-/// percentiles and step times.
+/// percentiles and step times; `flow` the residual flow.
 void write_report(const std::string& path, const Scene& scene, const SimModel& model, const Assessment& a,
-                  const std::vector<FrameStats>& frames, const HapticTiming* haptic = nullptr);
+                  const std::vector<FrameStats>& frames, const HapticTiming* haptic = nullptr, const ResidualFlow* flow = nullptr);
 
 }  // namespace aneu::sim

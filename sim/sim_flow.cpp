@@ -1,0 +1,73 @@
+// SPDX-License-Identifier: MIT
+// The residual blood flow after a session: `aneuprep flow` (OpenFOAM, minutes) run as a child process on the
+// series' last frame once the session is over, its figures read back for the report. The simulator links none of
+// the offline stack (VTK, CGAL, OpenFOAM): it only starts the program.
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "aneu/core/bundle_io.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/core/reporter.hpp"
+#include "aneu/sim/simulator.hpp"
+
+namespace fs = std::filesystem;
+
+namespace aneu::sim {
+
+ResidualFlow residual_flow(const Scene& sc) {
+    ResidualFlow r;
+    r.file = sc.flow;
+    std::error_code ec;
+    const fs::path beside = fs::read_symlink("/proc/self/exe", ec).parent_path() / "aneuprep";
+    const std::string exe = !ec && fs::exists(beside) ? beside.string() : "aneuprep";
+    std::vector<std::string> args = {exe, "flow", sc.bundle, "--series", sc.series + ".h5", "-o", sc.flow};
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    const auto t0 = std::chrono::steady_clock::now();
+    const pid_t pid = ::fork();
+    if (pid < 0) {
+        r.error = std::string("cannot start aneuprep flow (fork: ") + std::strerror(errno) + ")";
+        return r;
+    }
+    if (pid == 0) {
+        ::execvp(argv[0], argv.data());
+        std::fprintf(stderr, "aneusim: cannot run %s: %s\n", argv[0], std::strerror(errno));
+        ::_exit(127);
+    }
+    int status = 0;
+    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+    }
+    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    if (code != 0) {
+        r.error = "aneuprep flow failed (exit " + std::to_string(code) + "; its message is above)";
+        return r;
+    }
+    BundleParts parts;
+    parts.image = false;
+    parts.volume = false;
+    parts.fem = false;
+    parts.condensed_W = false;
+    const Bundle b = read_bundle(sc.flow, parts);
+    if (b.meta.stages.empty() || b.meta.stages.back().stage != "flow") {
+        r.error = sc.flow + ": not a flow stage's output";
+        return r;
+    }
+    for (const auto& [k, v] : b.meta.stages.back().qa) {
+        if (k == "residual_sac_inflow_ratio") r.ratio = v;
+        if (k == "sac_inflow_ml_s") r.sac_inflow_ml_s = v;
+        if (k == "pre_clip_sac_inflow_ml_s") r.pre_clip_sac_inflow_ml_s = v;
+        if (k == "sac_volume_mm3") r.sac_volume_mm3 = v;
+        if (k == "ends_closed_off") r.ends_closed_off = v;
+    }
+    return r;
+}
+
+}  // namespace aneu::sim
