@@ -118,7 +118,8 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
     c.steps.push_back({"tetmesh", file("wall.h5"), file("volume.h5"), file("volume.h5")});
     c.steps.push_back({"assemble", file("volume.h5"), file("fem.h5"), file("fem.h5")});
     c.steps.push_back({"condense", file("fem.h5"), file("case.h5"), file("case.h5")});
-    // The pre-clip blood flow, only where the config asks for it ([flow]): it needs the lumen only.
+    // The blood flow, only where the config asks for it ([flow]): the pre-clip lumen needs the surface only (a
+    // session's frame, [flow] series, the case bundle: below).
     if (has_flow) c.steps.push_back({"flow", file("surface.h5"), file("flow.h5"), file("flow.h5")});
 
     for (const auto& s : sets) {
@@ -136,6 +137,13 @@ CaseChain make_case_chain(const std::string& config, const std::string& out_dir,
         const std::string key = s.substr(dot + 1, eq - dot - 1), value = s.substr(eq + 1);
         c.options[stage].emplace_back(key, std::vector<std::string>{value});
         c.sets[stage].emplace_back(key, value);
+    }
+    // The flow of a simulator session (series = SCENE_series.h5, a path like [run] source): the case bundle's mesh
+    // carries the series' deformation to the lumen, so the stage follows condense instead of the surface.
+    for (CaseStep& st : c.steps) {
+        if (st.stage != "flow") continue;
+        for (const auto& [k, v] : c.options["flow"])
+            if (k == "series") st.input = v.empty() || v.front().empty() ? file("surface.h5") : file("case.h5");
     }
     return c;
 }
@@ -163,6 +171,9 @@ StagePlan plan_step(const CaseChain& chain, const CaseStep& step) {
     }
     plan.parameters = plan.job->parameters();
     if (!step.input.empty()) plan.inputs.push_back(step.input);
+    if (step.stage == "flow")  // a session's series is an input too: a new session reruns the flow
+        for (const auto& [k, v] : plan.parameters)
+            if (k == "series" && !v.empty() && !step.input.empty()) plan.inputs.push_back(v);
     plan.output = step.output;
     std::vector<std::string> argv{"aneuprep", "--config", chain.config, step.stage};
     if (!step.input.empty()) argv.push_back(step.input);
@@ -268,7 +279,12 @@ void write_make_rules(const CaseRunOptions& o, const CaseChain& chain, const std
         const fs::path stamp = stamps / (s.stage + ".txt");
         write_if_changed(stamp, params_text(plans[i]));
         std::string deps = make_word(stamp.string(), "stamp") + " $(PREP)";
-        if (s.stage == "flow") {  // the lumen only: a changed wall or condensation does not rerun it
+        if (s.stage == "flow" && plans[i].inputs.size() > 1) {  // a session's flow: the case bundle and the series
+            const std::string series = make_word(plans[i].inputs[1], "[flow] series");
+            deps = make_word(s.input, "input") + " " + series + " " + deps;
+            r += series + ":\n\t@echo '" + chain.id + ": no " + plans[i].inputs[1] +
+                 ": run the scene first (aneusim run SCENE; its outputs.series)' >&2; exit 1\n";
+        } else if (s.stage == "flow") {  // the lumen only: a changed wall or condensation does not rerun it
             deps = make_word(s.input, "input") + " " + deps;
         } else if (i > 0) {
             deps = chain.steps[i - 1].provenance_file + " " + deps;

@@ -248,6 +248,15 @@ TEST(Flow, ACaseConfigWithAFlowSectionHasAFlowStage) {
     EXPECT_EQ(c.bundle(), (d.p / "b" / "case.h5").string()) << "the case bundle is still condense's output";
     ASSERT_EQ(c.options.at("flow").size(), 1u);
     EXPECT_EQ(c.options.at("flow")[0].first, "inflow-cm-s");
+    // A session's flow ([flow] series): the case bundle is the input, the series a second input (a new session
+    // reruns it); Makefile.cases depends on both.
+    std::ofstream(d.p / "session.toml") << src << "[flow]\nseries = \"" << (d.p / "scene_series.h5").string() << "\"\n";
+    CaseChain sc = make_case_chain((d.p / "session.toml").string(), (d.p / "s").string(), "", {});
+    ASSERT_NE(sc.find("flow"), nullptr);
+    EXPECT_EQ(sc.find("flow")->input, (d.p / "s" / "case.h5").string());
+    const std::vector<StagePlan> plans = plan_case(sc);
+    ASSERT_EQ(plans.back().inputs.size(), 2u);
+    EXPECT_EQ(plans.back().inputs[1], (d.p / "scene_series.h5").string());
     std::ofstream(d.p / "empty_flow.toml") << src << "[flow]\n";
     EXPECT_NE(make_case_chain((d.p / "empty_flow.toml").string(), (d.p / "c").string(), "", {}).find("flow"), nullptr)
         << "an empty [flow] section asks for the stage with its defaults";
