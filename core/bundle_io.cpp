@@ -424,13 +424,36 @@ FemData read_fem(const H5::H5File& f, const Ctx& ctx) {
     return fe;
 }
 
+// ---------------------------------------------------------------- /flow
+void write_flow(H5::H5File& f, const FlowFieldData& fl, int deflate) {
+    const auto n = fl.centre.rows();
+    require(fl.velocity.rows() == n && fl.pressure.size() == n && fl.volume.size() == n, "flow: centre, velocity, pressure and volume differ in length");
+    H5::Group g = f.createGroup("/flow");
+    write_matrix(g, "cell_centre", fl.centre, "mm", deflate);
+    write_matrix(g, "velocity", fl.velocity, "mm/s", deflate);
+    write_vector<double>(g, "pressure", fl.pressure, "Pa", deflate);
+    write_vector<double>(g, "cell_volume", fl.volume, "mm3", deflate);
+}
+
+FlowFieldData read_flow(H5::H5File& f, const Ctx& ctx) {
+    const H5::Group g = f.openGroup("/flow");
+    FlowFieldData fl;
+    fl.centre = read_matrix<double>(g, "/flow", "cell_centre", -1, 3, ctx, "[C,3]");
+    const auto n = fl.centre.rows();
+    const std::string doc = "[C] with C = " + std::to_string(n);
+    fl.velocity = read_matrix<double>(g, "/flow", "velocity", n, 3, ctx, "[C,3] with C = " + std::to_string(n));
+    fl.pressure = read_vector<double>(g, "/flow", "pressure", n, ctx, doc);
+    fl.volume = read_vector<double>(g, "/flow", "cell_volume", n, ctx, doc);
+    return fl;
+}
+
 }  // namespace
 
 void write_bundle(const std::string& path, const Bundle& b, const BundleWriteOptions& opt, Reporter& rep) {
     h5::silence_hdf5();
     AtomicPath out(path);
     const int total = 2 + (b.image ? 1 : 0) + static_cast<int>(b.surfaces.size()) + (b.volume ? 1 : 0) +
-                      (b.fem ? 1 : 0) + (b.condensed ? 1 : 0);
+                      (b.fem ? 1 : 0) + (b.condensed ? 1 : 0) + (b.flow ? 1 : 0);
     int done = 0;
     try {
         H5::H5File f(out.tmp(), H5F_ACC_TRUNC);
@@ -457,6 +480,10 @@ void write_bundle(const std::string& path, const Bundle& b, const BundleWriteOpt
         }
         if (b.condensed) {
             detail::write_condensed_group(f, *b.condensed, rep);
+            rep.progress("write", ++done, total);
+        }
+        if (b.flow) {
+            write_flow(f, *b.flow, opt.deflate_level);
             rep.progress("write", ++done, total);
         }
         f.close();
@@ -488,6 +515,7 @@ Bundle read_bundle(const std::string& path, const BundleParts& parts) {
         if (parts.volume && h5::exists(root, "volume")) b.volume = read_volume(f, ctx);
         if (parts.fem && h5::exists(root, "fem")) b.fem = read_fem(f, ctx);
         if (h5::exists(root, "condensed")) b.condensed = detail::read_condensed_group(f, ctx, parts.condensed_W);
+        if (parts.flow && h5::exists(root, "flow")) b.flow = read_flow(f, ctx);
     } catch (const H5::Exception& e) {
         throw InputError(path + ": HDF5 read failed in " + e.getFuncName() + " (HDF5: " + h5::last_error_detail() +
                       ")");

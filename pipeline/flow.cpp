@@ -260,6 +260,20 @@ public:
         return best;
     }
 
+    /// The points within r of x (r at most the bucket size).
+    void within(const Eigen::Vector3d& x, double r, std::vector<int>& out) const {
+        out.clear();
+        const Eigen::Vector3i c = cell_of(x);
+        for (int i = -1; i <= 1; ++i)
+            for (int j = -1; j <= 1; ++j)
+                for (int k = -1; k <= 1; ++k) {
+                    const auto it = m_grid.find(key(c + Eigen::Vector3i(i, j, k)));
+                    if (it == m_grid.end()) continue;
+                    for (int q : it->second)
+                        if ((m_pts[static_cast<size_t>(q)] - x).squaredNorm() <= r * r) out.push_back(q);
+                }
+    }
+
 private:
     Eigen::Vector3i cell_of(const Eigen::Vector3d& x) const { return (x / m_h).array().floor().cast<int>(); }
     static std::int64_t key(const Eigen::Vector3i& c) {
@@ -441,6 +455,7 @@ namespace {
 struct Solved {
     std::vector<std::pair<std::string, double>> qa;
     SurfaceData blood;
+    FlowFieldData field;
     double inflow_m3_s = 0, sac_inflow_m3_s = -1;  // -1: no sac
     double seconds = 0;
 };
@@ -797,6 +812,24 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
     const std::vector<double> pc = FieldFile(td / "p").internal(1, cc.size() / 3);
     if (ww.size() != cw.size() || pc.size() * 3 != cc.size()) throw Error("flow: OpenFOAM's wall or cell fields disagree in size");
     const auto wall_pts = as_points(cw, 1e3), cell_pts = as_points(cc, 1e3);
+    const std::vector<double> uc = FieldFile(td / "U").internal(3, cell_pts.size());
+    const std::vector<double> vol = FieldFile(td / "V").internal(1, cell_pts.size());
+    if (uc.size() != cc.size() || vol.size() * 3 != cc.size()) throw Error("flow: OpenFOAM's velocity or cell volumes disagree in size with its cells");
+    {
+        const auto n = static_cast<Eigen::Index>(cell_pts.size());
+        FlowFieldData& fd = res.field;
+        fd.centre.resize(n, 3);
+        fd.velocity.resize(n, 3);
+        fd.pressure.resize(n);
+        fd.volume.resize(n);
+        for (Eigen::Index c = 0; c < n; ++c) {
+            const auto i = static_cast<size_t>(c);
+            fd.centre.row(c) = cell_pts[i].transpose();
+            fd.velocity.row(c) << 1e3 * uc[3 * i], 1e3 * uc[3 * i + 1], 1e3 * uc[3 * i + 2];
+            fd.pressure[c] = pc[i] * rho;
+            fd.volume[c] = vol[i] * 1e9;
+        }
+    }
     const NearestPoint near_wall(wall_pts, 2 * h), near_cell(cell_pts, 2 * h);
     const Eigen::Index nf = blood.F.rows();
     Eigen::MatrixXd wss = Eigen::MatrixXd::Zero(nf, 1), wssv = Eigen::MatrixXd::Zero(nf, 3), pres = Eigen::MatrixXd::Zero(nf, 1);
@@ -824,8 +857,6 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
     const SacNeck neck = sac_neck(lumen);
     if (neck.area_mm2 > 0) {
         // The sac's cells: beyond the neck's plane, their nearest lumen face sac (CGAL AABB tree).
-        const std::vector<double> uc = FieldFile(td / "U").internal(3, cell_pts.size());
-        const std::vector<double> vol = FieldFile(td / "V").internal(1, cell_pts.size());
         std::vector<size_t> beyond;
         for (size_t c = 0; c < cell_pts.size(); ++c)
             if (neck.into_sac.dot(cell_pts[c] - neck.centre) > 0) beyond.push_back(c);
@@ -843,20 +874,68 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
             v_sum += vol[c];
             vs_sum += vol[c] * Eigen::Vector3d(uc[3 * c], uc[3 * c + 1], uc[3 * c + 2]).norm();
         }
-        // The flow into the sac: the solver's own face fluxes (phi) through the faces between sac cells and the
-        // others. Into a sac without an outlet what enters leaves again (in = out up to the solver's
-        // convergence); a sac closed off by the clip has no cell and no inflow.
+        // The flow into the sac: through the neck, the disc spanned by its loop (a fan from the centroid), sampled
+        // every half cell with the velocity of the nearest cell. Into a sac without an outlet what enters leaves
+        // again: the inflow is the positive part. A planar quadrature, not the cells' faces: the positive part of
+        // the fluxes through a staircase of faces grows with the tangential flow past it (measured: 10 % between
+        // the sample's default mesh and one refinement, against 1 % on the disc).
+        // Only what reaches the sac counts: a sample whose nearest cell belongs to the sac's side of the disc as
+        // far as it connects to the sac's cells (cells beyond the disc's plane, flooded through the mesh's faces
+        // from the sac's cells), or lies next to it. A neck pinched shut has no such cell: no inflow, even where the
+        // deformed disc crosses the parent vessel.
         const std::vector<int> owner = read_label_list(dir / "constant" / "polyMesh" / "owner");
         const std::vector<int> neighbour = read_label_list(dir / "constant" / "polyMesh" / "neighbour");
-        const std::vector<double> phi = FieldFile(td / "phi").internal(1, neighbour.size());
-        if (phi.size() != neighbour.size() || owner.size() < neighbour.size()) throw Error("flow: OpenFOAM's faces and fluxes disagree in size");
-        double q_in = 0, q_out = 0;
+        if (owner.size() < neighbour.size()) throw Error("flow: OpenFOAM's owner and neighbour lists disagree in size");
+        const size_t nc = cell_pts.size();
+        std::vector<std::vector<int>> adjacent(nc);
         for (size_t f = 0; f < neighbour.size(); ++f) {
             const auto o = static_cast<size_t>(owner[f]), n = static_cast<size_t>(neighbour[f]);
-            if (o >= in_sac.size() || n >= in_sac.size()) throw Error("flow: OpenFOAM's face " + std::to_string(f) + " names a cell beyond the mesh");
-            if (in_sac[o] == in_sac[n]) continue;
-            const double into = in_sac[n] ? phi[f] : -phi[f];  // phi runs from owner to neighbour [m³/s]
-            (into > 0 ? q_in : q_out) += into;
+            if (o >= nc || n >= nc) throw Error("flow: OpenFOAM's face " + std::to_string(f) + " names a cell beyond the mesh");
+            adjacent[o].push_back(static_cast<int>(n));
+            adjacent[n].push_back(static_cast<int>(o));
+        }
+        std::vector<char> sac_side(nc, 0), beyond_flag(nc, 0);
+        for (size_t c : beyond) beyond_flag[c] = 1;
+        std::vector<size_t> queue;
+        for (size_t c = 0; c < nc; ++c)
+            if (in_sac[c]) {
+                sac_side[c] = 1;
+                queue.push_back(c);
+            }
+        for (size_t k = 0; k < queue.size(); ++k)
+            for (int m : adjacent[queue[k]]) {
+                const auto mm = static_cast<size_t>(m);
+                if (!sac_side[mm] && beyond_flag[mm]) {
+                    sac_side[mm] = 1;
+                    queue.push_back(mm);
+                }
+            }
+        std::vector<char> counts = sac_side;
+        for (size_t c = 0; c < nc; ++c)
+            if (sac_side[c])
+                for (int m : adjacent[c]) counts[static_cast<size_t>(m)] = 1;
+        double q_in = 0, q_out = 0;
+        for (size_t i = 0; i < neck.loop.size(); ++i) {
+            const Eigen::Vector3d a = neck.centre, b1 = neck.loop[i], c1 = neck.loop[(i + 1) % neck.loop.size()];
+            Eigen::Vector3d n = (b1 - a).cross(c1 - a);
+            const double area = 0.5 * n.norm();
+            if (area <= 0) continue;
+            n.normalize();
+            if (n.dot(neck.into_sac) < 0) n = -n;
+            const int k = std::max(2, static_cast<int>(std::ceil(std::max((b1 - a).norm(), (c1 - a).norm()) / (0.5 * h))));
+            const double da = area / (k * k);  // k² sub-triangles of equal area
+            for (int ii = 0; ii < k; ++ii)
+                for (int jj = 0; jj < k - ii; ++jj)
+                    for (int up = 0; up < (jj < k - ii - 1 ? 2 : 1); ++up) {
+                        // centroid of sub-triangle (ii, jj, up) in barycentric steps of 1/k
+                        const double u = (ii + (up ? 2.0 / 3 : 1.0 / 3)) / k, v = (jj + (up ? 2.0 / 3 : 1.0 / 3)) / k;
+                        const Eigen::Vector3d x = a + u * (b1 - a) + v * (c1 - a);
+                        const int c = near_cell.nearest(x);
+                        if (c < 0 || !counts[static_cast<size_t>(c)] || (cell_pts[static_cast<size_t>(c)] - x).norm() > h) continue;
+                        const Eigen::Vector3d vel(uc[3 * static_cast<size_t>(c)], uc[3 * static_cast<size_t>(c) + 1], uc[3 * static_cast<size_t>(c) + 2]);
+                        const double q = vel.dot(n) * da * 1e-6;  // m³/s
+                        (q > 0 ? q_in : q_out) += q;
+                    }
         }
         qa.emplace_back("neck_area_mm2", neck.area_mm2);
         qa.emplace_back("sac_inflow_ml_s", q_in * 1e6);
@@ -897,6 +976,85 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
 }
 
 }  // namespace
+
+std::vector<Streamline> trace_streamlines(const FlowFieldData& field, const SurfaceData& blood, const std::string& inlet_patch, int seeds,
+                                          double max_length_mm) {
+    const auto n = field.centre.rows();
+    if (n == 0) return {};
+    // The cell size: the median cell's edge.
+    std::vector<double> edge(static_cast<size_t>(n));
+    for (Eigen::Index c = 0; c < n; ++c) edge[static_cast<size_t>(c)] = std::cbrt(std::max(field.volume[c], 0.0));
+    std::nth_element(edge.begin(), edge.begin() + static_cast<std::ptrdiff_t>(edge.size() / 2), edge.end());
+    const double h = std::max(edge[edge.size() / 2], 1e-3), r = 1.5 * h;
+    std::vector<Eigen::Vector3d> pts(static_cast<size_t>(n));
+    for (Eigen::Index c = 0; c < n; ++c) pts[static_cast<size_t>(c)] = field.centre.row(c).transpose();
+    const NearestPoint grid(pts, r);
+    std::vector<int> near;
+    double vmax = 0;
+    for (Eigen::Index c = 0; c < n; ++c) vmax = std::max(vmax, field.velocity.row(c).norm());
+    // Velocity at x: inverse-distance weights of the cells within r; none near: outside the blood.
+    auto velocity = [&](const Eigen::Vector3d& x, Eigen::Vector3d& v) {
+        grid.within(x, r, near);
+        if (near.empty()) return false;
+        double wsum = 0;
+        v.setZero();
+        for (int c : near) {
+            const double w = 1.0 / ((pts[static_cast<size_t>(c)] - x).norm() + 0.05 * h);
+            v += w * field.velocity.row(c).transpose();
+            wsum += w;
+        }
+        v /= wsum;
+        return true;
+    };
+    // Seeds: area-weighted over the inlet cap's faces, at fixed fractions (deterministic), a cell inwards.
+    const auto it = std::find(blood.label_names.begin(), blood.label_names.end(), inlet_patch);
+    if (it == blood.label_names.end()) throw InputError("streamlines: the blood surface has no patch '" + inlet_patch + "'");
+    const int lab = static_cast<int>(it - blood.label_names.begin());
+    std::vector<Eigen::Index> faces;
+    std::vector<double> cum;
+    double area = 0;
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    for (Eigen::Index f = 0; f < blood.F.rows(); ++f) {
+        if (blood.face_label[f] != lab) continue;
+        const Eigen::Vector3d a = blood.V.row(blood.F(f, 0)), b = blood.V.row(blood.F(f, 1)), c = blood.V.row(blood.F(f, 2));
+        const Eigen::Vector3d n2 = (b - a).cross(c - a);
+        area += 0.5 * n2.norm();
+        normal += n2;
+        faces.push_back(f);
+        cum.push_back(area);
+    }
+    if (faces.empty()) return {};
+    normal.normalize();  // out of the blood
+    std::vector<Streamline> lines;
+    for (int k = 0; k < seeds; ++k) {
+        const double t = (k + 0.5) / seeds * area;
+        const size_t i = static_cast<size_t>(std::lower_bound(cum.begin(), cum.end(), t) - cum.begin());
+        const Eigen::Index f = faces[std::min(i, faces.size() - 1)];
+        // A point of the face by a low-discrepancy pair (golden ratio), folded into the triangle.
+        double u = std::fmod(0.5 + k * 0.6180339887498949, 1.0), w = std::fmod(0.5 + k * 0.7548776662466927, 1.0);
+        if (u + w > 1) {
+            u = 1 - u;
+            w = 1 - w;
+        }
+        const Eigen::Vector3d a = blood.V.row(blood.F(f, 0)), b = blood.V.row(blood.F(f, 1)), c = blood.V.row(blood.F(f, 2));
+        Eigen::Vector3d x = a + u * (b - a) + w * (c - a) - h * normal;
+        Streamline sl;
+        Eigen::Vector3d v1, v2;
+        double length = 0;
+        while (length < max_length_mm && velocity(x, v1)) {
+            const double sp = v1.norm();
+            sl.points.push_back(x);
+            sl.speed_cm_s.push_back(sp / 10.0);
+            if (sp < 1e-4 * vmax) break;
+            const double dt = h / 3 / sp;
+            if (!velocity(x + 0.5 * dt * v1, v2)) break;
+            x += dt * v2;
+            length += dt * v2.norm();
+        }
+        if (sl.points.size() > 2) lines.push_back(std::move(sl));
+    }
+    return lines;
+}
 
 SurfaceData deformed_lumen(const Bundle& bundle, const SurfaceData& lumen, const std::string& series, int frame, Reporter& rep, int* frame_used) {
     if (!bundle.volume || !bundle.fem)
@@ -996,6 +1154,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         Solved r = solve_lumen(lumen, p, voxel, dir, keep, out, deadline, rep, "lumen");
         qa = std::move(r.qa);
         b.surfaces["blood"] = std::move(r.blood);
+        b.flow = std::move(r.field);
     } else {
         int frame = p.frame;
         SurfaceData moved = deformed_lumen(b, lumen, p.series, p.frame, rep, &frame);
@@ -1007,7 +1166,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
         qa.insert(qa.begin(), {"frame", static_cast<double>(frame)});
         for (const auto& [k, v] : pre.qa)
             if (k == "inflow_ml_s" || k == "sac_inflow_ml_s" || k == "sac_inflow_fraction" || k == "sac_mean_speed_cm_s" || k == "cells" ||
-                k == "domain_volume_mm3" || k == "pressure_drop_pa" || k == "mass_imbalance")
+                k == "domain_volume_mm3" || k == "sac_volume_mm3" || k == "pressure_drop_pa" || k == "mass_imbalance")
                 qa.emplace_back("pre_clip_" + k, v);
         if (pre.sac_inflow_m3_s > 0 && fr.sac_inflow_m3_s >= 0) {
             const double ratio = fr.sac_inflow_m3_s / pre.sac_inflow_m3_s;
@@ -1018,6 +1177,7 @@ void flow_file(const std::string& in, const std::string& out, const FlowParams& 
             rep.warn("flow: no sac inflow to compare (no labelled sac, or none before the clip)");
         }
         b.surfaces["blood"] = std::move(fr.blood);
+        b.flow = std::move(fr.field);
         b.surfaces["blood_pre_clip"] = std::move(pre.blood);
         b.surfaces["lumen_deformed"] = std::move(moved);
     }

@@ -20,6 +20,7 @@
 #include "aneu/core/provenance.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/core/version.hpp"
+#include "aneu/pipeline/flow.hpp"
 #include "aneu/pipeline/snapshot.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
 
@@ -299,6 +300,30 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
             key.push_back({"condense", esc(k), k.find("bytes") != std::string::npos ? human_bytes(static_cast<std::uint64_t>(v)) : num(v), ""});
         }
     }
+    if (files.count("flow") && record_of(files["flow"].meta, "flow")) {
+        const auto& qa = record_of(files["flow"].meta, "flow")->qa;
+        const bool session = !std::isnan(qa_value(qa, "frame"));
+        const std::pair<const char*, const char*> shown[] = {
+            {"inflow_ml_s", "inflow [mL/s]"},
+            {"cells", "fluid cells"},
+            {"mass_imbalance", "mass imbalance (inflow − outflows) / inflow"},
+            {"pressure_drop_pa", "pressure drop, inlet to outlets [Pa]"},
+            {"wss_mean_pa", "wall shear stress, area mean [Pa]"},
+            {"sac_inflow_ml_s", "sac inflow through the neck [mL/s]"},
+            {"sac_inflow_fraction", "sac inflow / inflow"},
+            {"sac_mean_speed_cm_s", "mean speed in the sac [cm/s]"},
+            {"pre_clip_sac_inflow_ml_s", "pre-clip sac inflow [mL/s]"},
+            {"residual_sac_inflow_ratio", "residual sac inflow / pre-clip"},
+            {"ends_closed_off", "vessel ends closed off"}};
+        for (const auto& [k, label] : shown) {
+            const double v = qa_value(qa, k);
+            if (std::isnan(v)) continue;
+            std::string accept;
+            if (std::string(k) == "mass_imbalance") accept = v <= 0.005 ? "&le; 0.5 %" : "<span class=\"bad\">&gt; 0.5 %</span>";
+            if (std::string(k) == "residual_sac_inflow_ratio") accept = v < 0.05 ? "closed (&lt; 5 %)" : "<span class=\"bad\">open (&ge; 5 %)</span>";
+            key.push_back({session ? "flow (session)" : "flow", label, num(v), accept});
+        }
+    }
     pg.table({"stage", "figure", "value", "acceptance"}, key);
 
     // --- pictures
@@ -328,6 +353,30 @@ void write_case_report(const ReportInput& in, const std::string& html, Reporter&
         sc.layers.push_back({files["tetmesh"].surfaces["wall"], ColorBy::REGION, 1.0, true, ""});
         sc.title = "tetmesh regions";
         pg.picture({"tetmesh", "boundary of the tetrahedral mesh coloured by material region (artery/aneurysm).", render(sc)});
+    }
+
+    if (files.count("flow") && files["flow"].surfaces.count("blood")) {
+        const Bundle& fb = files["flow"];
+        const SurfaceData& blood = fb.surfaces.at("blood");
+        if (blood.face_fields.count("wall_shear_stress_pa")) {
+            SnapshotScene sc;
+            sc.layers.push_back({blood, ColorBy::FIELD, 1.0, false, "wall_shear_stress_pa"});
+            sc.title = "wall shear stress [Pa]";
+            pg.picture({"flow", "wall shear stress of the steady blood flow on the blood domain's wall (colour bar to its 98th percentile).", render(sc)});
+        }
+        if (fb.flow) {
+            const double inlet = qa_value(record_of(fb.meta, "flow")->qa, "inlet_end");
+            const auto lines = trace_streamlines(*fb.flow, blood, "end_" + std::to_string(static_cast<int>(inlet)));
+            SnapshotScene sc;
+            sc.layers.push_back({blood, ColorBy::LABEL, 0.25, false, ""});
+            for (const auto& l : lines) {
+                sc.lines.push_back(l.points);
+                sc.line_values.push_back(l.speed_cm_s);
+            }
+            sc.line_title = "speed [cm/s]";
+            sc.title = "streamlines";
+            pg.picture({"flow", fmt::format("{} streamlines from the inlet, coloured by speed, in the blood domain (translucent).", lines.size()), render(sc)});
+        }
     }
 
     // --- histograms

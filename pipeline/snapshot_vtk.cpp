@@ -153,6 +153,41 @@ void snapshot_scene(const SnapshotScene& scene, const std::string& png, int widt
         }
         ren->AddActor(actor);
     }
+    if (!scene.lines.empty()) {
+        vtkNew<vtkPolyData> poly;
+        vtkNew<vtkPoints> pts;
+        vtkNew<vtkCellArray> cells;
+        vtkNew<vtkDoubleArray> val;
+        val->SetName(scene.line_title.c_str());
+        std::vector<double> all_v;
+        for (size_t l = 0; l < scene.lines.size(); ++l) {
+            const auto& line = scene.lines[l];
+            cells->InsertNextCell(static_cast<vtkIdType>(line.size()));
+            for (size_t i = 0; i < line.size(); ++i) {
+                cells->InsertCellPoint(pts->InsertNextPoint(line[i].x(), line[i].y(), line[i].z()));
+                const double v = l < scene.line_values.size() && i < scene.line_values[l].size() ? scene.line_values[l][i] : 0.0;
+                val->InsertNextValue(v);
+                all_v.push_back(v);
+                all.push_back(line[i]);
+            }
+        }
+        poly->SetPoints(pts);
+        poly->SetLines(cells);
+        poly->GetPointData()->SetScalars(val);
+        std::sort(all_v.begin(), all_v.end());
+        const double lo = all_v.front(), hi = std::max(lo + 1e-12, all_v[static_cast<size_t>(0.98 * static_cast<double>(all_v.size() - 1))]);
+        vtkNew<vtkPolyDataMapper> m;
+        m->SetInputData(poly);
+        vtkNew<vtkLookupTable> lut;
+        lut->SetHueRange(0.66, 0.0);
+        colour_scale(lut, m, lo, hi);
+        m->SetScalarModeToUsePointData();
+        vtkNew<vtkActor> a;
+        a->SetMapper(m);
+        a->GetProperty()->SetLineWidth(2.0);
+        ren->AddActor(a);
+        ren->AddActor2D(scalar_bar(lut, scene.line_title, 0.85, 0.12));
+    }
     const Centerline& cl = scene.centerline;
     if (cl.points.rows() > 1 && cl.offsets.size() > 1) {
         vtkNew<vtkPolyData> lines;

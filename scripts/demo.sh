@@ -44,8 +44,9 @@ echo "== aneusim runs the clipping scene configs/scenes/tube_clip.json (threads,
 build/tools/aneusim run configs/scenes/tube_clip.json
 echo "   assessment: $out/sim_report.json.txt; deformed surface for ParaView: $out/sim_series.xdmf"
 cat "$out/sim_report.json.txt"
-echo "== aneusim plans a scene for the CT-derived sample case (a clip across its detected neck) and runs it"
-build/tools/aneusim plan "$out/sample/case.h5" -o "$out/sample/planned_scene.json"
+echo "== aneusim plans a scene for the CT-derived sample case (a clip across its detected neck) and runs it;"
+echo "   after the session, the residual blood flow into the sac (aneuprep flow, OpenFOAM: about a minute)"
+build/tools/aneusim plan "$out/sample/case.h5" -o "$out/sample/planned_scene.json" --flow
 head -3 "$out/sample/planned_scene.json"
 build/tools/aneusim run "$out/sample/planned_scene.json"
 cat "$out/sample/planned_scene_report.json.txt"

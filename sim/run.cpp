@@ -557,6 +557,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
             j["residual_flow"]["sac_volume_reached_mm3"] = flow->sac_volume_mm3;
             j["residual_flow"]["ends_closed_off"] = flow->ends_closed_off;
             if (flow->ratio >= 0) j["residual_flow"]["residual_sac_inflow_ratio"] = flow->ratio;
+            j["residual_flow"]["pictures"] = flow->pictures;
+            if (!flow->pictures_note.empty()) j["residual_flow"]["pictures_note"] = flow->pictures_note;
             char fb[320];
             if (flow->ratio >= 0)
                 std::snprintf(fb, sizeof fb, "  residual sac inflow        %.1f %% of pre-clip (%.3g of %.3g mL/s; sac volume reached %.3g mm3)%s\n", 100 * flow->ratio,
@@ -565,6 +567,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
             else
                 std::snprintf(fb, sizeof fb, "  residual sac inflow        no labelled sac to compare\n");
             flow_line = fb;
+            for (const auto& pic : flow->pictures) flow_line += "  residual flow picture      " + pic + "\n";
+            if (!flow->pictures_note.empty()) flow_line += "  residual flow pictures     " + flow->pictures_note + "\n";
         }
     }
     TextOut js(path);

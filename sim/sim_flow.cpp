@@ -3,6 +3,9 @@
 // series' last frame once the session is over, its figures read back for the report. The simulator links none of
 // the offline stack (VTK, CGAL, OpenFOAM): it only starts the program.
 #include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <string>
@@ -20,22 +23,15 @@ namespace fs = std::filesystem;
 
 namespace aneu::sim {
 
-ResidualFlow residual_flow(const Scene& sc) {
-    ResidualFlow r;
-    r.file = sc.flow;
-    std::error_code ec;
-    const fs::path beside = fs::read_symlink("/proc/self/exe", ec).parent_path() / "aneuprep";
-    const std::string exe = !ec && fs::exists(beside) ? beside.string() : "aneuprep";
-    std::vector<std::string> args = {exe, "flow", sc.bundle, "--series", sc.series + ".h5", "-o", sc.flow};
+namespace {
+
+/// Runs a program (searched on PATH unless a path is given) and waits: its exit code, or −1 when it cannot start.
+int run_program(std::vector<std::string> args) {
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
-    const auto t0 = std::chrono::steady_clock::now();
     const pid_t pid = ::fork();
-    if (pid < 0) {
-        r.error = std::string("cannot start aneuprep flow (fork: ") + std::strerror(errno) + ")";
-        return r;
-    }
+    if (pid < 0) return -1;
     if (pid == 0) {
         ::execvp(argv[0], argv.data());
         std::fprintf(stderr, "aneusim: cannot run %s: %s\n", argv[0], std::strerror(errno));
@@ -44,8 +40,24 @@ ResidualFlow residual_flow(const Scene& sc) {
     int status = 0;
     while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
     }
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+}  // namespace
+
+ResidualFlow residual_flow(const Scene& sc) {
+    ResidualFlow r;
+    r.file = sc.flow;
+    std::error_code ec;
+    const fs::path beside = fs::read_symlink("/proc/self/exe", ec).parent_path() / "aneuprep";
+    const std::string exe = !ec && fs::exists(beside) ? beside.string() : "aneuprep";
+    const auto t0 = std::chrono::steady_clock::now();
+    const int code = run_program({exe, "flow", sc.bundle, "--series", sc.series + ".h5", "-o", sc.flow});
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    const int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    if (code < 0) {
+        r.error = std::string("cannot start aneuprep flow (fork: ") + std::strerror(errno) + ")";
+        return r;
+    }
     if (code != 0) {
         r.error = "aneuprep flow failed (exit " + std::to_string(code) + "; its message is above)";
         return r;
@@ -66,6 +78,18 @@ ResidualFlow residual_flow(const Scene& sc) {
         if (k == "pre_clip_sac_inflow_ml_s") r.pre_clip_sac_inflow_ml_s = v;
         if (k == "sac_volume_mm3") r.sac_volume_mm3 = v;
         if (k == "ends_closed_off") r.ends_closed_off = v;
+    }
+    // Pictures for the assessment (VTK renders through X: only with a display).
+    const std::string base = fs::path(sc.flow).replace_extension().string();
+    if (std::getenv("DISPLAY") != nullptr) {
+        for (const auto& [what, args] : std::vector<std::pair<std::string, std::vector<std::string>>>{
+                 {base + "_streamlines.png", {"--streamlines"}}, {base + "_wss.png", {"--surface", "blood", "--color-by", "wall_shear_stress_pa"}}}) {
+            std::vector<std::string> cmd = {exe, "-q", "snapshot", sc.flow, "-o", what};
+            cmd.insert(cmd.end(), args.begin(), args.end());
+            if (run_program(cmd) == 0) r.pictures.push_back(what);
+        }
+    } else {
+        r.pictures_note = "no display for pictures: xvfb-run -a aneuprep snapshot " + sc.flow + " --streamlines -o " + base + "_streamlines.png";
     }
     return r;
 }

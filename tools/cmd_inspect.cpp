@@ -7,6 +7,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/file_summary.hpp"
+#include "aneu/pipeline/flow.hpp"
 #include "aneu/pipeline/snapshot.hpp"
 #include "aneu/core/text.hpp"
 #include "cli_common.hpp"
@@ -83,6 +84,7 @@ std::vector<std::pair<std::string, std::string>> contents(const FileSummary& s) 
                                                    attr(s, "/condensed", "method")));
     }
     if (s.find("/condensed/diagnostics")) out.emplace_back("  diagnostics", attrs_line("/condensed/diagnostics"));
+    if (s.find("/flow")) out.emplace_back("/flow", fmt::format("{} fluid cells: velocity, pressure, volume", dim(s, "/flow/cell_centre", 0)));
     return out;
 }
 
@@ -159,6 +161,8 @@ nlohmann::json to_json(const FileSummary& s) {
 void add_snapshot_command(CLI::App& app, std::function<int()>& action) {
     struct Opts {
         std::string file, surface = "wall", color_by = "label", png;
+        bool streamlines = false;
+        int seeds = 150;
     };
     auto o = std::make_shared<Opts>();
     auto* c = app.add_subcommand("snapshot", "render a surface of a stage file to PNG (needs X: use xvfb-run -a)");
@@ -167,12 +171,36 @@ void add_snapshot_command(CLI::App& app, std::function<int()>& action) {
     c->add_option("--color-by", o->color_by, "label, region, or a face field of the surface (e.g. wall_shear_stress_pa of the flow stage's blood surface)")
         ->capture_default_str();
     c->add_option("-o,--output", o->png, "PNG file")->required();
-    c->callback([o, &action] {
+    auto* sl = c->add_flag("--streamlines", o->streamlines,
+                           "a flow stage's file: streamlines from the inlet coloured by speed, in the blood surface (translucent; --surface blood unless given)");
+    c->add_option("--seeds", o->seeds, "--streamlines: how many, spread over the inlet")->capture_default_str()->check(CLI::Range(1, 5000))->needs(sl);
+    c->callback([o, c, &action] {
+        if (o->streamlines && c->count("--surface") == 0) o->surface = "blood";
         action = [o] {
             return run_guarded("aneuprep snapshot", [&] {
                 BundleParts parts;
                 parts.volume = parts.fem = parts.condensed_W = parts.image = false;
                 const Bundle b = read_bundle(o->file, parts);
+                if (o->streamlines) {
+                    if (!b.flow || b.meta.stages.empty() || b.meta.stages.back().stage != "flow")
+                        throw InputError(o->file + ": no /flow (--streamlines needs a file of the flow stage)");
+                    const auto bs = b.surfaces.find(o->surface);
+                    if (bs == b.surfaces.end()) throw InputError(o->file + ": no /surface/" + o->surface);
+                    double inlet = -1;
+                    for (const auto& [k, v] : b.meta.stages.back().qa)
+                        if (k == "inlet_end") inlet = v;
+                    const auto lines = pipeline::trace_streamlines(*b.flow, bs->second, "end_" + std::to_string(static_cast<int>(inlet)), o->seeds);
+                    pipeline::SnapshotScene sc;
+                    sc.layers.push_back({bs->second, pipeline::ColorBy::LABEL, 0.25, false, ""});
+                    for (const auto& l : lines) {
+                        sc.lines.push_back(l.points);
+                        sc.line_values.push_back(l.speed_cm_s);
+                    }
+                    sc.line_title = "speed [cm/s]";
+                    sc.title = "streamlines from the inlet (" + std::to_string(lines.size()) + ")";
+                    pipeline::snapshot_scene(sc, o->png, 1000, 800);
+                    return;
+                }
                 const auto it = b.surfaces.find(o->surface);
                 if (it == b.surfaces.end()) throw InputError(o->file + ": no /surface/" + o->surface);
                 const SurfaceData& sf = it->second;

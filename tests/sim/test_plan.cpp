@@ -94,4 +94,14 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_EQ(a.clips_used, 1);
     EXPECT_EQ(a.clips_deposited, 1);
     EXPECT_GT(a.peak_vessel_force_n, 0.0) << "the clip touched the vessel";
+    // --flow asks for the residual flow after the session, on the scene's own series.
+    EXPECT_TRUE(sc.flow.empty());
+    sim::PlanOptions po;
+    po.flow = true;
+    {
+        std::ofstream(t.dir / "planned_flow.json") << sim::plan_scene(m, "tube.h5", "planned_flow", po);
+    }
+    const sim::Scene with_flow = sim::read_scene((t.dir / "planned_flow.json").string());
+    EXPECT_EQ(fs::path(with_flow.flow).filename(), "planned_flow_flow.h5");
+    EXPECT_EQ(fs::path(with_flow.series).filename(), "planned_flow_series");
 }

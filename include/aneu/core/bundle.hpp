@@ -137,6 +137,15 @@ struct CondensedData {
     Eigen::Index size() const { return dof_node.size(); }
 };
 
+/// /flow: the blood's velocity and pressure at the fluid mesh's cell centres (the flow stage: OpenFOAM's finite
+/// volumes), for streamlines and ParaView (`aneuprep export --format vtp --flow`).
+struct FlowFieldData {
+    Eigen::MatrixX3d centre;    ///< #C×3 [mm]
+    Eigen::MatrixX3d velocity;  ///< #C×3 [mm/s]
+    Eigen::VectorXd pressure;   ///< #C gauge pressure [Pa] (outlets at 0)
+    Eigen::VectorXd volume;     ///< #C cell volume [mm³]
+};
+
 /// A whole stage file. Absent groups are not written.
 struct Bundle {
     Meta meta;
@@ -145,6 +154,7 @@ struct Bundle {
     std::optional<VolumeData> volume;
     std::optional<FemData> fem;
     std::optional<CondensedData> condensed;
+    std::optional<FlowFieldData> flow;
 };
 
 }  // namespace aneu

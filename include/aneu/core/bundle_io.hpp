@@ -22,6 +22,7 @@ struct BundleParts {
     bool volume = true;
     bool fem = true;
     bool condensed_W = true;  ///< the W matrix itself (may be GBs); the rest of /condensed is always read
+    bool flow = true;         ///< /flow (the flow stage's cell fields)
 };
 
 /// Writes a bundle atomically: to "<path>.part-<pid>" in the same directory, renamed to `path` only once

@@ -89,8 +89,21 @@ SurfaceData blood_domain(const SurfaceData& lumen);
 SurfaceData deformed_lumen(const Bundle& bundle, const SurfaceData& lumen, const std::string& series, int frame, Reporter& rep,
                            int* frame_used = nullptr);
 
+/// A streamline of the blood: points [mm] and the speed there [cm/s].
+struct Streamline {
+    std::vector<Eigen::Vector3d> points;
+    std::vector<double> speed_cm_s;
+};
+
+/// Streamlines of a flow stage's velocity field, seeded at `seeds` points spread over the inlet's cap (the blood
+/// surface's faces labelled `inlet_patch`, e.g. "end_1"): second-order Runge–Kutta through the cells' velocities
+/// (inverse-distance weights of the cells within 1.5 cell sizes), steps of a third of a cell, ending where no
+/// cell is near (the wall or an outlet), where the blood is still, or after `max_length_mm`.
+std::vector<Streamline> trace_streamlines(const FlowFieldData& field, const SurfaceData& blood, const std::string& inlet_patch, int seeds = 150,
+                                          double max_length_mm = 200.0);
+
 /// Runs the flow stage: reads /surface/lumen of `in`, solves, writes `out` with the input's image and surfaces
-/// plus /surface/blood carrying the face fields wall_shear_stress_pa [F,1], wall_shear_stress_vector_pa [F,3]
+/// plus /flow (velocity and pressure at the fluid cells) and /surface/blood carrying the face fields wall_shear_stress_pa [F,1], wall_shear_stress_vector_pa [F,3]
 /// and pressure_pa [F,1] (zero on the caps for the wall shear stress). Figures in the stage's QA: per end flow
 /// (mL/s, positive out of the domain) and mean pressure (Pa), the mass imbalance, the wall shear stress.
 void flow_file(const std::string& in, const std::string& out, const FlowParams& p, StageRecord stage, Reporter& rep);

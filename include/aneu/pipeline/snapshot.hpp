@@ -28,6 +28,11 @@ struct SnapshotScene {
     Centerline centerline;
     std::vector<EndPlane> planes;
     std::string title;
+    /// Polylines (streamlines) coloured by a value per point, blue (low) to red (its 98th percentile), with a
+    /// colour bar titled `line_title`.
+    std::vector<std::vector<Eigen::Vector3d>> lines;
+    std::vector<std::vector<double>> line_values;
+    std::string line_title;
 };
 /// Renders a scene to PNG off screen. The camera looks along the direction in which the geometry is
 /// thinnest (its smallest principal axis), slightly from above, so the whole vessel tree is in view.

@@ -169,6 +169,8 @@ struct ResidualFlow {
     double ends_closed_off = 0;        ///< vessel ends no longer reachable from the inlet
     double seconds = 0;
     std::string error;                 ///< non-empty: aneuprep flow failed (its message went to the terminal)
+    std::vector<std::string> pictures; ///< streamlines and wall shear stress (PNG, when a display was there)
+    std::string pictures_note;         ///< why there are none, and the command that makes them
 };
 
 /// Runs `aneuprep flow BUNDLE --series SERIES.h5 -o FLOW` (the aneuprep beside this executable, else on PATH) after
