@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <tuple>
 
 #include <fmt/format.h>
 
@@ -95,7 +96,38 @@ void write_inp(const Bundle& b, const std::string& input, const std::string& pat
     if (!o) throw IoError(path + ": write failed");
 }
 
+/// The flow stage's cell fields (/flow) as an XDMF point cloud: velocity and pressure at the fluid cells' centres,
+/// read by ParaView from the stage file in place (render as Point Gaussian, or resample onto an image).
+void write_flow_xdmf(const FlowFieldData& fl, const std::string& input, const std::string& path) {
+    const std::string h5 = fs::relative(fs::absolute(input), fs::absolute(path).parent_path()).string();
+    const auto n = fl.centre.rows();
+    std::ofstream o(path);
+    if (!o) throw IoError(path + ": cannot write");
+    o << "<?xml version=\"1.0\" ?>\n<!-- aneuclip: the blood flow at the fluid cells' centres of " << input
+      << "; the data are read from that file -->\n<Xdmf Version=\"3.0\">\n <Domain>\n  <Grid Name=\"blood\" GridType=\"Uniform\">\n";
+    o << fmt::format("   <Topology TopologyType=\"Polyvertex\" NumberOfElements=\"{}\" NodesPerElement=\"1\"/>\n", n);
+    o << "   <Geometry GeometryType=\"XYZ\">\n";
+    o << fmt::format("    <DataItem Dimensions=\"{} 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">{}:/flow/cell_centre</DataItem>\n", n, h5);
+    o << "   </Geometry>\n";
+    const std::tuple<const char*, const char*, const char*, int> fields[] = {{"velocity_mm_s", "Vector", "velocity", 3},
+                                                                            {"pressure_pa", "Scalar", "pressure", 1},
+                                                                            {"cell_volume_mm3", "Scalar", "cell_volume", 1}};
+    for (const auto& [name, type, ds, k] : fields) {
+        o << fmt::format("   <Attribute Name=\"{}\" AttributeType=\"{}\" Center=\"Node\">\n", name, type);
+        o << fmt::format("    <DataItem Dimensions=\"{}{}\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">{}:/flow/{}</DataItem>\n", n,
+                         k == 3 ? " 3" : "", h5, ds);
+        o << "   </Attribute>\n";
+    }
+    o << "  </Grid>\n </Domain>\n</Xdmf>\n";
+    o.flush();
+    if (!o) throw IoError(path + ": write failed");
+}
+
 void write_xdmf(const Bundle& b, const std::string& input, const std::string& path) {
+    if (!b.volume && b.flow) {
+        write_flow_xdmf(*b.flow, input, path);
+        return;
+    }
     const VolumeData& vol = need_volume(b, input, "xdmf");
     // The datasets stay in the stage file; the XDMF names it relative to itself.
     const fs::path rel = fs::relative(fs::absolute(input), fs::absolute(path).parent_path());

@@ -879,10 +879,10 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
         // again: the inflow is the positive part. A planar quadrature, not the cells' faces: the positive part of
         // the fluxes through a staircase of faces grows with the tangential flow past it (measured: 10 % between
         // the sample's default mesh and one refinement, against 1 % on the disc).
-        // Only what reaches the sac counts: a sample whose nearest cell belongs to the sac's side of the disc as
-        // far as it connects to the sac's cells (cells beyond the disc's plane, flooded through the mesh's faces
-        // from the sac's cells), or lies next to it. A neck pinched shut has no such cell: no inflow, even where the
-        // deformed disc crosses the parent vessel.
+        // Only what reaches the sac counts: a sample whose nearest cell lies on the sac's side of the disc (the
+        // cells reached from the sac's cells two cells beyond the neck's plane without a link crossing the disc)
+        // or next to one. A neck pinched shut leaves no sac cell: no inflow, even where the deformed disc crosses
+        // the parent vessel. (Should the flood leak past the disc's rim, every sample counts: the plain disc.)
         const std::vector<int> owner = read_label_list(dir / "constant" / "polyMesh" / "owner");
         const std::vector<int> neighbour = read_label_list(dir / "constant" / "polyMesh" / "neighbour");
         if (owner.size() < neighbour.size()) throw Error("flow: OpenFOAM's owner and neighbour lists disagree in size");
@@ -894,18 +894,38 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
             adjacent[o].push_back(static_cast<int>(n));
             adjacent[n].push_back(static_cast<int>(o));
         }
-        std::vector<char> sac_side(nc, 0), beyond_flag(nc, 0);
-        for (size_t c : beyond) beyond_flag[c] = 1;
+        double disc_r = 0;
+        for (const auto& x : neck.loop) disc_r = std::max(disc_r, (x - neck.centre).norm());
+        // Does the segment p–q cross the disc (a fan of triangles from the centre)? Möller–Trumbore per triangle.
+        auto crosses_disc = [&](const Eigen::Vector3d& p0, const Eigen::Vector3d& q0) {
+            const Eigen::Vector3d d = q0 - p0;
+            if ((p0 - neck.centre).norm() > disc_r + d.norm() + 1e-9) return false;
+            for (size_t i = 0; i < neck.loop.size(); ++i) {
+                const Eigen::Vector3d& a = neck.centre;
+                const Eigen::Vector3d e1 = neck.loop[i] - a, e2 = neck.loop[(i + 1) % neck.loop.size()] - a;
+                const Eigen::Vector3d pv = d.cross(e2);
+                const double det = e1.dot(pv);
+                if (std::abs(det) < 1e-14) continue;
+                const Eigen::Vector3d tv = p0 - a;
+                const double u = tv.dot(pv) / det;
+                if (u < 0 || u > 1) continue;
+                const Eigen::Vector3d qv = tv.cross(e1);
+                const double v = d.dot(qv) / det, t = e2.dot(qv) / det;
+                if (v >= 0 && u + v <= 1 && t >= 0 && t <= 1) return true;
+            }
+            return false;
+        };
+        std::vector<char> sac_side(nc, 0);
         std::vector<size_t> queue;
         for (size_t c = 0; c < nc; ++c)
-            if (in_sac[c]) {
+            if (in_sac[c] && neck.into_sac.dot(cell_pts[c] - neck.centre) > 2 * h) {
                 sac_side[c] = 1;
                 queue.push_back(c);
             }
         for (size_t k = 0; k < queue.size(); ++k)
             for (int m : adjacent[queue[k]]) {
                 const auto mm = static_cast<size_t>(m);
-                if (!sac_side[mm] && beyond_flag[mm]) {
+                if (!sac_side[mm] && !crosses_disc(cell_pts[queue[k]], cell_pts[mm])) {
                     sac_side[mm] = 1;
                     queue.push_back(mm);
                 }

@@ -18,6 +18,7 @@
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/fem/structured_mesh.hpp"
 #include "aneu/pipeline/case_runner.hpp"
+#include "aneu/pipeline/export.hpp"
 #include "aneu/pipeline/flow.hpp"
 #include "aneu/pipeline/geometry.hpp"
 #include "aneu/pipeline/surface_checks.hpp"
@@ -143,6 +144,42 @@ TEST(Flow, PoiseuilleInAStraightTube) {
         }
         EXPECT_NEAR(s.face_fields.at("wall_shear_stress_vector_pa").row(f).norm(), wss(f, 0), 1e-12);
     }
+    // The cells' field: one entry per cell, the cells' volumes fill the tube, the flow through a cross-section
+    // from the cells' velocities is the inflow; streamlines run straight down the tube, inlet to outlet.
+    ASSERT_TRUE(b.flow.has_value());
+    const FlowFieldData& fl = *b.flow;
+    EXPECT_EQ(static_cast<double>(fl.centre.rows()), qa_of(b, "cells"));
+    EXPECT_NEAR(fl.volume.sum(), PI * R * R * L, 0.02 * PI * R * R * L);
+    double q_mid = 0;  // Σ u_x V / L over the middle half = the mean flow
+    for (Eigen::Index c = 0; c < fl.centre.rows(); ++c)
+        if (fl.centre(c, 0) > x0 + 0.25 * (x1 - x0) && fl.centre(c, 0) < x0 + 0.75 * (x1 - x0)) q_mid += std::abs(fl.velocity(c, 0)) * fl.volume[c];
+    q_mid /= 0.5 * (x1 - x0);
+    EXPECT_NEAR(q_mid * 1e-9, Q, 0.02 * Q) << "mm³/s from the cells against the inflow";
+    const auto lines = trace_streamlines(fl, s, "end_" + std::to_string(static_cast<int>(qa_of(b, "inlet_end"))), 40);
+    ASSERT_GE(lines.size(), 35u);
+    double worst_drift = 0, shortest_run = 1e9;
+    for (const auto& l : lines) {  // drift over the developed middle half (the plug inflow reshapes first)
+        const Eigen::Vector3d a0 = l.points.front(), a1 = l.points.back();
+        const Eigen::Vector3d* m0 = nullptr;
+        for (const auto& x : l.points) {
+            if (x.x() < x0 + 0.25 * (x1 - x0) || x.x() > x0 + 0.75 * (x1 - x0)) continue;
+            if (m0 == nullptr) m0 = &x;
+            worst_drift = std::max(worst_drift, std::hypot(x.y() - m0->y(), x.z() - m0->z()));
+        }
+        shortest_run = std::min(shortest_run, std::abs(a1.x() - a0.x()));
+    }
+    std::printf("Poiseuille: %zu streamlines, largest drift across the middle half %.3f mm (R %.1f), shortest run %.1f of %.1f mm\n", lines.size(),
+                worst_drift, R, shortest_run, x1 - x0);
+    EXPECT_LT(worst_drift, 0.05 * R);
+    EXPECT_GT(shortest_run, 0.9 * (x1 - x0));
+    // ParaView: the cells as points with velocity and pressure, read from the stage file in place.
+    ExportParams ep;
+    ep.format = ExportFormat::XDMF;
+    export_file((d.p / "flow.h5").string(), (d.p / "cells.xdmf").string(), ep, null_reporter());
+    std::stringstream xs;
+    xs << std::ifstream(d.p / "cells.xdmf").rdbuf();
+    EXPECT_NE(xs.str().find("TopologyType=\"Polyvertex\""), std::string::npos);
+    EXPECT_NE(xs.str().find("flow.h5:/flow/velocity"), std::string::npos);
 }
 
 // The flow into a sidewall sac through its neck: a tube of radius 1.5 mm along z with a sphere of radius 2.5 mm on

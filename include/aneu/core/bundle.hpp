@@ -138,7 +138,7 @@ struct CondensedData {
 };
 
 /// /flow: the blood's velocity and pressure at the fluid mesh's cell centres (the flow stage: OpenFOAM's finite
-/// volumes), for streamlines and ParaView (`aneuprep export --format vtp --flow`).
+/// volumes), for streamlines and ParaView (`aneuprep export FLOW.h5 --format xdmf`: the cells as points).
 struct FlowFieldData {
     Eigen::MatrixX3d centre;    ///< #C×3 [mm]
     Eigen::MatrixX3d velocity;  ///< #C×3 [mm/s]

@@ -29,7 +29,8 @@ struct ExportParams {
 ///          `set_<name>` (1 in the node set);
 ///  - vtp/stl: a surface with cell data `label`, `region` and point data `thickness` (vtp);
 ///  - nrrd: /image/mask as a label map in the physical frame (3D Slicer: load as segmentation);
-///  - xdmf: an XDMF file describing /volume of `input` in place (ParaView reads the HDF5 datasets from it);
+///  - xdmf: an XDMF file describing /volume of `input` in place (ParaView reads the HDF5 datasets from it); for a
+///          flow stage's file (no /volume) the /flow cell centres as points with velocity and pressure;
 ///  - inp:  nodes, C3D4/C3D10 elements with one ELSET and material per region, NSETs, the fixed DOFs as
 ///          *BOUNDARY, a *STATIC step with the optional pressure as *CLOAD, and *NODE PRINT of U.
 /// @throws InputError when the input lacks what the format needs
