@@ -79,6 +79,42 @@ fs::path tube_lumen(const TempDir& d, double R, double L) {
     return s;
 }
 
+/// Figures of a straight tube along x: the pressure gradient (slope of the wall's pressure along the middle half),
+/// the area-weighted wall shear stress there, the flow and the radius from the inlet's area.
+struct TubeFigures {
+    double dpdx = 0, wss = 0, Q = 0, R = 0;
+    int faces = 0;  ///< wall faces in the middle half
+};
+TubeFigures tube_figures(const Bundle& b) {
+    const SurfaceData& s = b.surfaces.at("blood");
+    TubeFigures t;
+    t.R = std::sqrt(qa_of(b, "area_mm2_end_" + s.label_names[1].substr(4)) / PI) * 1e-3;
+    t.Q = qa_of(b, "inflow_ml_s") * 1e-6;
+    const double x0 = s.V.col(0).minCoeff(), x1 = s.V.col(0).maxCoeff();
+    const auto& pr = s.face_fields.at("pressure_pa");
+    const auto& wss = s.face_fields.at("wall_shear_stress_pa");
+    double sx = 0, sp = 0, sxx = 0, sxp = 0, n = 0, wsum = 0, asum = 0;
+    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+        if (s.face_label[f] != 0) continue;
+        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), bb = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
+        const double x = (a.x() + bb.x() + c.x()) / 3;
+        if (x < x0 + 0.25 * (x1 - x0) || x > x0 + 0.75 * (x1 - x0)) continue;
+        const double xm = x * 1e-3;
+        sx += xm;
+        sp += pr(f, 0);
+        sxx += xm * xm;
+        sxp += xm * pr(f, 0);
+        n += 1;
+        const double ar = 0.5 * (bb - a).cross(c - a).norm();
+        wsum += ar * wss(f, 0);
+        asum += ar;
+    }
+    t.dpdx = std::abs((n * sxp - sx * sp) / (n * sxx - sx * sx));  // the inlet may be either end
+    t.faces = static_cast<int>(n);
+    t.wss = wsum / asum;
+    return t;
+}
+
 StageRecord record() {
     StageRecord r;
     r.stage = "flow";
@@ -110,33 +146,17 @@ TEST(Flow, PoiseuilleInAStraightTube) {
     EXPECT_LE(qa_of(b, "mass_imbalance"), 0.005);
     // The axis: the tube runs along x; the middle half of its length.
     const double x0 = s.V.col(0).minCoeff(), x1 = s.V.col(0).maxCoeff();
-    const auto& pr = s.face_fields.at("pressure_pa");
+    const TubeFigures tf = tube_figures(b);
+    ASSERT_GT(tf.faces, 100);
+    const double slope = tf.dpdx;
     const auto& wss = s.face_fields.at("wall_shear_stress_pa");
-    double sx = 0, sp = 0, sxx = 0, sxp = 0, n = 0, wsum = 0, asum = 0;
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        if (s.face_label[f] != 0) continue;
-        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), bb = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
-        const double x = (a.x() + bb.x() + c.x()) / 3;
-        if (x < x0 + 0.25 * (x1 - x0) || x > x0 + 0.75 * (x1 - x0)) continue;
-        const double xm = x * 1e-3;
-        sx += xm;
-        sp += pr(f, 0);
-        sxx += xm * xm;
-        sxp += xm * pr(f, 0);
-        n += 1;
-        const double ar = 0.5 * (bb - a).cross(c - a).norm();
-        wsum += ar * wss(f, 0);
-        asum += ar;
-    }
-    ASSERT_GT(n, 100);
-    const double slope = std::abs((n * sxp - sx * sp) / (n * sxx - sx * sx));  // the inlet may be either end
     const double mu = BLOOD_VISCOSITY_PA_S;
     const double dpdx = 8 * mu * Q / (PI * std::pow(Re, 4));
     const double tau = 4 * mu * Q / (PI * std::pow(Re, 3));
     std::printf("Poiseuille: dp/dx %.4f Pa/m (Hagen-Poiseuille %.4f, %+.2f %%), WSS %.5f Pa (%.5f, %+.2f %%), mass imbalance %.2e, %g cells\n", slope,
-                dpdx, 100 * (slope / dpdx - 1), wsum / asum, tau, 100 * (wsum / asum / tau - 1), qa_of(b, "mass_imbalance"), qa_of(b, "cells"));
+                dpdx, 100 * (slope / dpdx - 1), tf.wss, tau, 100 * (tf.wss / tau - 1), qa_of(b, "mass_imbalance"), qa_of(b, "cells"));
     EXPECT_NEAR(slope, dpdx, 0.02 * dpdx);
-    EXPECT_NEAR(wsum / asum, tau, 0.05 * tau);
+    EXPECT_NEAR(tf.wss, tau, 0.05 * tau);
     // The caps carry no wall shear stress; the vector field's magnitude is the scalar.
     for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
         if (s.face_label[f] != 0) {
@@ -600,40 +620,6 @@ TEST(Flow, TheLumenFollowsTheWallOfASeriesFrame) {
 }
 
 namespace {
-
-/// Figures of a straight tube along x: the pressure gradient (slope of the wall's pressure along the middle half),
-/// the area-weighted wall shear stress there, the flow and the radius from the inlet's area.
-struct TubeFigures {
-    double dpdx = 0, wss = 0, Q = 0, R = 0;
-};
-TubeFigures tube_figures(const Bundle& b) {
-    const SurfaceData& s = b.surfaces.at("blood");
-    TubeFigures t;
-    t.R = std::sqrt(qa_of(b, "area_mm2_end_" + s.label_names[1].substr(4)) / PI) * 1e-3;
-    t.Q = qa_of(b, "inflow_ml_s") * 1e-6;
-    const double x0 = s.V.col(0).minCoeff(), x1 = s.V.col(0).maxCoeff();
-    const auto& pr = s.face_fields.at("pressure_pa");
-    const auto& wss = s.face_fields.at("wall_shear_stress_pa");
-    double sx = 0, sp = 0, sxx = 0, sxp = 0, n = 0, wsum = 0, asum = 0;
-    for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
-        if (s.face_label[f] != 0) continue;
-        const Eigen::Vector3d a = s.V.row(s.F(f, 0)), bb = s.V.row(s.F(f, 1)), c = s.V.row(s.F(f, 2));
-        const double x = (a.x() + bb.x() + c.x()) / 3;
-        if (x < x0 + 0.25 * (x1 - x0) || x > x0 + 0.75 * (x1 - x0)) continue;
-        const double xm = x * 1e-3;
-        sx += xm;
-        sp += pr(f, 0);
-        sxx += xm * xm;
-        sxp += xm * pr(f, 0);
-        n += 1;
-        const double ar = 0.5 * (bb - a).cross(c - a).norm();
-        wsum += ar * wss(f, 0);
-        asum += ar;
-    }
-    t.dpdx = std::abs((n * sxp - sx * sp) / (n * sxx - sx * sx));
-    t.wss = wsum / asum;
-    return t;
-}
 
 /// Fully developed Carreau–Yasuda flow in a tube of radius R [m] under a pressure gradient G [Pa/m]:
 /// the shear stress G r / 2 = μ(γ̇) γ̇ gives γ̇(r) (monotone: bisection), Q = π ∫ γ̇ r² dr.
