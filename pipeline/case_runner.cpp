@@ -171,9 +171,10 @@ StagePlan plan_step(const CaseChain& chain, const CaseStep& step) {
     }
     plan.parameters = plan.job->parameters();
     if (!step.input.empty()) plan.inputs.push_back(step.input);
-    if (step.stage == "flow")  // a session's series is an input too: a new session reruns the flow
-        for (const auto& [k, v] : plan.parameters)
-            if (k == "series" && !v.empty() && !step.input.empty()) plan.inputs.push_back(v);
+    if (step.stage == "flow" && !step.input.empty())  // a session's series is an input too: a new session reruns the flow
+        if (auto it = chain.options.find("flow"); it != chain.options.end())
+            for (const auto& [k, v] : it->second)
+                if (k == "series" && !v.empty() && !v.back().empty()) plan.inputs.push_back(v.back());
     plan.output = step.output;
     std::vector<std::string> argv{"aneuprep", "--config", chain.config, step.stage};
     if (!step.input.empty()) argv.push_back(step.input);

@@ -303,6 +303,8 @@ TEST(Flow, ACaseConfigWithAFlowSectionHasAFlowStage) {
     EXPECT_EQ(c.find("flow")->input, (d.p / "b" / "surface.h5").string());
     EXPECT_EQ(c.find("flow")->output, (d.p / "b" / "flow.h5").string());
     EXPECT_EQ(c.bundle(), (d.p / "b" / "case.h5").string()) << "the case bundle is still condense's output";
+    CaseChain cp = c;
+    EXPECT_EQ(plan_case(cp).back().inputs, std::vector<std::string>{(d.p / "b" / "surface.h5").string()}) << "the pre-clip flow's one input";
     ASSERT_EQ(c.options.at("flow").size(), 1u);
     EXPECT_EQ(c.options.at("flow")[0].first, "inflow-cm-s");
     // A session's flow ([flow] series): the case bundle is the input, the series a second input (a new session
