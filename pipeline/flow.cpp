@@ -570,6 +570,38 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
                 }
         res.qa.emplace_back("ends_closed_off", static_cast<double>(lost.size()));
     }
+    // Outlets narrower than three cells across cannot be meshed (snappyHexMesh cuts the branch off before its end):
+    // they are closed as wall, with a warning. By Murray's law they carry (r/R)³ of the flow: a 0.25 mm branch off
+    // a 2.7 mm parent, 0.08 %.
+    {
+        std::vector<int> closed;
+        std::vector<int> relabel(blood.label_names.size(), 0);
+        std::vector<std::string> names = {"wall"};
+        std::vector<EndCap> kept;
+        for (const EndCap& c : caps) {
+            const double r = std::sqrt(c.area_mm2 / PI);
+            const auto l = static_cast<size_t>(std::find(blood.label_names.begin(), blood.label_names.end(), c.patch) - blood.label_names.begin());
+            if (c.id != ic.id && r < 1.5 * h) {
+                closed.push_back(c.id);
+                rep.warn("flow: " + what + ": end " + std::to_string(c.id) + " (radius " + shortest(std::round(r * 100) / 100) + " mm) is narrower than three " +
+                         shortest(h) + " mm cells: closed as wall (by Murray's law " + shortest(std::round(std::pow(r / std::sqrt(ic.area_mm2 / PI), 3) * 1e4) / 100) +
+                         " % of the flow; --cell-mm " + shortest(std::floor(r / 1.5 * 1000) / 1000) + " keeps it open)");
+                continue;
+            }
+            if (l < relabel.size()) relabel[l] = static_cast<int>(names.size());
+            names.push_back(c.patch);
+            kept.push_back(c);
+        }
+        if (!closed.empty()) {
+            for (Eigen::Index f = 0; f < blood.F.rows(); ++f) blood.face_label[f] = relabel[static_cast<size_t>(blood.face_label[f])];
+            blood.label_names = names;
+            caps = kept;
+            inlet = static_cast<size_t>(std::find_if(caps.begin(), caps.end(), [&](const EndCap& c) { return c.id == ic.id; }) - caps.begin());
+            if (caps.size() < 2)
+                throw InputError("flow: " + what + ": every outlet is narrower than three " + shortest(h) + " mm cells: give a smaller --cell-mm");
+        }
+        res.qa.emplace_back("ends_closed_as_wall", static_cast<double>(closed.size()));
+    }
     const double domain_volume = enclosed_volume(blood);
     res.qa.emplace_back("domain_voxel", voxel ? 1.0 : 0.0);
     res.qa.emplace_back("lumen_volume_mm3", lumen_volume);
@@ -613,10 +645,17 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
         write_file(dir / "system" / "blockMeshDict", s);
     }
     {
+        // Each cap refined until its radius spans three cells at least (a real tree's small outlets are narrower
+        // than the parent's cells: without this snappyHexMesh leaves them a face or none), at most level 5.
         std::string regions, patch_info;
         for (const auto& name : blood.label_names) {
             regions += name + " { name " + name + "; } ";
-            if (name != "wall") patch_info += name + " { level (2 2); patchInfo { type patch; } } ";
+            if (name == "wall") continue;
+            int level = 2;
+            for (const EndCap& c : caps)
+                if (c.patch == name)
+                    while (level < 5 && hb / std::pow(2.0, level) > std::sqrt(c.area_mm2 / PI) / 3) ++level;
+            patch_info += name + " { level (" + std::to_string(level) + " " + std::to_string(level) + "); patchInfo { type patch; } } ";
         }
         std::string s = foam_header("dictionary", "snappyHexMeshDict");
         s += "castellatedMesh true; snap true; addLayers " + std::string(p.layers > 0 ? "true" : "false") + ";\n";
@@ -717,6 +756,23 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
         if (q != std::string::npos && cells == 0) cells = std::atol(l.c_str() + q + 6);
     });
     if (cells <= 0) throw MeshingError("flow: snappyHexMesh made no cells inside the lumen (log: " + (dir / "log.snappyHexMesh").string() + ")");
+    // Every end must have become a patch with faces: an outlet narrower than the cells can vanish.
+    {
+        const std::string bt = read_text(dir / "constant" / "polyMesh" / "boundary");
+        for (const EndCap& c : caps) {
+            long faces = 0;
+            for (size_t at = bt.find(c.patch); at != std::string::npos; at = bt.find(c.patch, at + 1)) {
+                const size_t after = at + c.patch.size();
+                if (after < bt.size() && (std::isalnum(static_cast<unsigned char>(bt[after])) || bt[after] == '_')) continue;
+                const size_t nf = bt.find("nFaces", after), close = bt.find('}', after);
+                if (nf != std::string::npos && nf < close) faces = std::atol(bt.c_str() + nf + 6);
+                break;
+            }
+            if (faces <= 0)
+                throw InputError("flow: " + what + ": end " + std::to_string(c.id) + " (radius " + shortest(std::round(std::sqrt(c.area_mm2 / PI) * 100) / 100) +
+                                 " mm) got no face in the fluid mesh of " + shortest(h) + " mm cells: give a smaller --cell-mm (a third of that radius)");
+        }
+    }
     const double mesh_s = tm.seconds();
     rep.info("flow: " + std::to_string(cells) + " cells in " + shortest(std::round(mesh_s * 10) / 10) + " s; solving (simpleFoam, laminar, blood)");
     // Solve, with the residual history.

@@ -722,4 +722,17 @@ TEST(Flow, MurraysLawSplitsTheFlowAtAJunction) {
     EXPECT_NEAR(with_murray, murray, 0.02 * murray);
     const double with_zero = split("zero-pressure", &murray);
     EXPECT_GT(std::abs(with_zero / murray - 1), 0.04) << "zero pressure at both outlets splits by resistance, not by Murray (measured 5.6 % apart)";
+    // Cells of 0.7 mm: the 0.95 mm daughter is narrower than three cells across, so it is closed as wall (with a
+    // warning) and all the blood leaves through the other.
+    FlowParams coarse;
+    coarse.inflow_cm_s = 10.0;
+    coarse.cell_mm = 0.7;
+    flow_file((d.p / "surface.h5").string(), (d.p / "flow_coarse.h5").string(), coarse, record(), null_reporter());
+    const Bundle c = read_bundle((d.p / "flow_coarse.h5").string());
+    EXPECT_EQ(qa_of(c, "ends_closed_as_wall"), 1.0);
+    ASSERT_EQ(c.surfaces.at("blood").label_names.size(), 3u) << "wall, the inlet and one outlet";
+    double out = 0;
+    for (const auto& [k, v] : c.meta.stages.back().qa)
+        if (k.rfind("flow_ml_s_end_", 0) == 0 && v > 0) out += v;
+    EXPECT_NEAR(out, qa_of(c, "inflow_ml_s"), 0.005 * out) << "everything leaves through the wide daughter";
 }
