@@ -2,48 +2,23 @@
 // The residual blood flow after a session: `aneuprep flow` (OpenFOAM, minutes) run as a child process on the
 // series' last frame once the session is over, its figures read back for the report. The simulator links none of
 // the offline stack (VTK, CGAL, OpenFOAM): it only starts the program.
-#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <string>
 #include <vector>
 
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/core/program.hpp"
 #include "aneu/core/reporter.hpp"
 #include "aneu/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
 
 namespace aneu::sim {
-
-namespace {
-
-/// Runs a program (searched on PATH unless a path is given) and waits: its exit code, or −1 when it cannot start.
-int run_program(std::vector<std::string> args) {
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    const pid_t pid = ::fork();
-    if (pid < 0) return -1;
-    if (pid == 0) {
-        ::execvp(argv[0], argv.data());
-        std::fprintf(stderr, "aneusim: cannot run %s: %s\n", argv[0], std::strerror(errno));
-        ::_exit(127);
-    }
-    int status = 0;
-    while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-    }
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-}  // namespace
 
 ResidualFlow residual_flow(const Scene& sc) {
     ResidualFlow r;
@@ -52,12 +27,9 @@ ResidualFlow residual_flow(const Scene& sc) {
     const fs::path beside = fs::read_symlink("/proc/self/exe", ec).parent_path() / "aneuprep";
     const std::string exe = !ec && fs::exists(beside) ? beside.string() : "aneuprep";
     const auto t0 = std::chrono::steady_clock::now();
-    const int code = run_program({exe, "flow", sc.bundle, "--series", sc.series + ".h5", "-o", sc.flow});
+    // Its progress and messages go to this terminal.
+    const int code = run_program({{exe, "flow", sc.bundle, "--series", sc.series + ".h5", "-o", sc.flow}, "", "", std::nullopt, {}}).code;
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (code < 0) {
-        r.error = std::string("cannot start aneuprep flow (fork: ") + std::strerror(errno) + ")";
-        return r;
-    }
     if (code != 0) {
         r.error = "aneuprep flow failed (exit " + std::to_string(code) + "; its message is above)";
         return r;
@@ -86,7 +58,7 @@ ResidualFlow residual_flow(const Scene& sc) {
                  {base + "_streamlines.png", {"--streamlines"}}, {base + "_wss.png", {"--surface", "blood", "--color-by", "wall_shear_stress_pa"}}}) {
             std::vector<std::string> cmd = {exe, "-q", "snapshot", sc.flow, "-o", what};
             cmd.insert(cmd.end(), args.begin(), args.end());
-            if (run_program(cmd) == 0) r.pictures.push_back(what);
+            if (run_program({cmd, "", "", std::nullopt, {}}).code == 0) r.pictures.push_back(what);
         }
     } else {
         r.pictures_note = "no display for pictures: xvfb-run -a aneuprep snapshot " + sc.flow + " --streamlines -o " + base + "_streamlines.png";
