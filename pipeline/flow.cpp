@@ -5,23 +5,17 @@
 #include "aneu/pipeline/flow.hpp"
 
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
 #include <set>
 #include <sstream>
-#include <thread>
 #include <unordered_map>
 
-#include <fcntl.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <Eigen/Geometry>
@@ -30,6 +24,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/label_loops.hpp"
+#include "aneu/core/program.hpp"
 #include "aneu/core/text.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/pipeline/surface_ops.hpp"
@@ -51,60 +46,14 @@ double tri_area(const SurfaceData& s, Eigen::Index f) {
 
 // ---------------------------------------------------------------- child processes
 
-/// Runs `argv` in `dir` with stdout and stderr into `log`; `on_output` sees each new complete line of the log
-/// while it runs. Killed (its process group) at `deadline`: a stage failure.
+/// Runs an OpenFOAM tool in the case folder `dir`, its output into `log`; `on_output` sees each line as it comes.
+/// Killed at `deadline`: a stage failure.
 int run_logged(const std::vector<std::string>& argv, const fs::path& dir, const fs::path& log,
                std::chrono::steady_clock::time_point deadline, const std::function<void(const std::string&)>& on_output) {
-    const pid_t pid = ::fork();
-    if (pid < 0) throw Error("flow: cannot start " + argv[0] + " (fork: " + std::strerror(errno) + ")");
-    if (pid == 0) {
-        ::setpgid(0, 0);
-        const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        if (fd >= 0) {
-            ::dup2(fd, 1);
-            ::dup2(fd, 2);
-            ::close(fd);
-        }
-        if (::chdir(dir.c_str()) != 0) ::_exit(126);
-        ::setenv("PWD", dir.c_str(), 1);
-        std::vector<char*> a;
-        for (const auto& s : argv) a.push_back(const_cast<char*>(s.c_str()));
-        a.push_back(nullptr);
-        ::execvp(a[0], a.data());
-        ::_exit(127);
-    }
-    std::ifstream in;
-    std::string pending;
-    auto drain = [&] {
-        if (!in.is_open()) in.open(log);
-        if (!in.is_open()) return;
-        in.clear();
-        std::string chunk((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-        pending += chunk;
-        size_t start = 0;
-        for (size_t nl; (nl = pending.find('\n', start)) != std::string::npos; start = nl + 1) on_output(pending.substr(start, nl - start));
-        pending.erase(0, start);
-    };
-    int status = 0;
-    while (true) {
-        const pid_t r = ::waitpid(pid, &status, WNOHANG);
-        if (r == pid) break;
-        if (r < 0 && errno != EINTR) throw Error("flow: waiting for " + argv[0] + " failed (" + std::strerror(errno) + ")");
-        drain();
-        if (std::chrono::steady_clock::now() > deadline) {
-            ::kill(-pid, SIGKILL);
-            ::kill(pid, SIGKILL);
-            ::waitpid(pid, &status, 0);
-            throw Error("flow: " + argv[0] + " stopped: past the time budget (--time-budget-s); its log: " + log.string());
-        }
-        std::this_thread::sleep_for(std::chrono::milliseconds(200));
-    }
-    drain();
-    if (WIFEXITED(status)) {
-        if (WEXITSTATUS(status) == 127) throw Error("flow: " + argv[0] + " not found (OpenFOAM: apt-get install openfoam)");
-        return WEXITSTATUS(status);
-    }
-    return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+    const ProgramExit e = run_program({argv, dir.string(), log.string(), deadline, on_output});
+    if (e.timed_out) throw Error("flow: " + argv[0] + " stopped: past the time budget (--time-budget-s); its log: " + log.string());
+    if (e.code == 127) throw Error("flow: " + argv[0] + " not found (OpenFOAM: apt-get install openfoam)");
+    return e.code;
 }
 
 // ---------------------------------------------------------------- OpenFOAM ASCII fields
@@ -913,19 +862,20 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
     const SacNeck neck = sac_neck(lumen);
     if (neck.area_mm2 > 0) {
         // The sac's cells: beyond the neck's plane, their nearest lumen face sac (CGAL AABB tree).
-        std::vector<size_t> beyond;
-        for (size_t c = 0; c < cell_pts.size(); ++c)
-            if (neck.into_sac.dot(cell_pts[c] - neck.centre) > 0) beyond.push_back(c);
-        Eigen::MatrixX3d q(static_cast<Eigen::Index>(beyond.size()), 3);
-        for (size_t i = 0; i < beyond.size(); ++i) q.row(static_cast<Eigen::Index>(i)) = cell_pts[beyond[i]].transpose();
+        // Every cell's nearest lumen face (CGAL AABB tree): the sac's cells are those beyond the neck's plane
+        // nearest to a sac face.
+        const size_t nc = cell_pts.size();
+        Eigen::MatrixX3d q(static_cast<Eigen::Index>(nc), 3);
+        for (size_t c = 0; c < nc; ++c) q.row(static_cast<Eigen::Index>(c)) = cell_pts[c].transpose();
         Eigen::VectorXi nearest_face;
         distance_to_faces(lumen.V, lumen.F, q, &nearest_face);
-        std::vector<char> in_sac(cell_pts.size(), 0);
+        std::vector<char> beyond(nc, 0), near_sac(nc, 0), in_sac(nc, 0);
         double v_sum = 0, vs_sum = 0;
-        for (size_t i = 0; i < beyond.size(); ++i) {
-            const size_t c = beyond[i];
-            const int f = nearest_face[static_cast<Eigen::Index>(i)];
-            if (f < 0 || lumen.face_label[f] != neck.sac_label) continue;
+        for (size_t c = 0; c < nc; ++c) {
+            beyond[c] = neck.into_sac.dot(cell_pts[c] - neck.centre) > 0;
+            const int f = nearest_face[static_cast<Eigen::Index>(c)];
+            near_sac[c] = f >= 0 && lumen.face_label[f] == neck.sac_label;
+            if (!beyond[c] || !near_sac[c]) continue;
             in_sac[c] = 1;
             v_sum += vol[c];
             vs_sum += vol[c] * Eigen::Vector3d(uc[3 * c], uc[3 * c + 1], uc[3 * c + 2]).norm();
@@ -935,14 +885,15 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
         // again: the inflow is the positive part. A planar quadrature, not the cells' faces: the positive part of
         // the fluxes through a staircase of faces grows with the tangential flow past it (measured: 10 % between
         // the sample's default mesh and one refinement, against 1 % on the disc).
-        // Only what reaches the sac counts: a sample whose nearest cell lies on the sac's side of the disc (the
-        // cells reached from the sac's cells two cells beyond the neck's plane without a link crossing the disc)
-        // or next to one. A neck pinched shut leaves no sac cell: no inflow, even where the deformed disc crosses
-        // the parent vessel. (Should the flood leak past the disc's rim, every sample counts: the plain disc.)
+        // Only what reaches the sac counts: a sample whose nearest cell lies on the sac's side of the disc or next
+        // to one. The sac's side: the cells reached from the dome's cells (below), through links that do not cross
+        // the disc, into cells beyond the plane or nearest to a sac face (so the flood
+        // cannot leak past the disc's rim into the parent vessel, whose cells below the plane are nearest to
+        // artery). A neck pinched shut leaves no sac cell: no inflow, even where the deformed disc crosses the
+        // parent vessel.
         const std::vector<int> owner = read_label_list(dir / "constant" / "polyMesh" / "owner");
         const std::vector<int> neighbour = read_label_list(dir / "constant" / "polyMesh" / "neighbour");
         if (owner.size() < neighbour.size()) throw Error("flow: OpenFOAM's owner and neighbour lists disagree in size");
-        const size_t nc = cell_pts.size();
         std::vector<std::vector<int>> adjacent(nc);
         for (size_t f = 0; f < neighbour.size(); ++f) {
             const auto o = static_cast<size_t>(owner[f]), n = static_cast<size_t>(neighbour[f]);
@@ -971,17 +922,28 @@ Solved solve_lumen(const SurfaceData& lumen, const FlowParams& p, bool voxel, co
             }
             return false;
         };
+        // The seeds: cells nearest to the dome, the sac's faces beyond half its height over the neck. A clip that
+        // pushes the sac's wall into the parent vessel makes parent cells nearest to sac faces; only a dome blood
+        // still reaches makes inflow count.
+        double height = 0;
+        std::vector<double> rise(static_cast<size_t>(lumen.F.rows()), 0.0);
+        for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) {
+            if (lumen.face_label[f] != neck.sac_label) continue;
+            const Eigen::Vector3d x = (lumen.V.row(lumen.F(f, 0)) + lumen.V.row(lumen.F(f, 1)) + lumen.V.row(lumen.F(f, 2))).transpose() / 3.0;
+            rise[static_cast<size_t>(f)] = neck.into_sac.dot(x - neck.centre);
+            height = std::max(height, rise[static_cast<size_t>(f)]);
+        }
         std::vector<char> sac_side(nc, 0);
         std::vector<size_t> queue;
         for (size_t c = 0; c < nc; ++c)
-            if (in_sac[c] && neck.into_sac.dot(cell_pts[c] - neck.centre) > 2 * h) {
+            if (in_sac[c] && rise[static_cast<size_t>(nearest_face[static_cast<Eigen::Index>(c)])] > 0.5 * height) {
                 sac_side[c] = 1;
                 queue.push_back(c);
             }
         for (size_t k = 0; k < queue.size(); ++k)
             for (int m : adjacent[queue[k]]) {
                 const auto mm = static_cast<size_t>(m);
-                if (!sac_side[mm] && !crosses_disc(cell_pts[queue[k]], cell_pts[mm])) {
+                if (!sac_side[mm] && (beyond[mm] || near_sac[mm]) && !crosses_disc(cell_pts[queue[k]], cell_pts[mm])) {
                     sac_side[mm] = 1;
                     queue.push_back(mm);
                 }
