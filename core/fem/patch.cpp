@@ -30,6 +30,9 @@ struct PatchModel::Impl {
     std::vector<int> e_dof;           // E index -> global DOF
     Eigen::SparseMatrix<double> K_EI;  // |E| × #interface DOFs
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    // Map nodes: per map DOF, the patch DOF it is (≥ 0), or −1 − its row in `map` (exterior), or INT_MIN (fixed).
+    std::vector<int> map_src;
+    Eigen::MatrixXd map;              // exterior map DOFs × interface DOFs: −K_EE⁻¹ K_EI rows
     double setup_s = 0;
 
     Eigen::VectorXd iface(const Eigen::VectorXd& u) const {
@@ -60,7 +63,8 @@ void for_each_entry(const FemData& fem, F f) {
 
 }  // namespace
 
-PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets) : m(std::make_unique<Impl>()) {
+PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes)
+    : m(std::make_unique<Impl>()) {
     const Stopwatch clock;
     const Eigen::Index nn = vol.nodes.rows(), nt = vol.tets.rows();
     if (patch_tets.empty()) throw InputError("patch: no tetrahedra");
@@ -133,6 +137,25 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
         i_index[static_cast<size_t>(3 * m->nodes[static_cast<size_t>(pd / 3)] + pd % 3)] = static_cast<int>(k);
     }
     const auto ne = static_cast<Eigen::Index>(m->e_dof.size());
+    // The map nodes' DOFs: patch DOF, exterior row of the map, or fixed.
+    std::vector<int> map_e;  // exterior index of each map row
+    m->map_src.reserve(3 * map_nodes.size());
+    for (int v : map_nodes) {
+        if (v < 0 || v >= nn) throw InputError("patch: map node " + std::to_string(v) + " outside the mesh");
+        for (int ax = 0; ax < 3; ++ax) {
+            const int a = m->local[static_cast<size_t>(v)];
+            const int e = e_index[static_cast<size_t>(3 * v + ax)];
+            if (a >= 0) {
+                m->map_src.push_back(3 * a + ax);
+            } else if (e >= 0) {
+                m->map_src.push_back(-1 - static_cast<int>(map_e.size()));
+                map_e.push_back(e);
+            } else {
+                m->map_src.push_back(std::numeric_limits<int>::min());
+            }
+        }
+    }
+    m->map = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(map_e.size()), ni);
     std::vector<Eigen::Triplet<double>> tee, tei;
     m->S = Eigen::MatrixXd::Zero(ni, ni);
     for_each_entry(fem, [&](Eigen::Index r, Eigen::Index c, double v) {
@@ -170,6 +193,7 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
             const Eigen::MatrixXd B = Eigen::MatrixXd(m->K_EI.middleCols(c0, nc));
             const Eigen::MatrixXd X = m->llt.solve(B);
             m->S.middleCols(c0, nc).noalias() -= m->K_EI.transpose() * X;
+            for (size_t r = 0; r < map_e.size(); ++r) m->map.row(static_cast<Eigen::Index>(r)).segment(c0, nc) = -X.row(map_e[r]);
         }
     }
     m->S = 0.5 * (m->S + m->S.transpose()).eval();
@@ -244,6 +268,16 @@ Eigen::VectorXd PatchModel::restrict_to_patch(const Eigen::VectorXd& u_full) con
     Eigen::VectorXd u(dofs());
     for (size_t a = 0; a < m->nodes.size(); ++a) u.segment<3>(static_cast<Eigen::Index>(3 * a)) = u_full.segment<3>(3 * m->nodes[a]);
     return u;
+}
+
+Eigen::VectorXd PatchModel::mapped_displacement(const Eigen::VectorXd& u_patch) const {
+    Eigen::VectorXd out(static_cast<Eigen::Index>(m->map_src.size()));
+    const Eigen::VectorXd ext = m->map.rows() > 0 ? Eigen::VectorXd(m->map * m->iface(u_patch)) : Eigen::VectorXd();
+    for (size_t k = 0; k < m->map_src.size(); ++k) {
+        const int s = m->map_src[k];
+        out[static_cast<Eigen::Index>(k)] = s >= 0 ? u_patch[s] : s == std::numeric_limits<int>::min() ? 0.0 : ext[-1 - s];
+    }
+    return out;
 }
 
 Eigen::VectorXd PatchModel::full_displacement(const Eigen::VectorXd& u_patch) const {

@@ -3,6 +3,7 @@
 // is exact, and with the push inside the patch it gives the full neo-Hookean answer, not the linear one.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "aneu/core/error.hpp"
@@ -66,7 +67,10 @@ TEST(Patch, ExteriorCondensationIsExact) {
     // The patch's tangent at rest (its own K plus the condensed exterior S) solves the linear problem on the
     // patch exactly, and the recovered exterior is the linear model's: the condensation adds no error.
     const Tube tube;
-    const fem::PatchModel patch(tube.vol, tube.fem, tube.tets_near(1.6));
+    // Every third node of the mesh is a map node (inside the patch, outside it, and fixed ones).
+    std::vector<int> map_nodes;
+    for (Eigen::Index v = 0; v < tube.vol.nodes.rows(); v += 3) map_nodes.push_back(static_cast<int>(v));
+    const fem::PatchModel patch(tube.vol, tube.fem, tube.tets_near(1.6), map_nodes);
     ASSERT_GT(patch.interface_nodes(), 10);
     ASSERT_LT(static_cast<Eigen::Index>(patch.nodes().size()), tube.vol.nodes.rows() / 2);
     const auto pres = tube.push(0.05);
@@ -85,6 +89,14 @@ TEST(Patch, ExteriorCondensationIsExact) {
     const fem::DirichletResult r = fem::solve_dirichlet(local, lp);
     const Eigen::VectorXd u = patch.full_displacement(r.u);
     EXPECT_LT((u - u_full).norm(), 1e-9 * u_full.norm());
+    // The map nodes' displacement without a solve (the kept rows of K_EE⁻¹ K_EI) is the same.
+    const Eigen::VectorXd um = patch.mapped_displacement(r.u);
+    ASSERT_EQ(um.size(), 3 * static_cast<Eigen::Index>(map_nodes.size()));
+    double worst = 0;
+    for (size_t k = 0; k < map_nodes.size(); ++k)
+        worst = std::max(worst, (um.segment<3>(3 * static_cast<Eigen::Index>(k)) - u.segment<3>(3 * map_nodes[k])).norm());
+    EXPECT_LT(worst, 1e-9 * u_full.norm());
+    EXPECT_THROW(fem::PatchModel(tube.vol, tube.fem, tube.tets_near(1.6), {static_cast<int>(tube.vol.nodes.rows())}), InputError);
     // The reactions (the force to push) too.
     EXPECT_NEAR(r.reaction.sum(), fem::solve_dirichlet(tube.fem, pres).reaction.sum(), 1e-9 * r.reaction.cwiseAbs().sum());
 }

@@ -26,9 +26,12 @@ namespace aneu::fem {
 class PatchModel final : public ElasticBody {
 public:
     /// @param patch_tets indices into vol.tets (at least one)
-    /// @throws InputError empty or out-of-range patch, a model without the whole vessel outside it;
+    /// @param map_nodes  global nodes whose displacement the model should give cheaply for any patch state
+    ///                   (mapped_displacement): the rows of K_EE⁻¹ K_EI for them are kept from the setup's
+    ///                   interface solves (a simulator's visible surface outside the patch)
+    /// @throws InputError empty or out-of-range patch or map node, a model without the whole vessel outside it;
     ///         NumericalError K_EE not positive definite
-    PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets);
+    PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes = {});
     ~PatchModel() override;
     PatchModel(const PatchModel&) = delete;
     PatchModel& operator=(const PatchModel&) = delete;
@@ -54,6 +57,10 @@ public:
     Eigen::VectorXd restrict_to_patch(const Eigen::VectorXd& u_full) const;
     /// The whole model's displacement (3#N): the patch's, and the exterior's from the interface (linear).
     Eigen::VectorXd full_displacement(const Eigen::VectorXd& u_patch) const;
+    /// Displacement (3 per node, in the order given to the constructor) of the map nodes for a patch state:
+    /// a patch node's own, an exterior node's from the interface through the kept rows of −K_EE⁻¹ K_EI (a
+    /// dense product, 3#map × 3#interface; no solve), zero for fixed DOFs. Equals full_displacement there.
+    Eigen::VectorXd mapped_displacement(const Eigen::VectorXd& u_patch) const;
     /// Seconds to make the patch: the factorisation of K_EE and the interface solves.
     double setup_seconds() const;
 
