@@ -102,7 +102,18 @@ Assessment Simulator::Impl::assess() {
     }
     const Eigen::MatrixX3d x = deformed();
     const SimLumen& lumen = model.surface.lumen;
-    const NeckOcclusion occ = neck_occlusion(lumen, lumen.deformed(x, model.surface.X), scene.neck_gap_mm, lumen.wall_mm);
+    Eigen::MatrixX3d y = lumen.deformed(x, model.surface.X);
+    // Inside a nonlinear patch the lumen's vertices are the patch's own nodes: their displacement (the wall's
+    // compression under the clip included), plus the linear solve's part at the vertex they are bound to.
+    for (const PatchRun& P : patches) {
+        for (Eigen::Index l = 0; l < y.rows(); ++l) {
+            const int p = P.pm->local(lumen.node[l]);
+            if (p < 0) continue;
+            const Eigen::Index b = lumen.bind[l];
+            y.row(l) = lumen.X.row(l) + P.v.segment<3>(3 * p).transpose() + (d.row(b) - d_patch.row(b));
+        }
+    }
+    const NeckOcclusion occ = neck_occlusion(lumen, y, scene.neck_gap_mm, lumen.wall_mm);
     out.neck_closed_fraction = occ.fraction;
     out.neck_length_mm = occ.length_mm;
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
@@ -131,6 +142,11 @@ Assessment Simulator::Impl::assess() {
         }
     }
     out.neck_between_jaws_fraction = total > 0 ? closed / total : 0.0;
+    out.patches.clear();
+    for (const PatchRun& P : patches) {
+        out.patches.push_back(P.stats);
+        if (!std::isfinite(out.patches.back().min_wall_distance_mm)) out.patches.back().min_wall_distance_mm = 0;
+    }
     return out;
 }
 

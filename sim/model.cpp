@@ -130,11 +130,13 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
     }
     L.X.resize(static_cast<Eigen::Index>(order.size()), 3);
     L.bind.resize(static_cast<Eigen::Index>(order.size()));
+    L.node.resize(static_cast<Eigen::Index>(order.size()));
     L.wall_mm.resize(static_cast<Eigen::Index>(order.size()));
     for (size_t i = 0; i < order.size(); ++i) {
         const auto v = static_cast<Eigen::Index>(i);
         L.X.row(v) = nodes.row(order[i]);
         L.bind[v] = bind[i];
+        L.node[v] = order[i];
         L.wall_mm[v] = (s.X.row(bind[i]) - L.X.row(v)).norm();
     }
     L.F.resize(static_cast<Eigen::Index>(tris.size()), 3);

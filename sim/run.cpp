@@ -504,6 +504,17 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         }
         j["clips"].push_back(cj);
     }
+    j["wall_model"] = scene.wall_model == WallModel::PATCH ? "patch" : "linear";
+    if (scene.wall_model == WallModel::PATCH) {
+        j["patches"] = nlohmann::json::array();
+        for (const auto& p : a.patches)
+            j["patches"].push_back({{"clip", p.clip}, {"tets", p.tets}, {"nodes", p.nodes}, {"interface_nodes", p.interface_nodes},
+                                    {"builds", p.builds}, {"setup_s", p.setup_s}, {"frames", p.frames},
+                                    {"unconverged_frames", p.unconverged_frames}, {"max_newton_iterations", p.max_iterations},
+                                    {"mean_newton_iterations", p.mean_iterations}, {"mean_solve_ms", p.mean_solve_ms},
+                                    {"max_solve_ms", p.max_solve_ms}, {"peak_blade_force_n", p.peak_blade_force_n},
+                                    {"min_wall_distance_mm", p.min_wall_distance_mm}, {"wall_pairs_touching", p.wall_pairs_touching}});
+    }
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;
     j["haptic_ticks"] = a.haptic_ticks;
@@ -601,6 +612,14 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
             o << buf;
         }
         o << '\n';
+    }
+    for (const auto& p : a.patches) {
+        std::snprintf(buf, sizeof buf,
+                      "  clip %-2d nonlinear patch   %d nodes (%d on the interface), %ld frames (%ld not converged), %.1f Newton its and "
+                      "%.1f ms a frame (max %d, %.1f ms); peak blade force %.3g N; inner walls %.3g mm apart at the closest\n",
+                      p.clip, p.nodes, p.interface_nodes, p.frames, p.unconverged_frames, p.mean_iterations, p.mean_solve_ms, p.max_iterations,
+                      p.max_solve_ms, p.peak_blade_force_n, p.min_wall_distance_mm);
+        o << buf;
     }
     if (a.max_displacement_to_thickness > 0) {
         std::snprintf(buf, sizeof buf, "  largest push / wall        %.3g mm on %.3g mm (%.2g x; linear model trusted to %.2g x)%s\n",

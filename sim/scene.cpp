@@ -231,6 +231,16 @@ Scene read_scene(const std::string& path) {
         s.clip_method = o.choice("deposited_clips", {"exact", "two-solve"}) == 0 ? GroupMethod::EXACT : GroupMethod::TWO_SOLVE;
         o.done();
     }
+    if (top.has("model")) {
+        Obj o(top.at("model"), "model", path);
+        s.wall_model = o.choice("wall", {"linear", "patch"}) == 0 ? WallModel::LINEAR : WallModel::PATCH;
+        s.patch.radius_mm = o.num("patch_radius_mm", s.patch.radius_mm, 0.1, 50);
+        s.patch.trigger_mm = o.num("trigger_mm", s.patch.trigger_mm, 0, 20);
+        s.patch.newton_per_frame = static_cast<int>(o.num("newton_per_frame", s.patch.newton_per_frame, 1, 1000));
+        s.patch.tolerance = o.num("tolerance", s.patch.tolerance, 1e-14, 1e-1);
+        s.patch.wall_contact = o.flag("wall_contact", s.patch.wall_contact);
+        o.done();
+    }
     if (top.has("haptic")) {
         Obj o(top.at("haptic"), "haptic", path);
         s.plane_stiffness_n_per_mm = o.num("plane_stiffness_n_per_mm", s.plane_stiffness_n_per_mm, 0, 1e4);

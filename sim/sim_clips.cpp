@@ -210,6 +210,7 @@ void Simulator::Impl::balance_springs() {
     }
     for (Clip& c : clips) {
         if (c.state != Clip::State::HELD || c.model.empty()) continue;
+        if (static_cast<size_t>(c.id) < patch_of_clip.size() && patch_of_clip[static_cast<size_t>(c.id)] >= 0) continue;  // its patch balances it
         const ClipModel& cm = scene.clip_models.at(c.model);
         if (!cm.spring) continue;
         const double theta = c.opening_deg * DEG, M = moment[static_cast<size_t>(c.id)];

@@ -19,10 +19,12 @@ FrameStats Simulator::Impl::physics_step(double t, std::mutex* mx) {
     Frame fr(t, mx);
     begin_frame(fr);
     refresh_lagging_rows(fr);
+    make_patches(fr);
     detect_contacts(fr);
     update_node_states(fr);
     build_prescribed(fr);
     solve_frame(fr);
+    solve_patches(fr);
     update_clips_and_areas(fr);
     return fr.fs;
 }
@@ -92,7 +94,7 @@ void Simulator::Impl::refresh_lagging_rows(Frame& fr) {
             std::unique_lock<std::mutex> write;
             if (fr.mx) write = std::unique_lock<std::mutex>(*fr.mx);
             for (int v : lagging) {
-                for (int ax = 0; ax < 3; ++ax) d(v, ax) = dr[sf.row(v, ax)];
+                for (int ax = 0; ax < 3; ++ax) d(v, ax) = dr[sf.row(v, ax)] + d_patch(v, ax);
                 fresh[static_cast<size_t>(v)] = 1;
             }
         }
@@ -127,6 +129,7 @@ void Simulator::Impl::detect_contacts(Frame& fr) {
     kept.assign(static_cast<size_t>(S), 0);
     from_gap.assign(static_cast<size_t>(S), 0);
     for (size_t i = 0; i < ins.size(); ++i) {
+        if (patch_holds_instrument(i)) continue;  // its clip's jaws act in the patch's solve
         for (const auto& [part, shape] : parts[i]) {
             const Jaws& J = jaws[i];
             // This jaw's frame at this frame's opening (along, inner normal, across) and at the last frame's.
@@ -393,7 +396,7 @@ void Simulator::Impl::solve_frame(Frame& fr) {
     fresh = update;
     for (Eigen::Index v = 0; v < S; ++v) {
         if (!update[static_cast<size_t>(v)]) continue;
-        for (int ax = 0; ax < 3; ++ax) d(v, ax) = last.d[sf.row(v, ax)];
+        for (int ax = 0; ax < 3; ++ax) d(v, ax) = last.d[sf.row(v, ax)] + d_patch(v, ax);
     }
 }
 
@@ -401,6 +404,7 @@ void Simulator::Impl::solve_frame(Frame& fr) {
 void Simulator::Impl::update_clips_and_areas(Frame& fr) {
     // Clips: shift of deposited ones, forces of all.
     for (Clip& c : clips) {
+        if (static_cast<size_t>(c.id) < patch_of_clip.size() && patch_of_clip[static_cast<size_t>(c.id)] >= 0) continue;  // set by its patch
         c.net_force.setZero();
         c.grip_force_n = 0;
     }

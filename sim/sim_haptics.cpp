@@ -150,6 +150,8 @@ void Simulator::Impl::update_areas(const std::vector<int>& touching, const std::
 const std::vector<Eigen::Vector3d>& Simulator::Impl::haptic_step(double t) {
     const double lam = std::clamp((t - t_phys) / dt_phys, 0.0, 1.0);
     for (auto& f : forces) f.setZero();
+    // A clip in a nonlinear patch: the tissue's net force on its blades, from the last physics frame.
+    for (size_t i = 0; i < ins.size() && i < patch_force.size(); ++i) forces[i] += patch_force[i];
     std::map<int, Shape> shapes;
     for (size_t i = 0; i < ins.size(); ++i)
         for (auto& [part, sh] : parts_of(i)) shapes.emplace(part, std::move(sh));

@@ -7,6 +7,7 @@
 #include <mutex>
 #include <set>
 
+#include "aneu/core/bundle_io.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/sim/assessment.hpp"
 #include "simulator_impl.hpp"
@@ -21,6 +22,16 @@ Simulator::Impl::Impl(Scene s, SimModel m) : scene(std::move(s)), model(std::mov
     stick_u = stick_p = u;
     gap_side.assign(static_cast<size_t>(S), 0);
     d.setZero(S, 3);
+    d_patch.setZero(S, 3);
+    if (scene.wall_model == WallModel::PATCH && (!model.volume || !model.fem)) {
+        // The patch needs the mesh and K, which the real-time model does not otherwise read.
+        BundleParts parts;
+        parts.image = parts.surfaces = parts.condensed_W = parts.flow = false;
+        Bundle b = read_bundle(scene.bundle, parts);
+        if (!b.volume || !b.fem) throw InputError(scene.bundle + ": no /volume or /fem: the nonlinear patch (model.wall = \"patch\") needs the mesh and K");
+        model.volume = std::make_shared<const VolumeData>(std::move(*b.volume));
+        model.fem = std::make_shared<const FemData>(std::move(*b.fem));
+    }
     in_region.assign(static_cast<size_t>(S), 0);
     for (Eigen::Index v = 0; v < S; ++v)
         in_region[static_cast<size_t>(v)] = model.surface.row.row(v).maxCoeff() < model.n_active;
@@ -55,7 +66,7 @@ Eigen::MatrixX3d Simulator::Impl::deformed(bool region_only) {
         const Eigen::VectorXd rest = solver.deformation(model.n_active, M);
         for (Eigen::Index v = 0; v < S; ++v) {
             if (in_region[static_cast<size_t>(v)]) continue;
-            for (int ax = 0; ax < 3; ++ax) d(v, ax) = rest[sf.row(v, ax) - model.n_active];
+            for (int ax = 0; ax < 3; ++ax) d(v, ax) = rest[sf.row(v, ax) - model.n_active] + d_patch(v, ax);
         }
     }
     return sf.X + d;

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 
 #include "aneu/core/common.hpp"
 #include "aneu/fem/clip.hpp"
+#include "aneu/fem/patch.hpp"
 #include "aneu/sim/simulator.hpp"
 
 namespace aneu::sim {
@@ -92,6 +94,27 @@ struct Simulator::Impl {
         double tissue_k = 0;          // the tissue's rotational stiffness from that secant [N·mm/rad]
     };
     std::vector<ClipTrack> clip_track;
+    // The nonlinear patch under a clip (Scene::wall_model = PATCH; sim_patch.cpp).
+    struct PatchRun {
+        int clip = -1;
+        std::unique_ptr<fem::PatchModel> pm;
+        int tets = 0;
+        Eigen::MatrixX3d X;                   // rest positions of the patch's nodes
+        std::vector<int> cand, cand_vertex;   // patch nodes on the simulated surface, and their vertex
+        Eigen::MatrixX3i inner;               // lumen corner triangles in the patch (patch nodes), normals into the lumen
+        std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
+        Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
+        double kappa_wall = 0, kappa_blade = 0;
+        Eigen::Vector3d hinge_prev = Eigen::Vector3d::Zero();  // the clip's hinge at the last solve
+        double t_map = -1;                    // when the map vertices were last updated
+        Eigen::Vector3d force = Eigen::Vector3d::Zero();  // the tissue's net force on the clip [N]
+        Assessment::PatchEnd stats;
+        double iterations_sum = 0, solve_ms_sum = 0;
+    };
+    std::vector<PatchRun> patches;
+    std::vector<int> patch_of_clip;           // per clip: index into patches, −1
+    Eigen::MatrixX3d d_patch;                 // the patches' part of d (d = the linear solve's + this)
+    std::vector<Eigen::Vector3d> patch_force; // per instrument: the net force of the tissue on its clip's blades [N]
     // Nodes.
     Eigen::Index S = 0;
     std::vector<NodeState> st;
@@ -146,6 +169,15 @@ struct Simulator::Impl {
     // R(θ) = τ(θ) − M(θ), with the tissue's stiffness −dM/dθ from the secant of the last two frames (at most 2° a
     // frame). The jaws then open to max(what the applier holds, that balance).
     void balance_springs();
+
+    // sim_patch.cpp: the nonlinear patch (Scene::wall_model = PATCH). make_patches: a held clip whose jaws come
+    // within trigger_mm of the wall gets its patch (remade, carrying the state, when the jaws leave it);
+    // solve_patches: each patch's Newton solve with the clip's blades, spring and wall contact, then d.
+    bool patch_holds_instrument(size_t i) const;
+    void make_patches(Frame& fr);
+    void build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx);
+    void solve_patches(Frame& fr);
+    void set_patch_part(Eigen::Index v, const Eigen::Vector3d& value);
 
     // sim_frame.cpp: the physics frame (collision, solve, contact areas) and its steps, in order.
     FrameStats physics_step(double t, std::mutex* mx);

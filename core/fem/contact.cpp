@@ -47,6 +47,14 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
             nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
         }
+    // Vertex normals at u0 (area-weighted, towards the opposite wall): a pair is a vertex and a face of the
+    // opposite wall, facing each other (normals more than 90° apart). Same-wall vertices beyond the excluded
+    // rings lie nearly in a face's plane (a flat or flattened wall) and are not pairs.
+    std::vector<Eigen::Vector3d> vn(static_cast<size_t>(X.rows()), Eigen::Vector3d::Zero());
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+        const Eigen::Vector3d a = x(u0, faces(f, 0)), n = (x(u0, faces(f, 1)) - a).cross(x(u0, faces(f, 2)) - a);
+        for (int k = 0; k < 3; ++k) vn[static_cast<size_t>(faces(f, k))] += n;
+    }
     std::vector<int> ring(static_cast<size_t>(X.rows()), -1);  // face index that last marked the vertex as near
     std::vector<int> frontier, next;
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {
@@ -65,9 +73,11 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
                     }
             frontier.swap(next);
         }
+        const Eigen::Vector3d fn = (b - a).cross(c - a);
         for (int v : verts) {
             if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
             if ((x(u0, v) - centre).norm() > r + p.search_mm) continue;
+            if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
             // A vertex already behind the face where the solve starts did not come through it (a crease of
             // the wall, the other side of a fold): not a pair. One in contact from the last step is.
             double d;

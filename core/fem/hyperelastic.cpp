@@ -400,7 +400,8 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         if (m == 0) return du;
         fill_free();
         llt.factorize(Kff);
-        if (llt.info() != Eigen::Success) {
+        bool factored = llt.info() == Eigen::Success;
+        if (!factored) {
             // Not positive definite (buckling, strong compression): project the element tangents instead.
             // The predictor keeps the true tangent's K_fp in its right-hand side, computed above.
             ++out.shifted;
@@ -409,7 +410,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         }
         Eigen::VectorXd diag(m);
         for (Eigen::Index a = 0; a < m; ++a) diag[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
-        for (double tau = 0;;) {
+        for (double tau = 0; !factored;) {
             llt.factorize(Kff);
             if (llt.info() == Eigen::Success) break;
             if (tau > 1e4) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a shift of 1e4 times its diagonal");
@@ -432,6 +433,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     double s = 0, ds = 1;
     const bool trace = std::getenv("ANEU_NEWTON_TRACE") != nullptr;
     std::string last_failure = "no iteration";
+    bool budget_spent = false;  // keep_going: the iteration budget ran out (u is the last accepted iterate)
     // Tries to reach load fraction s1 from the converged state u (at s); true on convergence (u updated).
     auto substep = [&](double s1) {
         Eigen::VectorXd dp = Eigen::VectorXd::Zero(n);
@@ -459,6 +461,11 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 return true;
             }
             if (opt.max_total_iterations > 0 && out.iterations >= opt.max_total_iterations) {
+                if (opt.keep_going) {
+                    u = v;
+                    budget_spent = true;
+                    return true;
+                }
                 throw NumericalError("neo-Hookean solve: " + std::to_string(out.iterations) + " Newton iterations (the limit) reached at load fraction " +
                                      std::to_string(s1) + ", residual " + std::to_string(out.residual));
             }
@@ -495,11 +502,21 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     while (s < 1.0) {
         const double s1 = std::min(1.0, s + ds);
         if (substep(s1)) {
+            if (budget_spent) {
+                out.converged = false;
+                out.load_fraction = s1;
+                break;
+            }
             s = s1;
             ++out.substeps;
             ds = std::min(2 * ds, 1.0);
         } else {
             if (ds < std::ldexp(1.0, -opt.max_halvings)) {
+                if (opt.keep_going) {
+                    out.converged = false;
+                    out.load_fraction = s;
+                    break;
+                }
                 throw NumericalError("neo-Hookean solve: no convergence at load fraction " + std::to_string(s1) + " with the step " +
                                      "halved " + std::to_string(opt.max_halvings) + " times: " + last_failure +
                                      "; smallest det F " + std::to_string(solid.min_jacobian(u)));

@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 
 #include <Eigen/CholmodSupport>
@@ -33,7 +35,7 @@ struct PatchModel::Impl {
     // Map nodes: per map DOF, the patch DOF it is (≥ 0), or −1 − its row in `map` (exterior), or INT_MIN (fixed).
     std::vector<int> map_src;
     Eigen::MatrixXd map;              // exterior map DOFs × interface DOFs: −K_EE⁻¹ K_EI rows
-    double setup_s = 0;
+    double setup_s = 0, factor_s = 0, solves_s = 0;
 
     Eigen::VectorXd iface(const Eigen::VectorXd& u) const {
         Eigen::VectorXd x(static_cast<Eigen::Index>(iface_dof.size()));
@@ -184,9 +186,12 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
         m->K_EI.setFromTriplets(tei.begin(), tei.end());
         m->K_EI.makeCompressed();
         m->llt.cholmod().print = 0;
+        const Stopwatch tf;
         m->llt.compute(Kee);
+        m->factor_s = tf.seconds();
         if (m->llt.info() != Eigen::Success) throw NumericalError("patch: the exterior stiffness K_EE is not positive definite (is the model held?)");
         // − K_IE K_EE⁻¹ K_EI, in blocks of interface DOFs.
+        const Stopwatch ts;
         constexpr Eigen::Index BLOCK = 64;
         for (Eigen::Index c0 = 0; c0 < ni; c0 += BLOCK) {
             const Eigen::Index nc = std::min(BLOCK, ni - c0);
@@ -195,6 +200,7 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
             m->S.middleCols(c0, nc).noalias() -= m->K_EI.transpose() * X;
             for (size_t r = 0; r < map_e.size(); ++r) m->map.row(static_cast<Eigen::Index>(r)).segment(c0, nc) = -X.row(map_e[r]);
         }
+        m->solves_s = ts.seconds();
     }
     m->S = 0.5 * (m->S + m->S.transpose()).eval();
 
@@ -221,6 +227,9 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
     for (Eigen::Index a = 0; a < ni; ++a)
         for (Eigen::Index b = 0; b < ni; ++b) m->s_to_pattern.push_back(position(m->iface_dof[static_cast<size_t>(a)], m->iface_dof[static_cast<size_t>(b)]));
     m->setup_s = clock.seconds();
+    if (std::getenv("ANEU_PATCH_TRACE"))
+        std::fprintf(stderr, "patch: %zu nodes, %zu interface DOFs, %lld exterior DOFs: setup %.2f s (K_EE factor %.2f s, interface solves %.2f s)\n",
+                     m->nodes.size(), m->iface_dof.size(), static_cast<long long>(ne), m->setup_s, m->factor_s, m->solves_s);
 }
 
 PatchModel::~PatchModel() = default;

@@ -34,7 +34,8 @@ class ContactBody final : public ElasticBody {
 public:
     /// @param X      reference positions of the body's nodes
     /// @param faces  surface triangles that can touch (node indices), normals towards where the opposite wall is
-    /// @param u0     the state the solve starts from (candidate pairs are found in it)
+    /// @param u0     the state the solve starts from (candidate pairs are found in it: a vertex and a face facing each
+    ///               other, the vertex normal and the face normal more than 90° apart)
     ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0,
                 const ContactParams& p = {});
     Eigen::Index dofs() const override { return m_body.dofs(); }

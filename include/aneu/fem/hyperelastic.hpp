@@ -84,6 +84,10 @@ struct NewtonOptions {
     int max_total_iterations = 0;  ///< over all substeps of one call (0: no limit); past it the solve stops (NumericalError)
     int max_halvings = 10;     ///< smallest substep 2^−max_halvings of the prescribed increment (a substep that inverts
                                ///< elements or does not converge is halved)
+    /// Real time (a simulator's physics frame): when max_total_iterations is spent, or no substep of the smallest
+    /// size converges, return the last accepted state (converged = false, load_fraction how far the prescribed
+    /// values got) instead of throwing; the next frame starts from it.
+    bool keep_going = false;
 };
 
 struct NewtonResult {
@@ -94,6 +98,8 @@ struct NewtonResult {
     int shifted = 0;            ///< iterations whose tangent was not positive definite (projected element tangents used)
     double residual = 0;        ///< final ‖free residual‖ / ‖internal force‖
     double min_J = 1;           ///< smallest det F at the end
+    bool converged = true;      ///< false only with NewtonOptions::keep_going
+    double load_fraction = 1;   ///< of the prescribed increment reached (< 1 only when not converged)
 };
 
 /// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed

@@ -3,6 +3,7 @@
 /// @file
 /// The simulator's view of a case bundle: the simulated surface (boundary faces of the tetrahedral mesh
 /// whose nodes all carry condensed DOFs) and the columns of W its working region needs.
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -26,6 +27,7 @@ struct SimLumen {
     Eigen::MatrixX3d X;                ///< #L×3 rest positions [mm]
     Eigen::MatrixX3i F;                ///< #F×3 triangles, normals out of the lumen (into the wall)
     Eigen::VectorXi face_region;       ///< #F: index into SimSurface::region_names
+    Eigen::VectorXi node;              ///< #L: volume node of each vertex
     Eigen::VectorXi bind;              ///< #L: simulated-surface vertex whose displacement the vertex takes
     Eigen::VectorXd wall_mm;           ///< #L: distance to that vertex at rest (the local wall thickness)
     std::vector<std::vector<int>> neck_loops;  ///< closed vertex loops between "aneurysm" faces and others: the neck line
@@ -80,6 +82,10 @@ struct SimModel {
     Eigen::MatrixXf Wf;            ///< #M×#active when stored float32 [mm/N]
     Eigen::MatrixXd Wd;            ///< #M×#active when stored float64 [mm/N]
     SimSurface surface;
+    /// The mesh and K (Scene::wall_model = PATCH: the nonlinear patch needs them; the Simulator reads them from
+    /// the bundle when its scene asks for the patch and they are not here).
+    std::shared_ptr<const VolumeData> volume;
+    std::shared_ptr<const FemData> fem;
     std::string case_id;
     double load_seconds = 0.0;
     bool is_float() const { return precision == Precision::FLOAT32; }

@@ -85,6 +85,25 @@ enum class JawPush {
     NODE_NORMAL,  ///< along the node's normal, as published (also what the suction tube always uses)
 };
 
+/// The wall's model under a held clip (issue #15, item 2).
+enum class WallModel {
+    LINEAR,  ///< the condensed linear model everywhere: jaw contacts are prescribed displacements (fast; trusted to
+             ///< Scene::linear_limit wall thicknesses)
+    PATCH,   ///< a neo-Hookean patch around each clip on the exact linear exterior, with the clip's blades, its spring
+             ///< and wall-on-wall contact in one Newton problem per physics frame (fem::PatchModel, fem::ClipBody,
+             ///< fem::ContactBody)
+};
+
+/// How the patch is made and solved (Scene::wall_model = PATCH).
+struct PatchSpec {
+    double radius_mm = 1.5;      ///< the patch: tetrahedra with a corner within this of the clip's jaws (their wedge at the
+                                 ///< opening it is made at, along the jaws' length and width)
+    double trigger_mm = 1.0;     ///< a held clip's patch is made when its jaws close this near the wall
+    int newton_per_frame = 12;   ///< Newton iterations a physics frame may take (warm-started from the last frame)
+    double tolerance = 1e-6;     ///< relative residual of a converged frame
+    bool wall_contact = true;    ///< inner walls touch and do not pass through each other (inside the patch)
+};
+
 struct Scene {
     std::string path;               ///< the scene file
     std::string bundle;             ///< resolved against the scene file's directory
@@ -110,6 +129,8 @@ struct Scene {
     double linear_limit = 0.3;
     GroupMethod clip_method = GroupMethod::EXACT;
     JawPush jaw_push = JawPush::SHAPE;
+    WallModel wall_model = WallModel::LINEAR;
+    PatchSpec patch;
     // haptics (contact-plane method)
     double plane_stiffness_n_per_mm = 0.3;
     double friction_n_s_per_mm = 0.002;

@@ -85,6 +85,21 @@ struct Assessment {
         double opening_deg = 0, grip_force_n = 0, spring_torque_nmm = 0, tissue_moment_nmm = 0;
     };
     std::vector<ClipEnd> clip_ends;
+    /// Each nonlinear patch (Scene::wall_model = PATCH) over the session.
+    struct PatchEnd {
+        int clip = 0;
+        int nodes = 0, interface_nodes = 0, tets = 0;
+        int builds = 0;                      ///< made, then remade when the jaws moved out of it
+        double setup_s = 0;                  ///< the last build's factorisation and interface solves
+        long frames = 0, unconverged_frames = 0;
+        int max_iterations = 0;              ///< Newton iterations in one frame, at most
+        double mean_iterations = 0;
+        double mean_solve_ms = 0, max_solve_ms = 0;
+        double peak_blade_force_n = 0;       ///< mean normal force on one blade, largest over the session
+        double min_wall_distance_mm = 0;     ///< smallest signed distance between opposite inner walls (< 0: through)
+        int wall_pairs_touching = 0;         ///< at the end
+    };
+    std::vector<PatchEnd> patches;
     long frames = 0, haptic_ticks = 0;
 };
 

@@ -1,0 +1,293 @@
+// SPDX-License-Identifier: MIT
+// The nonlinear patch under a clip (simulator_impl.hpp; Scene::wall_model = PATCH; issue #15, item 2).
+//
+// A held clip whose jaws close within PatchSpec::trigger_mm of the wall gets a patch: the tetrahedra within
+// PatchSpec::radius_mm of its jaws' wedge become a neo-Hookean solid on the exact linear exterior
+// (fem::PatchModel). From then on the clip's jaws make no prescribed displacements: each physics frame solves
+// the patch with the clip's blades (fem::ClipBody: the opening θ held by the applier, or free against the
+// spring once the tissue pushes harder than the applier holds, and always free once deposited) and the inner
+// walls' contact (fem::ContactBody) in one Newton problem, warm-started from the last frame. The rest of the
+// scene stays linear; the two add (the patch's displacement of the surface on top of the linear solve's).
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <mutex>
+
+#include "aneu/core/error.hpp"
+#include "aneu/fem/contact.hpp"
+#include "simulator_impl.hpp"
+
+namespace aneu::sim {
+
+namespace {
+
+fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
+    fem::ClipBlades b;
+    b.hinge = c.pose.position;
+    b.axis = c.pose.axis;
+    b.up = c.pose.up;
+    b.length_mm = cm.jaw_length_mm;
+    b.width_mm = cm.jaw_width_mm;
+    b.thickness_mm = cm.jaw_thickness_mm;
+    b.closed_gap_mm = cm.closed_gap_mm;
+    return b;
+}
+
+/// Whether p lies within `margin` of the jaws' wedge at opening θ: along the jaws, across their width, and
+/// between (or on) the blades.
+bool near_wedge(const fem::ClipBlades& b, double theta, const Eigen::Vector3d& p, double margin) {
+    const Eigen::Vector3d rel = p - b.hinge, w = b.axis.cross(b.up);
+    const double r = rel.dot(b.axis);
+    if (r < -margin || r > b.length_mm + margin) return false;
+    if (std::abs(rel.dot(w)) > 0.5 * b.width_mm + margin) return false;
+    const double rr = std::clamp(r, 0.0, b.length_mm);
+    return std::abs(rel.dot(b.up)) <= rr * std::tan(0.5 * theta) + 0.5 * b.closed_gap_mm + b.thickness_mm + margin;
+}
+
+}  // namespace
+
+bool Simulator::Impl::patch_holds_instrument(size_t i) const {
+    const int c = ins[i].clip;
+    return c >= 0 && static_cast<size_t>(c) < patch_of_clip.size() && patch_of_clip[static_cast<size_t>(c)] >= 0;
+}
+
+void Simulator::Impl::set_patch_part(Eigen::Index v, const Eigen::Vector3d& value) {
+    d.row(v) += (value - d_patch.row(v).transpose()).transpose();
+    d_patch.row(v) = value.transpose();
+}
+
+// Patches for held clips whose jaws come near the wall, and remade ones for jaws that left theirs.
+void Simulator::Impl::make_patches(Frame& fr) {
+    if (scene.wall_model != WallModel::PATCH) return;
+    patch_of_clip.resize(clips.size(), -1);
+    const SimSurface& sf = model.surface;
+    std::vector<int> cand;
+    for (size_t i = 0; i < ins.size(); ++i) {
+        const int cid = ins[i].clip;
+        if (cid < 0 || !fr.jaws[i].on) continue;
+        const fem::ClipBlades& b = fr.jaws[i].blades;
+        const double theta = fr.jaws[i].theta;
+        const int have = patch_of_clip[static_cast<size_t>(cid)];
+        // A first patch when the jaws close on the wall (while they only come near, open, the linear model's
+        // contacts are small and the jaws may still move far: a patch made then would have to follow them).
+        if (have < 0 && !(theta < fr.jaws[i].theta_prev - 1e-9)) continue;
+        // The surface near the jaws: within trigger_mm (a first patch), or within half the patch radius (a patch
+        // that must still cover it).
+        const double reach = have < 0 ? scene.patch.trigger_mm : 0.5 * scene.patch.radius_mm;
+        Aabb box;
+        box.lo = box.hi = b.hinge;
+        for (int s : {1, -1}) {
+            Eigen::Vector3d t, n, w;
+            b.frame(s, theta, t, n, w);
+            for (double a : {-0.5, 0.5}) {
+                const Eigen::Vector3d tip = b.hinge + b.length_mm * t + a * b.width_mm * w;
+                const Eigen::Vector3d heel = b.hinge + a * b.width_mm * w;
+                for (const Eigen::Vector3d& p : {tip, heel}) {
+                    box.lo = box.lo.cwiseMin(p);
+                    box.hi = box.hi.cwiseMax(p);
+                }
+            }
+        }
+        grid.query(box.grown(reach + b.thickness_mm), cand);
+        bool near = false, uncovered = false;
+        for (int v : cand) {
+            const Eigen::Vector3d p = x_grid.row(v).transpose();
+            if (!near_wedge(b, theta, p, reach)) continue;
+            near = true;
+            if (have >= 0 && patches[static_cast<size_t>(have)].pm->local(sf.node[v]) < 0) uncovered = true;
+        }
+        if ((have < 0 && near) || uncovered) build_patch(cid, b, theta, fr.mx);
+    }
+}
+
+// Made without the lock (the factorisation and interface solves take seconds); what the other threads read is
+// changed under it.
+void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx) {
+    const Stopwatch sw;
+    const SimSurface& sf = model.surface;
+    const VolumeData& vol = *model.volume;
+    const FemData& fem = *model.fem;
+    std::vector<int> tets;
+    for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
+        for (int k = 0; k < 4; ++k)
+            if (near_wedge(blades, theta, vol.nodes.row(vol.tets(t, k)).transpose(), scene.patch.radius_mm)) {
+                tets.push_back(static_cast<int>(t));
+                break;
+            }
+    if (tets.empty()) return;
+    const int old = patch_of_clip[static_cast<size_t>(clip)];
+    // The visible surface the patch moves: in-region vertices (their displacement from the interface).
+    std::vector<int> map_vertex, map_nodes;
+    for (Eigen::Index v = 0; v < S; ++v)
+        if (in_region[static_cast<size_t>(v)]) {
+            map_vertex.push_back(static_cast<int>(v));
+            map_nodes.push_back(sf.node[v]);
+        }
+    PatchRun P;
+    P.clip = clip;
+    P.pm = std::make_unique<fem::PatchModel>(vol, fem, tets, map_nodes);
+    const fem::PatchModel& pm = *P.pm;
+    P.tets = static_cast<int>(tets.size());
+    P.map_vertex = std::move(map_vertex);
+    const auto np = static_cast<Eigen::Index>(pm.nodes().size());
+    P.X.resize(np, 3);
+    for (Eigen::Index a = 0; a < np; ++a) P.X.row(a) = vol.nodes.row(pm.nodes()[static_cast<size_t>(a)]);
+    for (Eigen::Index v = 0; v < S; ++v) {
+        const int a = pm.local(sf.node[v]);
+        if (a >= 0 && in_region[static_cast<size_t>(v)]) {
+            P.cand.push_back(a);
+            P.cand_vertex.push_back(static_cast<int>(v));
+        }
+    }
+    const SimLumen& L = sf.lumen;
+    std::vector<Eigen::Vector3i> tri;
+    for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
+        const int a = pm.local(L.node[L.F(f, 0)]), b = pm.local(L.node[L.F(f, 1)]), c = pm.local(L.node[L.F(f, 2)]);
+        if (a >= 0 && b >= 0 && c >= 0) tri.emplace_back(a, c, b);  // into the lumen: towards the opposite wall
+    }
+    P.inner.resize(static_cast<Eigen::Index>(tri.size()), 3);
+    for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
+    P.v = Eigen::VectorXd::Zero(pm.dofs() + 1);
+    P.v[pm.dofs()] = theta;
+    P.hinge_prev = blades.hinge;
+    P.stats.clip = clip;
+    P.stats.builds = 1;
+    P.stats.min_wall_distance_mm = std::numeric_limits<double>::infinity();
+    std::unique_lock<std::mutex> lock;
+    if (mx) lock = std::unique_lock<std::mutex>(*mx);
+    if (old >= 0) {
+        // Remade: the state carries over exactly (the old patch's whole displacement, restricted to the new one).
+        PatchRun& O = patches[static_cast<size_t>(old)];
+        const Eigen::VectorXd full = O.pm->full_displacement(O.v.head(O.pm->dofs()));
+        P.v.head(pm.dofs()) = pm.restrict_to_patch(full);
+        P.v[pm.dofs()] = O.v[O.pm->dofs()];
+        P.kappa_wall = O.kappa_wall;
+        P.kappa_blade = O.kappa_blade;
+        P.stats = O.stats;
+        ++P.stats.builds;
+        P.iterations_sum = O.iterations_sum;
+        P.solve_ms_sum = O.solve_ms_sum;
+        for (int v : O.map_vertex) set_patch_part(v, Eigen::Vector3d::Zero());
+        O.pm.reset();
+        patches[static_cast<size_t>(old)] = std::move(P);
+    } else {
+        patch_of_clip[static_cast<size_t>(clip)] = static_cast<int>(patches.size());
+        patches.push_back(std::move(P));
+    }
+    PatchRun& N = patches[static_cast<size_t>(patch_of_clip[static_cast<size_t>(clip)])];
+    N.stats.nodes = static_cast<int>(np);
+    N.stats.interface_nodes = static_cast<int>(N.pm->interface_nodes());
+    N.stats.tets = N.tets;
+    N.stats.setup_s = N.pm->setup_seconds();
+    N.t_map = -1;
+    char b[300];
+    std::snprintf(b, sizeof b, "clip %d: nonlinear patch %s at t=%.3f s: %d tetrahedra, %lld nodes (%lld on the interface), made in %.2f s", clip,
+                  old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
+                  sw.seconds());
+    warn(b);
+}
+
+// Each patch's Newton solve with its clip, then the surface's displacement from it.
+void Simulator::Impl::solve_patches(Frame& fr) {
+    if (patches.empty()) return;
+    patch_force.assign(ins.size(), Eigen::Vector3d::Zero());
+    for (PatchRun& P : patches) {
+        Clip& c = clips[static_cast<size_t>(P.clip)];
+        const ClipModel& cm = scene.clip_models.at(c.model);
+        const fem::PatchModel& pm = *P.pm;
+        const Eigen::Index nb = pm.dofs();
+        const fem::ClipBlades blades = blades_of(c, cm);
+        const bool held = c.state == Clip::State::HELD;
+        const double theta_applier = std::clamp(c.forceps_deg, 0.0, cm.max_opening_deg) * DEG;
+        // A clip without a modelled spring keeps the applier's opening (held) or its own (deposited).
+        const fem::ClipSpring spring = cm.spring ? *cm.spring : fem::ClipSpring{1e-3, 0.0};
+        const double theta_kept = held ? theta_applier : c.opening_deg * DEG;
+        if (fr.mx) fr.lock.unlock();
+        const Stopwatch sw;
+        const Eigen::VectorXd v0 = P.v;
+        std::unique_ptr<fem::ContactBody> wall;
+        if (scene.patch.wall_contact && P.inner.rows() > 0) {
+            fem::ContactParams cp;
+            cp.stiffness = P.kappa_wall;
+            // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
+            // walls between them close by up to the jaws' own motion), or walls would pass each other unseen.
+            const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
+            cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
+            wall = std::make_unique<fem::ContactBody>(pm, P.X, P.inner, v0.head(nb), cp);
+            P.kappa_wall = wall->stiffness();
+        }
+        const fem::ElasticBody& body = wall ? static_cast<const fem::ElasticBody&>(*wall) : pm;
+        fem::ClipContactParams bp;
+        bp.stiffness = P.kappa_blade;
+        const double t_wall = sw.seconds();
+        const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp);
+        const double t_clip = sw.seconds();
+        P.kappa_blade = cb.stiffness();
+        fem::NewtonOptions o;
+        o.tolerance = scene.patch.tolerance;
+        o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
+        o.max_halvings = 3;
+        o.keep_going = true;
+        const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
+        // Held by the applier (or a clip without a spring): θ prescribed. The applier can only hold a spring clip
+        // open: where the spring would close it less than the applier (the tissue pushes harder), θ is free.
+        const bool prescribe = !cm.spring || held;
+        fem::NewtonResult r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), prescribe ? held_at : std::vector<std::pair<int, double>>{}, v0, o);
+        int its = r.iterations;
+        if (prescribe && cm.spring && r.reaction.size() && r.reaction[0] < 0) {
+            r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), {}, v0, o);
+            its += r.iterations;
+        }
+        const double t_solve = sw.seconds();
+        const fem::BladeLoads loads = cb.loads(r.u);
+        // The tissue's net force on the blades: the gradient of the blades' penalty energy at the candidates.
+        const Eigen::VectorXd g_blades = cb.internal_force(r.u).head(nb) - body.internal_force(r.u.head(nb));
+        Eigen::Vector3d net = Eigen::Vector3d::Zero();
+        for (int a : P.cand) net += g_blades.segment<3>(3 * a);
+        const double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
+        const auto touching = wall ? static_cast<int>(wall->active(r.u.head(nb))) : 0;
+        const double ms = 1e3 * sw.seconds();
+        if (std::getenv("ANEU_PATCH_TRACE"))
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
+                         fr.t, v0[nb] / DEG, r.u[nb] / DEG, prescribe ? "held" : "free", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
+                         r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], wall_min, touching, ms, 1e3 * t_wall,
+                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip));
+        if (fr.mx) fr.lock.lock();
+        P.v = r.u;
+        P.hinge_prev = blades.hinge;
+        const double theta = r.u[cb.theta_dof()];
+        c.opening_deg = theta / DEG;
+        if (held && cm.spring) c.spring_deg = c.opening_deg;
+        c.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
+        c.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
+        c.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
+        P.force = net;
+        c.net_force = -net;  // on the vessel
+        if (held && c.holder >= 0) patch_force[static_cast<size_t>(c.holder)] += net;
+        a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, c.grip_force_n);
+        Assessment::PatchEnd& st = P.stats;
+        ++st.frames;
+        if (!r.converged) ++st.unconverged_frames;
+        st.max_iterations = std::max(st.max_iterations, its);
+        P.iterations_sum += its;
+        P.solve_ms_sum += ms;
+        st.mean_iterations = P.iterations_sum / static_cast<double>(st.frames);
+        st.mean_solve_ms = P.solve_ms_sum / static_cast<double>(st.frames);
+        st.max_solve_ms = std::max(st.max_solve_ms, ms);
+        st.peak_blade_force_n = std::max(st.peak_blade_force_n, c.grip_force_n);
+        st.min_wall_distance_mm = std::min(st.min_wall_distance_mm, wall_min);
+        st.wall_pairs_touching = touching;
+        fr.fs.solve_s += 1e-3 * ms;
+        // The surface: the patch's own vertices every frame, the rest of the region from the interface at region_hz.
+        for (size_t k = 0; k < P.cand.size(); ++k) set_patch_part(P.cand_vertex[k], P.v.segment<3>(3 * P.cand[k]));
+        if (P.t_map < 0 || fr.t - P.t_map >= 1.0 / scene.region_hz - 1e-9) {
+            P.t_map = fr.t;
+            const Eigen::VectorXd m = pm.mapped_displacement(P.v.head(nb));
+            for (size_t k = 0; k < P.map_vertex.size(); ++k) set_patch_part(P.map_vertex[k], m.segment<3>(3 * static_cast<Eigen::Index>(k)));
+        }
+    }
+}
+
+}  // namespace aneu::sim
