@@ -106,6 +106,7 @@ Assessment Simulator::Impl::assess() {
     // Inside a nonlinear patch the lumen's vertices are the patch's own nodes: their displacement (the wall's
     // compression under the clip included), plus the linear solve's part at the vertex they are bound to.
     for (const PatchRun& P : patches) {
+        if (!P.alive) continue;
         for (Eigen::Index l = 0; l < y.rows(); ++l) {
             const int p = P.pm->local(lumen.node[l]);
             if (p < 0) continue;

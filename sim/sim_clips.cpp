@@ -119,6 +119,28 @@ void Simulator::Impl::release(int i, double t) {
     auto& rel = clip_u[static_cast<size_t>(c.id)];
     nodes.clear();
     rel.clear();
+    const int patch = static_cast<size_t>(c.id) < patch_of_clip.size() ? patch_of_clip[static_cast<size_t>(c.id)] : -1;
+    if (patch >= 0) {
+        // A clip in a nonlinear patch stays where its blades grip the tissue (the patch solves it, its opening
+        // now free against the spring); one gripping nothing falls away, and its patch goes with it.
+        PatchRun& P = patches[static_cast<size_t>(patch)];
+        I.clip = -1;
+        c.holder = -1;
+        c.state = Clip::State::DEPOSITED;
+        for (Area& ar : areas)
+            if (ar.part / 2 == i) ar.alive = false;
+        if (P.contacts > 0) {
+            c.release_pose = c.pose;
+            c.shift.setZero();
+            c.n_nodes = P.contacts;
+            return;
+        }
+        warn("clip " + std::to_string(c.id) + " released at t=" + std::to_string(t) + " grips no vessel node: it falls away and is not deposited");
+        c.n_nodes = 0;
+        c.model.clear();
+        drop_patch(patch);
+        return;
+    }
     for (Eigen::Index v = 0; v < S; ++v) {
         const size_t s = static_cast<size_t>(v);
         if ((st[s] == NodeState::CONTACT || st[s] == NodeState::NEIGHBOUR) && owner[s] / 2 == i) {

@@ -4,10 +4,11 @@
 // A held clip whose jaws close within PatchSpec::trigger_mm of the wall gets a patch: the tetrahedra within
 // PatchSpec::radius_mm of its jaws' wedge become a neo-Hookean solid on the exact linear exterior
 // (fem::PatchModel). From then on the clip's jaws make no prescribed displacements: each physics frame solves
-// the patch with the clip's blades (fem::ClipBody: the opening θ held by the applier, or free against the
-// spring once the tissue pushes harder than the applier holds, and always free once deposited) and the inner
-// walls' contact (fem::ContactBody) in one Newton problem, warm-started from the last frame. The rest of the
-// scene stays linear; the two add (the patch's displacement of the surface on top of the linear solve's).
+// the patch with the clip's blades (fem::ClipBody, its opening θ prescribed: the applier's, or, for a clip with a
+// spring, the balance of spring and tissue that the frames approach, never below what the applier holds open)
+// and the inner walls' contact (fem::ContactBody) in one Newton problem, warm-started from the last frame. The
+// rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
+// solve's).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -56,6 +57,15 @@ bool Simulator::Impl::patch_holds_instrument(size_t i) const {
 void Simulator::Impl::set_patch_part(Eigen::Index v, const Eigen::Vector3d& value) {
     d.row(v) += (value - d_patch.row(v).transpose()).transpose();
     d_patch.row(v) = value.transpose();
+}
+
+void Simulator::Impl::drop_patch(int index) {
+    PatchRun& P = patches[static_cast<size_t>(index)];
+    for (size_t k = 0; k < P.cand.size(); ++k) set_patch_part(P.cand_vertex[k], Eigen::Vector3d::Zero());
+    for (int v : P.map_vertex) set_patch_part(v, Eigen::Vector3d::Zero());
+    patch_of_clip[static_cast<size_t>(P.clip)] = -1;
+    P.alive = false;
+    P.pm.reset();
 }
 
 // Patches for held clips whose jaws come near the wall, and remade ones for jaws that left theirs.
@@ -194,6 +204,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
     if (patches.empty()) return;
     patch_force.assign(ins.size(), Eigen::Vector3d::Zero());
     for (PatchRun& P : patches) {
+        if (!P.alive) continue;
         Clip& c = clips[static_cast<size_t>(P.clip)];
         const ClipModel& cm = scene.clip_models.at(c.model);
         const fem::PatchModel& pm = *P.pm;
@@ -201,9 +212,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const fem::ClipBlades blades = blades_of(c, cm);
         const bool held = c.state == Clip::State::HELD;
         const double theta_applier = std::clamp(c.forceps_deg, 0.0, cm.max_opening_deg) * DEG;
-        // A clip without a modelled spring keeps the applier's opening (held) or its own (deposited).
+        // The opening this frame holds. Without a spring: the applier's (held) or the clip's own (deposited). With
+        // one: the balance the frames approach (below), but never below what the applier holds open.
+        if (P.theta_bal < 0) P.theta_bal = P.v[nb];
+        const double theta_kept = !cm.spring ? (held ? theta_applier : c.opening_deg * DEG)
+                                             : std::max(held ? theta_applier : 0.0, P.theta_bal);
         const fem::ClipSpring spring = cm.spring ? *cm.spring : fem::ClipSpring{1e-3, 0.0};
-        const double theta_kept = held ? theta_applier : c.opening_deg * DEG;
         if (fr.mx) fr.lock.unlock();
         const Stopwatch sw;
         const Eigen::VectorXd v0 = P.v;
@@ -230,15 +244,24 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
         o.max_halvings = 3;
         o.keep_going = true;
+        o.force_scale = 1e-3;  // N: a released clip's free problem has no reaction to measure the residual by
+        // θ is prescribed in every frame's solve (a free θ against a stiff, buckling, pressed-together wall makes
+        // Newton crawl); the solve's reaction on it is R = τ(θ) − M(θ), the spring's torque less the tissue's
+        // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
+        // frame), as the applier lets it close or once it is released.
         const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
-        // Held by the applier (or a clip without a spring): θ prescribed. The applier can only hold a spring clip
-        // open: where the spring would close it less than the applier (the tissue pushes harder), θ is free.
-        const bool prescribe = !cm.spring || held;
-        fem::NewtonResult r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), prescribe ? held_at : std::vector<std::pair<int, double>>{}, v0, o);
-        int its = r.iterations;
-        if (prescribe && cm.spring && r.reaction.size() && r.reaction[0] < 0) {
-            r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), {}, v0, o);
-            its += r.iterations;
+        const fem::NewtonResult r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+        const int its = r.iterations;
+        if (cm.spring && r.reaction.size()) {
+            const double R = r.reaction[0], th = r.u[cb.theta_dof()];
+            double k = P.tissue_k;
+            if (P.prev_theta >= 0 && std::abs(th - P.prev_theta) > 1e-7) k = (R - P.prev_R) / (th - P.prev_theta);
+            k = std::max(k, spring.k_nmm_per_rad);  // R grows with θ: the spring alone gives at least its k
+            P.tissue_k = k;
+            P.prev_theta = th;
+            P.prev_R = R;
+            // Held, the applier bounds it from below anyway: only the opening is limited to 1° a frame.
+            P.theta_bal = std::max(0.0, th - std::clamp(R / k, -1.0 * DEG, held ? 1e9 : 1.0 * DEG));
         }
         const double t_solve = sw.seconds();
         const fem::BladeLoads loads = cb.loads(r.u);
@@ -251,7 +274,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))
             std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
-                         fr.t, v0[nb] / DEG, r.u[nb] / DEG, prescribe ? "held" : "free", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
+                         fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], wall_min, touching, ms, 1e3 * t_wall,
                          1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip));
         if (fr.mx) fr.lock.lock();
@@ -259,11 +282,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         P.hinge_prev = blades.hinge;
         const double theta = r.u[cb.theta_dof()];
         c.opening_deg = theta / DEG;
-        if (held && cm.spring) c.spring_deg = c.opening_deg;
+        if (held && cm.spring) c.spring_deg = P.theta_bal / DEG;
         c.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
         c.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
         c.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
         P.force = net;
+        P.contacts = loads.contacts[0] + loads.contacts[1];
         c.net_force = -net;  // on the vessel
         if (held && c.holder >= 0) patch_force[static_cast<size_t>(c.holder)] += net;
         a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, c.grip_force_n);

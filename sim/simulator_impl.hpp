@@ -108,6 +108,10 @@ struct Simulator::Impl {
         Eigen::Vector3d hinge_prev = Eigen::Vector3d::Zero();  // the clip's hinge at the last solve
         double t_map = -1;                    // when the map vertices were last updated
         Eigen::Vector3d force = Eigen::Vector3d::Zero();  // the tissue's net force on the clip [N]
+        int contacts = 0;                     // nodes pressing on the blades at the last solve
+        double theta_bal = -1;                // a spring clip: the opening the frames approach (−1: not yet)
+        double prev_theta = -1, prev_R = 0, tissue_k = 0;  // the last frame's θ and τ − M, the secant dR/dθ
+        bool alive = true;                    // false once its clip fell away
         Assessment::PatchEnd stats;
         double iterations_sum = 0, solve_ms_sum = 0;
     };
@@ -178,6 +182,7 @@ struct Simulator::Impl {
     void build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx);
     void solve_patches(Frame& fr);
     void set_patch_part(Eigen::Index v, const Eigen::Vector3d& value);
+    void drop_patch(int index);  // its clip fell away: the wall returns to what the linear model gives
 
     // sim_frame.cpp: the physics frame (collision, solve, contact areas) and its steps, in order.
     FrameStats physics_step(double t, std::mutex* mx);

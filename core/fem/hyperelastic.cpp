@@ -454,7 +454,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         }
         for (int it = 0; it < opt.max_iterations; ++it) {
             g = solid.internal_force(v);
-            const double r = free_norm(g), scale = g.norm();
+            const double r = free_norm(g), scale = std::max(g.norm(), opt.force_scale);
             out.residual = scale > 0 ? r / scale : 0;
             if (r <= opt.tolerance * scale + 1e-14) {
                 u = v;

@@ -622,9 +622,10 @@ json flattening_scene(const std::string& bundle, const std::string& wall, bool r
         r["release"] = true;
         keys.push_back(r);
         keys.push_back(key(0.20, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, FLAT_END_DEG));
+        keys.push_back(key(0.32, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, FLAT_END_DEG));
     }
     json clip = {{"jaw_length_mm", 10.5}, {"jaw_width_mm", 1.2}, {"jaw_thickness_mm", 0.5}, {"closed_gap_mm", 0.2}, {"max_opening_deg", 45}};
-    if (release) clip["spring"] = {{"label_force_n", 0.05}, {"open_force_n", 0.1}, {"placeholder", true}, {"source", "test"}};
+    if (release) clip["spring"] = {{"label_force_n", 0.3}, {"open_force_n", 0.5}, {"placeholder", true}, {"source", "test"}};
     return json{{"bundle", bundle},
                 {"clip_models", {{"flat", clip}}},
                 {"model", {{"wall", wall}, {"newton_per_frame", 40}}},
@@ -699,4 +700,36 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
                 "inner walls %.4f mm apart at the closest (reference %.4f), %d pairs touching; %.1f Newton its, %.1f ms a frame\n",
                 FLAT_END_DEG, p.nodes, p.interface_nodes, c.grip_force_n, f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm,
                 ref_min, p.wall_pairs_touching, p.mean_iterations, p.mean_solve_ms);
+}
+
+TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
+    // A clip with a 0.3 N spring (at the label point) on the tube: the applier can only hold it open, so as the
+    // applier closes, the clip stops where the tissue's moment about the hinge equals the spring's torque, short
+    // of the flattening the applier asks for; released, it stays there. The patch's solve gives that balance
+    // (its reaction on the opening is τ − M; the frames step the opening onto τ = M). The same scene run twice
+    // gives the same log, byte for byte.
+    test::TempDir d("patchspring");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    std::string logs[2];
+    for (int run = 0; run < 2; ++run) {
+        json j = flattening_scene(bundle, "patch", true);
+        j["outputs"]["log"] = "log" + std::to_string(run) + ".csv";
+        sim::Simulator s = make(j, d.file(""), "spring" + std::to_string(run) + ".json");
+        const sim::Assessment a = sim::run_scene(s, {});
+        ASSERT_EQ(a.patches.size(), 1u);
+        EXPECT_EQ(a.patches[0].unconverged_frames, 0);
+        const sim::Clip& c = s.clips().at(0);
+        EXPECT_EQ(c.state, sim::Clip::State::DEPOSITED);
+        EXPECT_GT(c.opening_deg, FLAT_END_DEG + 0.5);
+        EXPECT_LT(c.opening_deg, 30.0);
+        EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
+        EXPECT_GT(c.spring_torque_nmm, 0);
+        EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-3 * c.spring_torque_nmm);
+        if (run == 0)
+            std::printf("released: open %.3f deg (held at %.3f), spring %.5f N mm, tissue %.5f N mm, grip %.4f N\n", c.opening_deg, FLAT_END_DEG,
+                        c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n);
+        logs[run] = slurp(d.file("log" + std::to_string(run) + ".csv"));
+    }
+    ASSERT_GT(logs[0].size(), 100u);
+    EXPECT_EQ(logs[0], logs[1]);
 }

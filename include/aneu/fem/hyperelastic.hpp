@@ -88,6 +88,10 @@ struct NewtonOptions {
     /// size converges, return the last accepted state (converged = false, load_fraction how far the prescribed
     /// values got) instead of throwing; the next frame starts from it.
     bool keep_going = false;
+    /// Force [N] the residual is also measured against: converged when ‖free residual‖ ≤ tolerance ·
+    /// max(‖internal force‖, force_scale) + 1e-14. A problem with nothing prescribed or fixed (a released clip's
+    /// spring against a free patch) has ‖internal force‖ → 0 at equilibrium, so it needs this floor.
+    double force_scale = 0;
 };
 
 struct NewtonResult {
