@@ -145,8 +145,7 @@ Assessment Simulator::Impl::assess() {
     out.neck_between_jaws_fraction = total > 0 ? closed / total : 0.0;
     out.patches.clear();
     for (const PatchRun& P : patches) {
-        out.patches.push_back(P.stats);
-        if (!std::isfinite(out.patches.back().min_wall_distance_mm)) out.patches.back().min_wall_distance_mm = 0;
+        out.patches.push_back(P.stats);  // min_wall_distance_mm stays +inf when no opposite walls came within reach
     }
     return out;
 }

@@ -96,7 +96,8 @@ struct Assessment {
         double mean_iterations = 0;
         double mean_solve_ms = 0, max_solve_ms = 0;
         double peak_blade_force_n = 0;       ///< mean normal force on one blade, largest over the session
-        double min_wall_distance_mm = 0;     ///< smallest signed distance between opposite inner walls (< 0: through)
+        double min_wall_distance_mm = 0;     ///< smallest signed distance between opposite inner walls (< 0: through;
+                                             ///< +inf: none came within reach)
         int wall_pairs_touching = 0;         ///< at the end
     };
     std::vector<PatchEnd> patches;
