@@ -658,6 +658,33 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
     EXPECT_LT(p.min_wall_distance_mm, 0.011);
     const sim::Clip& c = s.clips().at(0);
     EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+    // The surface the simulator shows is the patch's: no vertex under a blade lies behind its inner face (by more
+    // than the contact's 0.02 mm).
+    {
+        const Eigen::MatrixX3d x = s.deformed_surface();
+        fem::ClipBlades jb;
+        jb.hinge = {FLAT_HINGE_X, 0, 4};
+        jb.axis = {-1, 0, 0};
+        jb.up = {0, 1, 0};
+        jb.closed_gap_mm = 0.2;
+        double worst = 1e9;
+        int under = 0;
+        for (int sgn : {1, -1}) {
+            Eigen::Vector3d t, n, w;
+            jb.frame(sgn, FLAT_END_DEG * aneu::DEG, t, n, w);
+            for (Eigen::Index v = 0; v < x.rows(); ++v) {
+                const Eigen::Vector3d rel = x.row(v).transpose() - jb.hinge;
+                const double r = rel.dot(t);
+                if (std::abs(rel.dot(w)) > 0.6 || r < 0 || r > 10.5) continue;
+                const double dist = 0.5 * jb.closed_gap_mm + rel.dot(n);  // in front of the blade's inner face: > 0
+                worst = std::min(worst, dist);
+                ++under;
+            }
+        }
+        EXPECT_GT(under, 20);
+        EXPECT_GT(worst, -0.02);
+        std::printf("%d surface vertices under the blades, the deepest %.4f mm in front of a blade face\n", under, worst);
+    }
     for (const auto& m : msgs) EXPECT_EQ(m.find("beyond the linear model's range"), std::string::npos) << m;
 
     // The reference: the whole tube neo-Hookean, closed in 1° steps.
