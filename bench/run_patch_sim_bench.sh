@@ -62,7 +62,7 @@ for run in runs:
     else:
         cols = ["(no wall contact)", "—", "—", "—", "—"]
     L.append(f"| {wall} | {gap:.2f} | {c['grip_force_n']:.4f} | {r['peak_vessel_force_n']:.4f} | {r['max_displacement_to_thickness']:.2f} | " + " | ".join(cols) + f" | {float(t[0]):.1f} |")
-L.append("")
+L += ["", "What the figures say, and what the sample case gave: bench/results/study/patch_sim_notes.md.", ""]
 open(dst, "w").write("\n".join(L) + "\n")
 print("\n".join(L))
 PY

@@ -250,7 +250,18 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
         // frame), as the applier lets it close or once it is released.
         const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
-        const fem::NewtonResult r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+        // A patch at rest whose blades, at the new opening, touch nothing stays at rest: no solve (the jaws closing
+        // through the air before they reach the wall).
+        fem::NewtonResult r;
+        Eigen::VectorXd moved = v0;
+        moved[cb.theta_dof()] = theta_kept;
+        const fem::BladeLoads free_loads = cb.loads(moved);
+        if (v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0) {
+            r.u = moved;
+            r.reaction = Eigen::VectorXd::Constant(1, spring.torque(theta_kept));
+        } else {
+            r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+        }
         const int its = r.iterations;
         if (cm.spring && r.reaction.size()) {
             const double R = r.reaction[0], th = r.u[cb.theta_dof()];
