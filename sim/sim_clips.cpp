@@ -220,10 +220,7 @@ void Simulator::Impl::balance_springs() {
         const int cid = ins[static_cast<size_t>(i)].clip;
         if (cid < 0) continue;
         const Clip& c = clips[static_cast<size_t>(cid)];
-        fem::ClipBlades bl;
-        bl.hinge = c.pose.position;
-        bl.axis = c.pose.axis;
-        bl.up = c.pose.up;
+        const fem::ClipBlades bl = blades_of(c, scene.clip_models.at(c.model));
         Eigen::Vector3d t, n, w;
         bl.frame(owner[s] % 2 == 0 ? 1 : -1, c.opening_deg * DEG, t, n, w);
         const Eigen::Vector3d x = sf.X.row(static_cast<Eigen::Index>(s)).transpose() + d.row(static_cast<Eigen::Index>(s)).transpose();

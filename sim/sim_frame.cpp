@@ -55,13 +55,7 @@ void Simulator::Impl::begin_frame(Frame& fr) {
         if (cm.jaw_mesh) continue;  // a jaw mesh keeps the shape push
         Jaws& J = jaws[i];
         J.on = true;
-        J.blades.hinge = c.pose.position;
-        J.blades.axis = c.pose.axis;
-        J.blades.up = c.pose.up;
-        J.blades.length_mm = cm.jaw_length_mm;
-        J.blades.width_mm = cm.jaw_width_mm;
-        J.blades.thickness_mm = cm.jaw_thickness_mm;
-        J.blades.closed_gap_mm = cm.closed_gap_mm;
+        J.blades = blades_of(c, cm);
         J.theta = std::clamp(c.opening_deg, 0.0, cm.max_opening_deg) * DEG;
         double& collided = clip_track[static_cast<size_t>(c.id)].collided_deg;
         J.theta_prev = collided < 0 ? J.theta : collided * DEG;

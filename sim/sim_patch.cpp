@@ -24,18 +24,6 @@ namespace aneu::sim {
 
 namespace {
 
-fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
-    fem::ClipBlades b;
-    b.hinge = c.pose.position;
-    b.axis = c.pose.axis;
-    b.up = c.pose.up;
-    b.length_mm = cm.jaw_length_mm;
-    b.width_mm = cm.jaw_width_mm;
-    b.thickness_mm = cm.jaw_thickness_mm;
-    b.closed_gap_mm = cm.closed_gap_mm;
-    return b;
-}
-
 /// Whether p lies within `margin` of the jaws' wedge at opening θ: along the jaws, across their width, and
 /// between (or on) the blades.
 bool near_wedge(const fem::ClipBlades& b, double theta, const Eigen::Vector3d& p, double margin) {
@@ -276,10 +264,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         }
         const double t_solve = sw.seconds();
         const fem::BladeLoads loads = cb.loads(r.u);
-        // The tissue's net force on the blades: the gradient of the blades' penalty energy at the candidates.
-        const Eigen::VectorXd g_blades = cb.internal_force(r.u).head(nb) - body.internal_force(r.u.head(nb));
-        Eigen::Vector3d net = Eigen::Vector3d::Zero();
-        for (int a : P.cand) net += g_blades.segment<3>(3 * a);
+        const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
         const auto touching = wall ? static_cast<int>(wall->active(r.u.head(nb))) : 0;
         const double ms = 1e3 * sw.seconds();

@@ -24,6 +24,19 @@
 
 namespace aneu::sim {
 
+/// A clip's jaws as the blades of fem::ClipBody, at its pose (collision, spring balance, the nonlinear patch).
+inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
+    fem::ClipBlades b;
+    b.hinge = c.pose.position;
+    b.axis = c.pose.axis;
+    b.up = c.pose.up;
+    b.length_mm = cm.jaw_length_mm;
+    b.width_mm = cm.jaw_width_mm;
+    b.thickness_mm = cm.jaw_thickness_mm;
+    b.closed_gap_mm = cm.closed_gap_mm;
+    return b;
+}
+
 struct Simulator::Impl {
     enum class NodeState : unsigned char { FREE, CONTACT, NEIGHBOUR, STUCK, RELAX, HELD };
     // A contact area for the haptic force: one connected patch of nodes touched by one part.

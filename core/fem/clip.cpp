@@ -223,7 +223,10 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
             Touch& c = tc[s > 0 ? 0 : 1];
-            if (!measure(v, k, s, c)) continue;
+            double e;
+            Eigen::Vector4d g;
+            if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
+            b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
             const size_t i = s > 0 ? 0 : 1;
             const double f = m_kappa * c.omega * (m_p.gap_mm - c.d);
             b.force_n[i] += f;

@@ -136,6 +136,13 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
     const fem::BladeLoads L = clip.loads(v);
     ASSERT_EQ(L.contacts[0] + L.contacts[1], 2);
+    // The tissue's net force on the blades is the blades' part of the nodes' internal force (the body's removed).
+    auto net_of = [&](const Eigen::VectorXd& s) {
+        const Eigen::VectorXd gb = clip.internal_force(s).head(b.body->dofs()) - b.body->internal_force(s.head(b.body->dofs()));
+        return Eigen::Vector3d(gb.segment<3>(6) + gb.segment<3>(9));
+    };
+    EXPECT_GT(L.net_force.norm(), 0.0);
+    EXPECT_LT((L.net_force - net_of(v)).norm(), 1e-12 * (1 + net_of(v).norm()));
     const double h = 1e-6;
     for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
         Eigen::VectorXd p = v, m = v;
@@ -153,6 +160,7 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     e[9] = 7.0 - Block::A + 0.04;
     e[10] = -0.25;
     ASSERT_EQ(clip.loads(e).contacts[0] + clip.loads(e).contacts[1], 2);
+    EXPECT_LT((clip.loads(e).net_force - net_of(e)).norm(), 1e-12 * (1 + net_of(e).norm()));  // the fade included
     const Eigen::VectorXd ge = clip.internal_force(e);
     for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
         Eigen::VectorXd p = e, m = e;

@@ -71,6 +71,9 @@ struct BladeLoads {
     std::array<int, 2> contacts{0, 0};       ///< nodes pressing on each blade
     double opening_rad = 0;
     double spring_torque_nmm = 0;
+    /// The tissue's net force on the clip [N]: the blades' penalty forces, edge fades included (−Σ the forces the
+    /// blades apply to the body's nodes).
+    Eigen::Vector3d net_force = Eigen::Vector3d::Zero();
 };
 
 /// An ElasticBody with a clip: DOFs are the body's then θ (the last, index dofs() − 1, in radians).
