@@ -239,6 +239,7 @@ Scene read_scene(const std::string& path) {
         s.patch.newton_per_frame = static_cast<int>(o.num("newton_per_frame", s.patch.newton_per_frame, 1, 1000));
         s.patch.tolerance = o.num("tolerance", s.patch.tolerance, 1e-14, 1e-1);
         s.patch.wall_contact = o.flag("wall_contact", s.patch.wall_contact);
+        s.patch.blade_friction = o.num("blade_friction", s.patch.blade_friction, 0, 5);
         o.done();
     }
     if (top.has("haptic")) {

@@ -163,6 +163,16 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
         P.v[pm.dofs()] = O.v[O.pm->dofs()];
         P.kappa_wall = O.kappa_wall;
         P.kappa_blade = O.kappa_blade;
+        // The grips carry over to the new patch's numbering (a node that is no longer a candidate lets go).
+        std::vector<int> is_cand(static_cast<size_t>(np), 0);
+        for (int a : P.cand) is_cand[static_cast<size_t>(a)] = 1;
+        for (fem::BladeGrip g : O.grips) {
+            const int a = pm.local(O.pm->nodes()[static_cast<size_t>(g.node)]);
+            if (a < 0 || !is_cand[static_cast<size_t>(a)]) continue;
+            g.node = a;
+            P.grips.push_back(g);
+        }
+        P.gripped = O.gripped;
         P.stats = O.stats;
         ++P.stats.builds;
         P.iterations_sum = O.iterations_sum;
@@ -223,8 +233,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const fem::ElasticBody& body = wall ? static_cast<const fem::ElasticBody&>(*wall) : pm;
         fem::ClipContactParams bp;
         bp.stiffness = P.kappa_blade;
+        bp.friction = scene.patch.blade_friction;
         const double t_wall = sw.seconds();
-        const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp);
+        // The grips of the last solve (in the blades' frame, so the clip's rigid motion carries them).
+        const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp, P.gripped ? &P.grips : nullptr);
         const double t_clip = sw.seconds();
         P.kappa_blade = cb.stiffness();
         fem::NewtonOptions o;
@@ -264,17 +276,21 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         }
         const double t_solve = sw.seconds();
         const fem::BladeLoads loads = cb.loads(r.u);
+        std::vector<fem::BladeGrip> grips = cb.grips(r.u);
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
         const auto touching = wall ? static_cast<int>(wall->active(r.u.head(nb))) : 0;
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
-                         r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], wall_min, touching, ms, 1e3 * t_wall,
+                         r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
+                         loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
                          1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip));
         if (fr.mx) fr.lock.lock();
         P.v = r.u;
+        P.grips = std::move(grips);
+        P.gripped = true;
         P.hinge_prev = blades.hinge;
         const double theta = r.u[cb.theta_dof()];
         c.opening_deg = theta / DEG;

@@ -124,6 +124,8 @@ struct Simulator::Impl {
         int contacts = 0;                     // nodes pressing on the blades at the last solve
         double theta_bal = -1;                // a spring clip: the opening the frames approach (−1: not yet)
         double prev_theta = -1, prev_R = 0, tissue_k = 0;  // the last frame's θ and τ − M, the secant dR/dθ
+        std::vector<fem::BladeGrip> grips;    // where patch nodes grip the blades after the last solve (with friction)
+        bool gripped = false;                 // grips holds the last solve's (false: none solved yet)
         bool alive = true;                    // false once its clip fell away
         Assessment::PatchEnd stats;
         double iterations_sum = 0, solve_ms_sum = 0;

@@ -43,7 +43,7 @@ void ClipBlades::frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d&
 }
 
 ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std::vector<int>& candidates, const Eigen::VectorXd& v0,
-                   const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p)
+                   const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p, const std::vector<BladeGrip>* grips)
     : m_body(body), m_X(X), m_nodes(candidates), m_blades(blades), m_spring(spring), m_p(p) {
     if (3 * X.rows() != body.dofs()) throw InputError("clip: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(body.dofs()) + " DOFs");
     for (int c : candidates)
@@ -54,6 +54,8 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     if (std::abs(blades.axis.norm() - 1) > 1e-9 || std::abs(blades.up.norm() - 1) > 1e-9 || std::abs(blades.axis.dot(blades.up)) > 1e-9)
         throw InputError("clip: the blade axis and opening direction must be orthonormal");
     if (!(p.gap_mm >= 0)) throw InputError("clip: the contact gap must be >= 0");
+    if (!(p.friction >= 0) || !std::isfinite(p.friction)) throw InputError("clip: the blades' friction coefficient must be >= 0 (got " + std::to_string(p.friction) + ")");
+    if (!(p.stick_mm > 0)) throw InputError("clip: the friction's stick slip must be > 0 mm (got " + std::to_string(p.stick_mm) + ")");
     if (v0.size() != dofs()) throw InputError("clip: the starting state has " + std::to_string(v0.size()) + " entries, expected " + std::to_string(dofs()));
     constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration a step may end with (the limit)
     for (int c : m_nodes) {
@@ -74,6 +76,29 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     // The closed stop: blades that meet cannot close further. A penalty on θ < 0 stiff enough that the preload
     // pushes them past closed by 1e-4 of θ₀ at most.
     m_stop = 1e4 * spring.k_nmm_per_rad;
+
+    m_grip.assign(m_nodes.size(), {});
+    if (p.friction > 0) {
+        if (grips) {
+            std::vector<int> cand_of(static_cast<size_t>(X.rows()), -1);
+            for (size_t k = 0; k < m_nodes.size(); ++k) cand_of[static_cast<size_t>(m_nodes[k])] = static_cast<int>(k);
+            for (const BladeGrip& g : *grips) {
+                if (g.node < 0 || g.node >= X.rows() || cand_of[static_cast<size_t>(g.node)] < 0 || (g.blade != 1 && g.blade != -1) ||
+                    !(g.normal_n >= 0) || !std::isfinite(g.r) || !std::isfinite(g.a))
+                    throw InputError("clip: a grip on node " + std::to_string(g.node) + ", blade " + std::to_string(g.blade) +
+                                     ": expected a candidate node, blade +1 or -1 and a normal force >= 0");
+                if (g.normal_n > 0)
+                    m_grip[static_cast<size_t>(cand_of[static_cast<size_t>(g.node)])][g.blade > 0 ? 0 : 1] = Grip{true, g.r, g.a, g.normal_n};
+            }
+        } else {
+            auto tc = touches(v0);
+            for (size_t k = 0; k < m_nodes.size(); ++k)
+                for (int s : {1, -1}) {
+                    Touch& c = tc[s > 0 ? 0 : 1];
+                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, m_kappa * c.omega * (m_p.gap_mm - c.d)};
+                }
+        }
+    }
 
     const auto th = static_cast<int>(body.dofs());
     std::vector<std::array<int, 4>> groups;  // each candidate's DOFs and θ
@@ -161,6 +186,80 @@ bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, d
     return true;
 }
 
+bool ClipBody::grip_terms(const Eigen::VectorXd& v, size_t k, int s, const Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
+                          bool project, bool* slid) const {
+    const Grip& g = m_grip[k][s > 0 ? 0 : 1];
+    if (!g.on) return false;
+    const int node = m_nodes[k];
+    const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
+    const double r = rel.dot(c.t), q = rel.dot(c.n);
+    const Eigen::Vector2d D(r - g.r, rel.dot(c.w) - g.a);  // the slip from the grip point, along t and w
+    const double y = D.norm(), limit = m_p.friction * g.lambda;  // the largest tangential force [N]
+    const double eps = m_p.stick_mm;
+    // J = ∂(Δ_t, Δ_w)/∂(x, θ): ∂r/∂x = t, ∂r/∂θ = rel·∂t/∂θ = −q/2; ∂a/∂x = w, ∂a/∂θ = 0.
+    Eigen::Matrix<double, 2, 4> J;
+    J << c.t.transpose(), -0.5 * q, c.w.transpose(), 0.0;
+    Eigen::Vector2d gD;
+    Eigen::Matrix2d HD;
+    // ψ(y) = μλ ε f(y/ε), f(s) = s² − s³/3 (s < 1), s − 1/3 beyond: the force ψ' = μλ (2s − s²) rises smoothly to
+    // μλ at the slip ε and stays there (ψ is C2, so Newton keeps its pace across stick and slip).
+    const double sl = y / eps;
+    if (sl < 1) {  // sticking
+        e = limit * eps * (sl * sl - sl * sl * sl / 3);
+        const double over_y = limit / eps * (2 - sl);                // ψ'/y
+        const double d2 = limit / eps * (2 - 2 * sl);                // ψ''
+        gD = over_y * D;
+        HD = over_y * Eigen::Matrix2d::Identity();
+        if (y > 0) HD += (d2 - over_y) * D * D.transpose() / (y * y);
+        if (slid) *slid = false;
+    } else {  // sliding: the force stays μλ along the slip
+        e = limit * (y - eps / 3);
+        gD = (limit / y) * D;
+        HD = (limit / y) * (Eigen::Matrix2d::Identity() - D * D.transpose() / (y * y));
+        if (slid) *slid = true;
+    }
+    grad = J.transpose() * gD;
+    if (H) {
+        *H = J.transpose() * HD * J;
+        if (!project) {  // + ∂ψ/∂r ∇²r: ∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4
+            H->block<3, 1>(0, 3) -= 0.5 * gD[0] * c.n;
+            H->block<1, 3>(3, 0) -= 0.5 * gD[0] * c.n.transpose();
+            (*H)(3, 3) -= 0.25 * gD[0] * r;
+        }
+    }
+    return true;
+}
+
+std::vector<BladeGrip> ClipBody::grips(const Eigen::VectorXd& v) const {
+    std::vector<BladeGrip> out;
+    if (!(m_p.friction > 0)) return out;
+    auto tc = touches(v);
+    for (size_t k = 0; k < m_nodes.size(); ++k)
+        for (int s : {1, -1}) {
+            Touch c = tc[s > 0 ? 0 : 1];
+            const int node = m_nodes[k];
+            const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
+            const Eigen::Vector2d at(rel.dot(c.t), rel.dot(c.w));
+            if (!measure(v, k, s, c) || !(m_p.gap_mm > c.d)) continue;  // not pressing: let go
+            BladeGrip g;
+            g.node = node;
+            g.blade = s;
+            g.normal_n = m_kappa * c.omega * (m_p.gap_mm - c.d);
+            Eigen::Vector2d anchor = at;
+            const Grip& old = m_grip[k][s > 0 ? 0 : 1];
+            if (old.on) {
+                anchor = Eigen::Vector2d(old.r, old.a);
+                const Eigen::Vector2d D = at - anchor;
+                const double y = D.norm();
+                if (y > m_p.stick_mm) anchor = at - D * (m_p.stick_mm / y);  // slid: the grip trails its node by ε
+            }
+            g.r = anchor[0];
+            g.a = anchor[1];
+            out.push_back(g);
+        }
+    return out;
+}
+
 double ClipBody::energy(const Eigen::VectorXd& v) const {
     double e = m_body.energy(v.head(m_body.dofs()));
     if (!std::isfinite(e)) return e;
@@ -171,8 +270,10 @@ double ClipBody::energy(const Eigen::VectorXd& v) const {
     double ek;
     Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
-        for (int s : {1, -1})
+        for (int s : {1, -1}) {
             if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) e += ek;
+            if (grip_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) e += ek;
+        }
     return e;
 }
 
@@ -187,9 +288,14 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
     Eigen::Vector4d gk;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            if (!pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) continue;
-            g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
-            gt += gk[3];
+            if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) {
+                g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
+                gt += gk[3];
+            }
+            if (grip_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) {
+                g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
+                gt += gk[3];
+            }
         }
     return g;
 }
@@ -208,9 +314,12 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
     Eigen::Matrix4d H;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            if (!pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project)) continue;
-            for (int i = 0; i < 4; ++i)
-                for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
+            if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project))
+                for (int i = 0; i < 4; ++i)
+                    for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
+            if (grip_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project))
+                for (int i = 0; i < 4; ++i)
+                    for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
         }
     return K;
 }
@@ -225,9 +334,16 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
             Touch& c = tc[s > 0 ? 0 : 1];
             double e;
             Eigen::Vector4d g;
+            const size_t i = s > 0 ? 0 : 1;
+            bool slid = false;
+            if (grip_terms(v, k, s, c, e, g, nullptr, false, &slid)) {
+                b.net_force += g.head<3>();
+                b.friction_n[i] += g.head<3>().norm();  // along the face (t and w)
+                b.moment_nmm[i] -= 2 * g[3];  // a radial friction force's moment about the hinge (the face is off it)
+                if (slid) ++b.sliding[i];
+            }
             if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
             b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
-            const size_t i = s > 0 ? 0 : 1;
             const double f = m_kappa * c.omega * (m_p.gap_mm - c.d);
             b.force_n[i] += f;
             b.moment_nmm[i] += f * c.r;

@@ -221,3 +221,103 @@ TEST(ClipBody, ReleasedOnANeoHookeanBlockTheBladesBalanceTheSpringWithoutPassing
     }
     EXPECT_GT(r.min_J, 0.0);
 }
+
+// Blades with friction (serrated jaws): a node pressed on a blade sticks to its grip point until the tangential
+// force reaches μλ, then slides with μλ.
+TEST(ClipBody, FrictionForcesAndTangentAreTheEnergysDerivatives) {
+    const Block b;
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(13);
+    v.segment<3>(6) << 0.01, -0.03, 0.02;
+    v.segment<3>(9) << -0.02, 0.01, 0.01;
+    v[12] = 0.2;
+    fem::ClipContactParams p;
+    p.friction = 0.3;
+    p.stiffness = 2000;
+    p.stick_mm = 1e-3;
+    // Node 2 sticks (its grip 0.5 µm away, inside ε = 1 µm); node 3 slides (its grip 0.1 mm away).
+    const double th = 0.2;
+    Eigen::Vector3d t, n, w;
+    fem::ClipBlades bl;
+    bl.frame(1, th, t, n, w);
+    const Eigen::Vector3d x2 = b.X.row(2).transpose() + v.segment<3>(6);
+    bl.frame(-1, th, t, n, w);
+    const Eigen::Vector3d x3 = b.X.row(3).transpose() + v.segment<3>(9);
+    Eigen::Vector3d t1, n1, w1;
+    bl.frame(1, th, t1, n1, w1);
+    const std::vector<fem::BladeGrip> grips{{2, 1, x2.dot(t1) + 0.0004, x2.dot(w1) - 0.0003, 20.0}, {3, -1, x3.dot(t) - 0.08, x3.dot(w) + 0.06, 0.5}};
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v, bl, test_spring(), p, &grips);
+    const Eigen::VectorXd g = clip.internal_force(v);
+    const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
+    const fem::BladeLoads L = clip.loads(v);
+    EXPECT_EQ(L.sliding[0], 0);
+    EXPECT_EQ(L.sliding[1], 1);
+    const double s2 = std::hypot(0.0004, 0.0003) / 1e-3;
+    EXPECT_NEAR(L.friction_n[0], 0.3 * 20.0 * (2 * s2 - s2 * s2), 1e-9);   // sticking: μλ (2s − s²), s = |Δ|/ε
+    EXPECT_NEAR(L.friction_n[1], 0.3 * 0.5, 1e-12);                        // sliding: μ λ
+    const double h = 1e-8;
+    for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
+        Eigen::VectorXd pl = v, mi = v;
+        pl[i] += h;
+        mi[i] -= h;
+        EXPECT_NEAR(g[i], (clip.energy(pl) - clip.energy(mi)) / (2 * h), 1e-5 * (1 + std::abs(g[i]))) << "dof " << i;
+        const Eigen::VectorXd col = (clip.internal_force(pl) - clip.internal_force(mi)) / (2 * h);
+        for (Eigen::Index j = 6; j < clip.dofs(); ++j)
+            EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
+    }
+    // A grip on a node that cannot touch the blades is an input error, as is a negative coefficient.
+    const std::vector<fem::BladeGrip> bad{{0, 1, 0, 0, 1.0}};
+    EXPECT_THROW(fem::ClipBody(*b.body, b.X, {2, 3}, v, bl, test_spring(), p, &bad), InputError);
+    p.friction = -0.1;
+    EXPECT_THROW(fem::ClipBody(*b.body, b.X, {2, 3}, v, bl, test_spring(), p), InputError);
+}
+
+TEST(ClipBody, AGrippedNodeHoldsUpToMuLambdaThenSlides) {
+    // The block between held blades; then its ground springs are pulled along blade +1 by δ. The node's normal
+    // force λ does not change (isotropic ground spring, flat blade), and along the blade the ground spring and the
+    // grip balance: K (δ − y) = μλ (2s − s²), s = y/ε, y the node's slip, while it sticks; μλ once it slides.
+    const Block b;
+    fem::ClipContactParams p;
+    p.friction = 0.3;
+    const fem::ClipBlades bl;
+    const double th = 0.2;
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    const fem::ClipBody open(*b.body, b.X, {2, 3}, v0, bl, test_spring(), p);
+    fem::NewtonOptions no;
+    no.tolerance = 1e-12;
+    const fem::NewtonResult r1 = fem::solve_neo_hookean(open, b.fixed, {{12, th}}, v0, no);
+    const std::vector<fem::BladeGrip> g1 = open.grips(r1.u);
+    ASSERT_EQ(g1.size(), 2u);
+    const double lambda = g1[0].normal_n, limit = 0.3 * lambda;
+    EXPECT_NEAR(lambda, open.loads(r1.u).force_n[0], 1e-12);
+    Eigen::Vector3d t, n, w;
+    bl.frame(1, th, t, n, w);
+    for (const double delta : {0.3 * limit / Block::K, 3 * limit / Block::K + 0.01}) {
+        const fem::ClipBody held(*b.body, b.X, {2, 3}, r1.u, bl, test_spring(), p, &g1);
+        Eigen::VectorXi fixed(3);
+        fixed << 3, 4, 5;
+        std::vector<std::pair<int, double>> pre{{12, th}};
+        for (int k = 0; k < 3; ++k) pre.emplace_back(k, delta * t[k]);
+        const fem::NewtonResult r2 = fem::solve_neo_hookean(held, fixed, pre, r1.u, no);
+        const fem::BladeLoads L = held.loads(r2.u);
+        EXPECT_NEAR(L.force_n[0], lambda, 1e-9 * lambda) << "the normal force stays";
+        const double y = (r2.u - r1.u).segment<3>(6).dot(t);  // the node's slip along the blade
+        if (delta < limit / Block::K) {
+            EXPECT_EQ(L.sliding[0], 0);
+            EXPECT_GT(y, 0.0);
+            EXPECT_LT(y, p.stick_mm);
+            EXPECT_NEAR(L.friction_n[0], Block::K * (delta - y), 1e-9 * limit);
+            EXPECT_LT(L.friction_n[0], limit);
+        } else {
+            EXPECT_EQ(L.sliding[0], 1);
+            EXPECT_NEAR(L.friction_n[0], limit, 1e-9 * limit);
+            EXPECT_NEAR(Block::K * (delta - y), limit, 1e-9 * limit);
+            // The grip slid with the node: the next grip trails it by ε.
+            const std::vector<fem::BladeGrip> g2 = held.grips(r2.u);
+            const Eigen::Vector3d x = b.X.row(2).transpose() + r2.u.segment<3>(6);
+            EXPECT_NEAR(x.dot(t) - g2[0].r, p.stick_mm, 1e-9);
+        }
+        // The other node, not pulled, stays where it gripped.
+        EXPECT_NEAR(L.friction_n[1], 0.0, 1e-9);
+    }
+}

@@ -638,8 +638,9 @@ json flattening_scene(const std::string& bundle, const std::string& wall, bool r
 
 TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWallsDoNotCross) {
     // The nonlinear patch (model.wall = "patch") against the whole tube as a neo-Hookean solid with the same
-    // blades and wall contact, solved offline to convergence at the clip's final opening: the patch's exterior
-    // is linear, so the two differ only by the exterior's nonlinearity (small 1.5 mm away from the jaws).
+    // blades (friction μ = 0.3, the default) and wall contact, solved offline to convergence along the same
+    // openings: the patch's exterior is linear, so the two differ only by the exterior's nonlinearity (small
+    // 1.5 mm away from the jaws).
     test::TempDir d("patchsim");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     sim::Simulator s = make(flattening_scene(bundle, "patch", false), d.file(""), "patch.json");
@@ -687,7 +688,10 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
     }
     for (const auto& m : msgs) EXPECT_EQ(m.find("beyond the linear model's range"), std::string::npos) << m;
 
-    // The reference: the whole tube neo-Hookean, closed in 1° steps.
+    // The reference: the whole tube neo-Hookean, closed along the openings of the simulator's frames (100 Hz,
+    // 40° at 0.02 s to 5.014° at 0.14 s, held for two more frames) with the same blade friction (μ = 0.3, the
+    // default), its grips renewed after each step as the simulator renews them each frame (friction is path
+    // dependent: the same steps give the same path).
     BundleParts parts;
     parts.image = parts.surfaces = parts.condensed_W = parts.flow = false;
     const Bundle b = read_bundle(bundle, parts);
@@ -709,20 +713,30 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
     fem::BladeLoads ref;
     double ref_min = 0;
     std::vector<double> steps;
-    for (double deg = 39; deg > FLAT_END_DEG; deg -= 1) steps.push_back(deg);
+    for (int k = 1; k <= 12; ++k) steps.push_back(40 - k / 12.0 * (40 - FLAT_END_DEG));
     steps.push_back(FLAT_END_DEG);
-    for (double deg : steps) {
-        const fem::ContactBody wall(solid, vol.nodes, inner, v.head(solid.dofs()));
-        const fem::ClipBody cb(wall, vol.nodes, outer, v, bl, fem::ClipSpring{1e-3, 0.0});
-        v = fem::solve_neo_hookean(cb, b.fem->fixed_dofs, std::vector<std::pair<int, double>>{{static_cast<int>(cb.theta_dof()), deg * aneu::DEG}}, v).u;
-        if (deg == FLAT_END_DEG) {
+    steps.push_back(FLAT_END_DEG);
+    fem::ClipContactParams bp;
+    bp.friction = 0.3;
+    std::vector<fem::BladeGrip> grips;
+    for (size_t k = 0; k < steps.size(); ++k) {
+        fem::ContactParams cp;
+        cp.search_mm = 0.2 + 2.0 * 3.0 * aneu::DEG * bl.length_mm;  // as far as the jaws close in a step
+        const fem::ContactBody wall(solid, vol.nodes, inner, v.head(solid.dofs()), cp);
+        const fem::ClipBody cb(wall, vol.nodes, outer, v, bl, fem::ClipSpring{1e-3, 0.0}, bp, k ? &grips : nullptr);
+        v = fem::solve_neo_hookean(cb, b.fem->fixed_dofs, std::vector<std::pair<int, double>>{{static_cast<int>(cb.theta_dof()), steps[k] * aneu::DEG}}, v).u;
+        grips = cb.grips(v);
+        if (k + 1 == steps.size()) {
             ref = cb.loads(v);
             ref_min = wall.min_distance(v.head(solid.dofs()));
         }
     }
     const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
     EXPECT_GT(ref_min, -0.02);
-    EXPECT_NEAR(c.grip_force_n, f_ref, 0.05 * f_ref);
+    EXPECT_NEAR(c.grip_force_n, f_ref, 0.02 * f_ref);
+    // The blades hold the tissue by friction (below μλ: the grips stick), both in the reference and in the patch.
+    EXPECT_GT(ref.friction_n[0], 0.05 * ref.force_n[0]);
+    EXPECT_LT(ref.friction_n[0], 0.3 * ref.force_n[0]);
     std::printf("clip flattening the tube to %.2f deg: patch %d nodes (%d interface), blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%); "
                 "inner walls %.4f mm apart at the closest (reference %.4f), %d pairs touching; %.1f Newton its, %.1f ms a frame\n",
                 FLAT_END_DEG, p.nodes, p.interface_nodes, c.grip_force_n, f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm,

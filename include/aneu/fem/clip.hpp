@@ -62,13 +62,33 @@ struct ClipBlades {
 struct ClipContactParams {
     double gap_mm = 0.01;      ///< a node is held at about this distance in front of a blade face
     double stiffness = 0;      ///< κ [N/mm] per node; 0 = 100 × the largest diagonal entry of the body's tangent at rest
+    /// μ: Coulomb friction between the blades' faces and the tissue, 0 = frictionless. A node pressed on a blade
+    /// grips a point there: its tangential force rises smoothly with its slip from that point, reaching μ λ at
+    /// `stick_mm` (λ: its normal force when the grip was last renewed, lagged as in incremental-potential friction,
+    /// Li et al. 2020), and stays μ λ beyond, where the node slides and its grip point follows it.
+    double friction = 0;
+    /// ε: the slip at which a grip lets go and slides (the friction's regularisation): the elastic give of the tissue
+    /// in the blades' serrations. Much smaller, and Newton's steps overshoot the narrow valley of ψ where a node's
+    /// slip reverses.
+    double stick_mm = 1e-2;
+};
+
+/// Where a node grips a blade: its place on the blade's face in the blade's own frame (r from the hinge along
+/// the blade, a across it), which moves with the clip, and the normal force λ [N] that bounds the hold (μ λ).
+struct BladeGrip {
+    int node = -1;  ///< the body's node
+    int blade = 1;  ///< +1 / −1
+    double r = 0, a = 0, normal_n = 0;
 };
 
 /// Loads on the blades at a state.
 struct BladeLoads {
     std::array<double, 2> force_n{0, 0};     ///< Σ normal force on blade +1 / −1 [N] (the tissue pushing it open)
-    std::array<double, 2> moment_nmm{0, 0};  ///< Σ force × distance from the hinge [N·mm]
+    std::array<double, 2> moment_nmm{0, 0};  ///< the tissue's moment on each blade about the hinge [N·mm]: Σ normal force ×
+                                             ///< distance from the hinge, and the grips' friction forces' moments
     std::array<int, 2> contacts{0, 0};       ///< nodes pressing on each blade
+    std::array<double, 2> friction_n{0, 0};  ///< Σ |tangential force| of the grips on blade +1 / −1 [N]
+    std::array<int, 2> sliding{0, 0};        ///< grips at their friction limit (sliding), per blade
     double opening_rad = 0;
     double spring_torque_nmm = 0;
     /// The tissue's net force on the clip [N]: the blades' penalty forces, edge fades included (−Σ the forces the
@@ -86,9 +106,15 @@ public:
     ///                   it lies in front of that blade's face there (not more than 0.02 mm behind it: tissue
     ///                   outside the clip stays outside), and then however deep it goes, so that no step can
     ///                   tunnel through a blade. Make a new ClipBody for the next load step.
-    /// @throws InputError bad sizes, a non-positive spring or blade dimension, axis and up not orthonormal
+    /// @param grips      with friction: where nodes grip the blades (grips() of the last solve; the blades' frame
+    ///                   moves with the clip, so a rigid move of the clip carries them). Null: taken at v0, the
+    ///                   nodes pressing on a blade there gripping where they are. A grip of a node that is not a
+    ///                   candidate is an input error.
+    /// @throws InputError bad sizes, a non-positive spring or blade dimension, axis and up not orthonormal, a
+    ///         negative friction coefficient
     ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std::vector<int>& candidates, const Eigen::VectorXd& v0,
-             const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p = {});
+             const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p = {},
+             const std::vector<BladeGrip>* grips = nullptr);
     Eigen::Index dofs() const override { return m_body.dofs() + 1; }
     Eigen::Index theta_dof() const { return m_body.dofs(); }
     double energy(const Eigen::VectorXd& v) const override;
@@ -97,6 +123,10 @@ public:
     const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_pattern; }
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
     BladeLoads loads(const Eigen::VectorXd& v) const;
+    /// The grips after a solve that ended at v, for the next one: a grip that held stays where it was, one that
+    /// slid follows its node (ε behind it); nodes that press on a blade at v without a grip take one where they
+    /// are; every grip's λ is its node's normal force at v (none: let go).
+    std::vector<BladeGrip> grips(const Eigen::VectorXd& v) const;
     double stiffness() const { return m_kappa; }
     const ClipBlades& blades() const { return m_blades; }
 
@@ -117,10 +147,20 @@ private:
     /// Candidate k against blade s at v (c holds that blade's frame from touches()): true when it presses on it
     /// (d < gap, ω > 0, and in front of it at v0).
     bool measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const;
+    /// Candidate k's grip on blade s (c: that blade's frame): the friction energy ψ(|Δ|) of its slip Δ from the grip
+    /// point (convex, C2; ψ' = μλ beyond ε), its gradient on (x, y, z, θ) and (H ≠ null) tangent. False when there
+    /// is no grip. slid: |Δ| ≥ ε.
+    bool grip_terms(const Eigen::VectorXd& v, size_t k, int s, const Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
+                    bool project, bool* slid = nullptr) const;
+    struct Grip {
+        bool on = false;
+        double r = 0, a = 0, lambda = 0;
+    };
     const ElasticBody& m_body;
     Eigen::MatrixX3d m_X;
     std::vector<int> m_nodes;
     std::vector<std::array<bool, 2>> m_front;  // per candidate: in front of blade +1 / −1 at v0
+    std::vector<std::array<Grip, 2>> m_grip;   // per candidate: its grip on blade +1 / −1
     ClipBlades m_blades;
     ClipSpring m_spring;
     ClipContactParams m_p;

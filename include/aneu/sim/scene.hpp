@@ -102,6 +102,11 @@ struct PatchSpec {
     int newton_per_frame = 12;   ///< Newton iterations a physics frame may take (warm-started from the last frame)
     double tolerance = 1e-6;     ///< relative residual of a converged frame
     bool wall_contact = true;    ///< inner walls touch and do not pass through each other (inside the patch)
+    /// μ between the clip's blades and the tissue (fem::ClipContactParams::friction). 0.3: tissue on instrument
+    /// steel measures 0.1–0.4 wet (Shacham 2010: 0.29–0.36; Guo 2021: graspers on bowel), and clip blades are
+    /// serrated to hold; frictionless blades of a hinged clip squeeze a pressed vessel out of the V, which has no
+    /// static equilibrium.
+    double blade_friction = 0.3;
 };
 
 struct Scene {
