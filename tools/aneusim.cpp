@@ -1,5 +1,7 @@
 // SPDX-License-Identifier: MIT
 // aneusim: the real-time clipping simulator. Links aneu_sim + aneu_core only (no offline stack).
+#include <malloc.h>
+
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -17,6 +19,12 @@
 
 int main(int argc, char** argv) {
     using namespace aneu::tools;
+    // The nonlinear patch's physics frames allocate and free tangents of ~10⁶ entries (tens of MB) many times a
+    // second. Above glibc's mmap threshold each would be a fresh mapping, page-faulted in on first touch and
+    // unmapped when freed; keeping them on the heap, never trimmed, reuses the same pages (measured on the study
+    // artery: a frame's blade set-up 70–100 ms → 9 ms, a frame 0.8–1.0 s → 0.5–0.7 s; bench/results/study/patch_sim_notes.md).
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 1 << 30);
     CLI::App app{"aneuclip real-time clipping simulator", "aneusim"};
     app.set_version_flag("--version", std::string("aneusim ") + aneu::tool_version() + " (" + aneu::git_revision() + ")");
     app.require_subcommand(1);

@@ -32,24 +32,52 @@ struct MergedPattern {
     }
 };
 
-/// `body`'s pattern on n × n (n ≥ its size) with a dense block over each group of DOFs.
+/// `body`'s pattern on n × n (n ≥ its size) with a dense block over each group of DOFs. Built row by row in
+/// compressed form: a row without a group's entries is the body's row as it is; a row with some merges its sorted
+/// extra columns into the body's (a patch's tangent has ~10⁶ entries, its dense exterior block most of them,
+/// against a few thousand from the groups, and it is rebuilt every physics frame).
 template <size_t N>
 MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::array<int, N>>& groups) {
-    using RowSparse = Eigen::SparseMatrix<double, Eigen::RowMajor>;
-    std::vector<Eigen::Triplet<double>> tp;
-    tp.reserve(static_cast<size_t>(body.nonZeros()) + N * N * groups.size());
-    for (Eigen::Index r = 0; r < body.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(body, r); it; ++it) tp.emplace_back(static_cast<int>(r), static_cast<int>(it.col()), 0.0);
+    // Extra columns per row: (row, col) pairs, sorted, unique.
+    std::vector<std::pair<int, int>> extra;
+    extra.reserve(N * N * groups.size());
     for (const auto& g : groups)
         for (int i : g)
-            for (int j : g) tp.emplace_back(i, j, 0.0);
+            for (int j : g) extra.emplace_back(i, j);
+    std::sort(extra.begin(), extra.end());
+    extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
+    const Eigen::Index body_rows = body.outerSize();
+    const int* bo = body.outerIndexPtr();
+    const int* bi = body.innerIndexPtr();
+    const bool compressed = body.isCompressed();
+    const int* bnz = body.innerNonZeroPtr();
+    auto row_begin = [&](Eigen::Index r) { return r < body_rows ? bo[r] : 0; };
+    auto row_end = [&](Eigen::Index r) { return r < body_rows ? (compressed ? bo[r + 1] : bo[r] + bnz[r]) : 0; };
     MergedPattern m;
-    m.pattern.resize(n, n);
-    m.pattern.setFromTriplets(tp.begin(), tp.end());
+    std::vector<int> outer(static_cast<size_t>(n) + 1, 0), inner;
+    inner.reserve(static_cast<size_t>(body.nonZeros()) + extra.size());
+    m.body_to_pattern.resize(static_cast<size_t>(body.nonZeros()));
+    size_t e = 0;
+    std::int64_t body_k = 0;  // running index over the body's stored entries, in row order
+    for (Eigen::Index r = 0; r < n; ++r) {
+        int k = row_begin(r);
+        const int end = row_end(r);
+        while (k < end || (e < extra.size() && extra[e].first == r)) {
+            const bool take_body = k < end && (e >= extra.size() || extra[e].first != r || bi[k] <= extra[e].second);
+            if (take_body) {
+                if (e < extra.size() && extra[e].first == r && extra[e].second == bi[k]) ++e;  // the same entry
+                m.body_to_pattern[static_cast<size_t>(body_k++)] = static_cast<std::int64_t>(inner.size());
+                inner.push_back(bi[k++]);
+            } else {
+                inner.push_back(extra[e++].second);
+            }
+        }
+        outer[static_cast<size_t>(r) + 1] = static_cast<int>(inner.size());
+    }
+    std::vector<double> zeros(inner.size(), 0.0);
+    m.pattern = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>>(n, n, static_cast<Eigen::Index>(inner.size()), outer.data(), inner.data(),
+                                                                               zeros.data());
     m.pattern.makeCompressed();
-    m.body_to_pattern.reserve(static_cast<size_t>(body.nonZeros()));
-    for (Eigen::Index r = 0; r < body.outerSize(); ++r)
-        for (RowSparse::InnerIterator it(body, r); it; ++it) m.body_to_pattern.push_back(m.position(r, it.col()));
     return m;
 }
 
