@@ -57,14 +57,15 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     if (!(p.friction >= 0) || !std::isfinite(p.friction)) throw InputError("clip: the blades' friction coefficient must be >= 0 (got " + std::to_string(p.friction) + ")");
     if (!(p.stick_mm > 0)) throw InputError("clip: the friction's stick slip must be > 0 mm (got " + std::to_string(p.stick_mm) + ")");
     if (v0.size() != dofs()) throw InputError("clip: the starting state has " + std::to_string(v0.size()) + " entries, expected " + std::to_string(dofs()));
+    m_rho = std::min({EDGE_MM, 0.5 * blades.thickness_mm, 0.25 * blades.width_mm, 0.25 * blades.length_mm});
     constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration a step may end with (the limit)
     for (int c : m_nodes) {
         std::array<bool, 2> f{};
         for (int i = 0; i < 2; ++i) {
-            Eigen::Vector3d t, n, w;
-            blades.frame(i == 0 ? 1 : -1, v0[body.dofs()], t, n, w);
+            Touch tc;
+            blades.frame(i == 0 ? 1 : -1, v0[body.dofs()], tc.t, tc.n, tc.w);
             const Eigen::Vector3d rel = X.row(c).transpose() + v0.segment<3>(3 * c) - blades.hinge;
-            f[static_cast<size_t>(i)] = 0.5 * blades.closed_gap_mm + rel.dot(n) >= -BEHIND_AT_START;
+            f[static_cast<size_t>(i)] = blade_distance(rel, tc) >= -BEHIND_AT_START;
         }
         m_front.push_back(f);
     }
@@ -95,7 +96,7 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
             for (size_t k = 0; k < m_nodes.size(); ++k)
                 for (int s : {1, -1}) {
                     Touch& c = tc[s > 0 ? 0 : 1];
-                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, m_kappa * c.omega * (m_p.gap_mm - c.d)};
+                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, m_kappa * (m_p.gap_mm - c.d)};
                 }
         }
     }
@@ -111,23 +112,6 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     m_body_to_pattern = std::move(mp.body_to_pattern);
 }
 
-namespace {
-
-/// 1 at s ≤ 0, 0 at s ≥ 1, C1 between (a smoothstep), and its derivative.
-void fade(double s, double& w, double& dw) {
-    if (s <= 0) {
-        w = 1;
-        dw = 0;
-    } else if (s >= 1) {
-        w = 0;
-        dw = 0;
-    } else {
-        w = 1 - s * s * (3 - 2 * s);
-        dw = -6 * s * (1 - s);
-    }
-}
-
-}  // namespace
 
 std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const {
     std::array<Touch, 2> c;
@@ -136,51 +120,57 @@ std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const
     return c;
 }
 
+double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
+    // In the blade's frame: r along it from the hinge, a across it, p = the plane distance in front of its face.
+    // The blade is the set within ρ of its core, the rectangle r ∈ [0, L − ρ], |a| ≤ W/2 − ρ at ρ behind the face:
+    // a flat face of W − 2ρ with edges rounded to the radius ρ at the sides and the tip. Over the core the distance
+    // is the plane's, however deep (a node that came through the face is pushed back out of it, not through it);
+    // beside it the distance to the core's edge, the node's height above the core's plane counted only in front
+    // of it (beside the blade, below its face, the blade's side pushes it sideways).
+    c.r = rel.dot(c.t);
+    c.a = rel.dot(c.w);
+    const double p = 0.5 * m_blades.closed_gap_mm + rel.dot(c.n);
+    const double half = 0.5 * m_blades.width_mm - m_rho, tip = m_blades.length_mm - m_rho;
+    const double vr = c.r - std::clamp(c.r, 0.0, tip), va = c.a - std::clamp(c.a, -half, half);
+    if (vr == 0 && va == 0) {
+        c.u = Eigen::Vector3d(0, 0, 1);
+        return p;
+    }
+    const double vd = std::max(p + m_rho, 0.0), dist = std::sqrt(vr * vr + va * va + vd * vd);
+    c.u = Eigen::Vector3d(vr, va, vd) / dist;
+    return dist - m_rho;
+}
+
 bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const {
     if (!m_front[k][s > 0 ? 0 : 1]) return false;
     const int node = m_nodes[k];
-    const Eigen::Vector3d& w = c.w;
     const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
-    c.r = rel.dot(c.t);
-    c.d = 0.5 * m_blades.closed_gap_mm + rel.dot(c.n);
-    if (c.d >= m_p.gap_mm) return false;
-    // Rounded edges: the penalty fades out over EDGE_MM beyond the blade's sides, tip and hinge end, so that the
-    // energy stays C1 when tissue squeezed past an edge slides off the blade (a step edge stops the line search).
-    const double across = rel.dot(w);
-    c.a = across;
-    double ww, dww, wr, dwr;
-    fade((std::abs(across) - 0.5 * m_blades.width_mm) / EDGE_MM, ww, dww);
-    const double beyond = std::max(-c.r, c.r - m_blades.length_mm);  // > 0 outside [0, L]
-    fade(beyond / EDGE_MM, wr, dwr);
-    c.omega = ww * wr;
-    if (c.omega <= 0) return false;
-    const double sign_r = c.r < 0 ? -1.0 : 1.0;  // d(beyond)/dr where it matters
-    c.domega_dx = (wr * dww / EDGE_MM * (across < 0 ? -1.0 : 1.0)) * w + (ww * dwr / EDGE_MM * sign_r) * c.t;
-    c.domega_dtheta = ww * dwr / EDGE_MM * sign_r * (-0.5 * (c.d - 0.5 * m_blades.closed_gap_mm));  // ∂r/∂θ = −(d − c/2)/2
-    return true;
+    c.d = blade_distance(rel, c);
+    c.q = rel.dot(c.n);
+    return c.d < m_p.gap_mm;
 }
 
 bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                           bool project) const {
     if (!measure(v, k, s, c)) return false;
     const double P = m_p.gap_mm - c.d;  // > 0: pressing
-    // Normal: ½ κ ω P². ∂P/∂x = −n, ∂P/∂θ = −r/2.
+    // ½ κ P², P = gap − D. ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's frame (u: the unit vector from the core's
+    // nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2), q = rel·n.
     Eigen::Vector4d dP;
-    dP << -c.n, -0.5 * c.r;
-    Eigen::Vector4d dw;
-    dw << c.domega_dx, c.domega_dtheta;
-    e = 0.5 * m_kappa * c.omega * P * P;
-    grad = m_kappa * c.omega * P * dP + 0.5 * m_kappa * P * P * dw;
+    dP << -(c.u[0] * c.t + c.u[1] * c.w + c.u[2] * c.n), -(c.u[0] * (-0.5 * c.q) + c.u[2] * 0.5 * c.r);
+    e = 0.5 * m_kappa * P * P;
+    grad = m_kappa * P * dP;
     if (H) {
-        // κ ω ∇P ∇Pᵀ (Gauss–Newton) + κ ω P ∇²P, with ∂²P/∂x∂θ = −t/2, ∂²P/∂θ² = (d − closed_gap/2)/4; the second
-        // part is dropped for a projected (semidefinite) tangent. The fade's own derivatives (nonzero only within
-        // EDGE_MM of an edge) are left out of the tangent.
-        *H = m_kappa * c.omega * dP * dP.transpose();
+        // κ ∇P ∇Pᵀ (Gauss–Newton) + κ P ∇²P from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
+        // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4); dropped for a projected (semidefinite) tangent. The turning of u around
+        // a rounded edge ((I − u uᵀ)/|v|) is left out: the Gauss–Newton part stays positive semidefinite.
+        *H = m_kappa * dP * dP.transpose();
         if (!project) {
-            const double q = m_kappa * c.omega * P;
-            H->block<3, 1>(0, 3) -= q * 0.5 * c.t;
-            H->block<1, 3>(3, 0) -= q * 0.5 * c.t.transpose();
-            (*H)(3, 3) += q * 0.25 * (c.d - 0.5 * m_blades.closed_gap_mm);
+            const double kp = m_kappa * P;
+            const Eigen::Vector3d xt = -(c.u[0] * (-0.5) * c.n + c.u[2] * 0.5 * c.t);
+            H->block<3, 1>(0, 3) += kp * xt;
+            H->block<1, 3>(3, 0) += kp * xt.transpose();
+            (*H)(3, 3) += -kp * (c.u[0] * (-0.25 * c.r) + c.u[2] * (-0.25 * c.q));
         }
     }
     return true;
@@ -244,7 +234,7 @@ std::vector<BladeGrip> ClipBody::grips(const Eigen::VectorXd& v) const {
             BladeGrip g;
             g.node = node;
             g.blade = s;
-            g.normal_n = m_kappa * c.omega * (m_p.gap_mm - c.d);
+            g.normal_n = m_kappa * (m_p.gap_mm - c.d);
             Eigen::Vector2d anchor = at;
             const Grip& old = m_grip[k][s > 0 ? 0 : 1];
             if (old.on) {
@@ -344,9 +334,9 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
             }
             if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
             b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
-            const double f = m_kappa * c.omega * (m_p.gap_mm - c.d);
+            const double f = m_kappa * (m_p.gap_mm - c.d);
             b.force_n[i] += f;
-            b.moment_nmm[i] += f * c.r;
+            b.moment_nmm[i] -= 2 * g[3];  // f r on the face; around a rounded edge the force's own lever
             ++b.contacts[i];
         }
     return b;

@@ -11,9 +11,11 @@
 /// third of the blade from the tip) fixes one point of it. ClipBody adds the blades to an ElasticBody as one more
 /// unknown, θ, and the blade faces as a penalty on the body's surface nodes: the total potential
 ///
-///     Π(u, θ) = Ψ(u) + Σ ½ κ ω_i (g − d_i(u, θ))²  [d_i < g]  + k (θ²/2 + θ₀ θ)
+///     Π(u, θ) = Ψ(u) + Σ ½ κ (g − D_i(u, θ))²  [D_i < g]  + k (θ²/2 + θ₀ θ)
 ///
-/// (ω_i: 1 on the blade, fading to 0 within 0.1 mm beyond its edges: rounded edges keep Π C1) is minimised by
+/// (D_i: how far node i lies in front of a blade, the blades being solids whose sides and tip are rounded to a
+/// 0.1 mm radius, so that tissue pressed past an edge is pushed off it along the rounded surface's normal; and,
+/// with friction, the grips' energy, ClipContactParams::friction) is minimised by
 /// the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
 /// released clip (θ free) stops where the tissue pushes back as hard as its spring; a clip held open by the
 /// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
@@ -131,14 +133,17 @@ public:
     const ClipBlades& blades() const { return m_blades; }
 
 private:
-    /// A candidate against a blade: d, the distance along the blade's inner normal n; r, along the blade t from
-    /// the hinge; ω, the edge fade (1 on the blade, 0 beyond EDGE_MM of its sides, tip and hinge end) and its
-    /// derivatives.
+    /// A candidate against a blade: d, its distance in front of the blade (blade_distance); r, along the blade t
+    /// from the hinge; a, across it.
     struct Touch {
-        double d = 0, r = 0, a = 0, omega = 0, domega_dtheta = 0;  // a: across the blade, along w
-        Eigen::Vector3d t, n, w, domega_dx;
+        double d = 0, r = 0, a = 0, q = 0;  // a: across the blade, along w; q = rel·n
+        Eigen::Vector3d t, n, w;
+        Eigen::Vector3d u = Eigen::Vector3d(0, 0, 1);  // ∂D/∂(r, a, p): the unit vector from the blade's core
     };
-    static constexpr double EDGE_MM = 0.1;
+    static constexpr double EDGE_MM = 0.1;  ///< the blades' edge radius ρ (less on blades too thin or narrow for it)
+    /// D: how far the point hinge + rel lies in front of the blade whose frame c holds (its face flat over the
+    /// blade's core, its sides and tip rounded to the radius ρ), and in c.u its derivative in the blade's frame.
+    double blade_distance(const Eigen::Vector3d& rel, Touch& c) const;
     /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
     bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project) const;
@@ -165,6 +170,7 @@ private:
     ClipSpring m_spring;
     ClipContactParams m_p;
     double m_kappa = 0, m_stop = 0;  // node penalty; the closed stop's penalty on θ < 0 [N·mm/rad]
+    double m_rho = EDGE_MM;          // edge radius [mm]
     Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
     std::vector<std::int64_t> m_body_to_pattern;
     std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
