@@ -112,7 +112,6 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     m_body_to_pattern = std::move(mp.body_to_pattern);
 }
 
-
 std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const {
     std::array<Touch, 2> c;
     m_blades.frame(1, v[theta_dof()], c[0].t, c[0].n, c[0].w);
@@ -126,7 +125,8 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     // a flat face of W − 2ρ with edges rounded to the radius ρ at the sides and the tip. Over the core the distance
     // is the plane's, however deep (a node that came through the face is pushed back out of it, not through it);
     // beside it the distance to the core's edge, the node's height above the core's plane counted only in front
-    // of it (beside the blade, below its face, the blade's side pushes it sideways).
+    // of it (beside the blade, below its face, the blade's side pushes it sideways). A node more than ρ behind the
+    // face right at the core's edge is the one place where the two disagree (it has come far through the blade).
     c.r = rel.dot(c.t);
     c.a = rel.dot(c.w);
     const double p = 0.5 * m_blades.closed_gap_mm + rel.dot(c.n);

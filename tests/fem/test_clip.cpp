@@ -160,7 +160,7 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     e[9] = 6.9 - Block::A;
     e[10] = -0.22;
     ASSERT_EQ(clip.loads(e).contacts[0] + clip.loads(e).contacts[1], 2) << clip.loads(e).contacts[0] << " " << clip.loads(e).contacts[1];
-    EXPECT_LT((clip.loads(e).net_force - net_of(e)).norm(), 1e-12 * (1 + net_of(e).norm()));  // the fade included
+    EXPECT_LT((clip.loads(e).net_force - net_of(e)).norm(), 1e-12 * (1 + net_of(e).norm()));  // around the edges too
     const Eigen::VectorXd ge = clip.internal_force(e);
     for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
         Eigen::VectorXd p = e, m = e;

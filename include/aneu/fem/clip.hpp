@@ -93,7 +93,7 @@ struct BladeLoads {
     std::array<int, 2> sliding{0, 0};        ///< grips at their friction limit (sliding), per blade
     double opening_rad = 0;
     double spring_torque_nmm = 0;
-    /// The tissue's net force on the clip [N]: the blades' penalty forces, edge fades included (−Σ the forces the
+    /// The tissue's net force on the clip [N]: the blades' penalty and friction forces (−Σ the forces the
     /// blades apply to the body's nodes).
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();
 };
