@@ -122,7 +122,8 @@ void Simulator::Impl::release(int i, double t) {
     const int patch = static_cast<size_t>(c.id) < patch_of_clip.size() ? patch_of_clip[static_cast<size_t>(c.id)] : -1;
     if (patch >= 0) {
         // A clip in a nonlinear patch stays where its blades grip the tissue (the patch solves it, its opening
-        // now free against the spring); one gripping nothing falls away, and its patch goes with it.
+        // stepped onto the balance of its spring and the tissue); one gripping nothing falls away, and its patch
+        // goes with it.
         PatchRun& P = patches[static_cast<size_t>(patch)];
         I.clip = -1;
         c.holder = -1;

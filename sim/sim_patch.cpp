@@ -256,7 +256,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         Eigen::VectorXd moved = v0;
         moved[cb.theta_dof()] = theta_kept;
         const fem::BladeLoads free_loads = cb.loads(moved);
-        if (v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0) {
+        const bool at_rest = v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0;
+        if (at_rest) {
             r.u = moved;
             r.reaction = Eigen::VectorXd::Constant(1, spring.torque(theta_kept));
         } else {
@@ -275,7 +276,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.theta_bal = std::max(0.0, th - std::clamp(R / k, -1.0 * DEG, held ? 1e9 : 1.0 * DEG));
         }
         const double t_solve = sw.seconds();
-        const fem::BladeLoads loads = cb.loads(r.u);
+        const fem::BladeLoads loads = at_rest ? free_loads : cb.loads(r.u);
         std::vector<fem::BladeGrip> grips = cb.grips(r.u);
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();

@@ -59,6 +59,22 @@ double block_residual(double theta, const fem::ClipSpring& s, double kappa, doub
     return s.torque(theta) - F * r;
 }
 
+/// The clip's force is its energy's derivative and its tangent the force's, by central differences of step h over
+/// the DOFs from `first` on (the block's free nodes and θ).
+void expect_derivatives(const fem::ClipBody& clip, const Eigen::VectorXd& v, Eigen::Index first, double h) {
+    const Eigen::VectorXd g = clip.internal_force(v);
+    const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
+    for (Eigen::Index i = first; i < clip.dofs(); ++i) {
+        Eigen::VectorXd p = v, m = v;
+        p[i] += h;
+        m[i] -= h;
+        EXPECT_NEAR(g[i], (clip.energy(p) - clip.energy(m)) / (2 * h), 1e-5 * (1 + std::abs(g[i]))) << "dof " << i;
+        const Eigen::VectorXd col = (clip.internal_force(p) - clip.internal_force(m)) / (2 * h);
+        for (Eigen::Index j = first; j < clip.dofs(); ++j)
+            EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
+    }
+}
+
 }  // namespace
 
 TEST(ClipSpring, TwoLabelForcesGiveTheHyperbola) {
@@ -132,8 +148,6 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     v.segment<3>(6) << 0.01, -0.03, 0.02;   // node 2 pressing on blade +1
     v.segment<3>(9) << -0.02, 0.01, 0.01;   // node 3 pressing on blade −1
     v[clip.theta_dof()] = 0.2;
-    const Eigen::VectorXd g = clip.internal_force(v);
-    const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
     const fem::BladeLoads L = clip.loads(v);
     ASSERT_EQ(L.contacts[0] + L.contacts[1], 2);
     // The tissue's net force on the blades is the blades' part of the nodes' internal force (the body's removed).
@@ -144,15 +158,7 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     EXPECT_GT(L.net_force.norm(), 0.0);
     EXPECT_LT((L.net_force - net_of(v)).norm(), 1e-12 * (1 + net_of(v).norm()));
     const double h = 1e-6;
-    for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
-        Eigen::VectorXd p = v, m = v;
-        p[i] += h;
-        m[i] -= h;
-        EXPECT_NEAR(g[i], (clip.energy(p) - clip.energy(m)) / (2 * h), 1e-5 * (1 + std::abs(g[i]))) << "dof " << i;
-        const Eigen::VectorXd col = (clip.internal_force(p) - clip.internal_force(m)) / (2 * h);
-        for (Eigen::Index j = 6; j < clip.dofs(); ++j)
-            EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
-    }
+    expect_derivatives(clip, v, 6, h);
     // Over a rounded edge (node 2 over the blade's side edge, node 3 over its tip; the edges' radius is 0.1 mm):
     // the force there is the energy's derivative too, and the tangent its derivative (the frame's part).
     Eigen::VectorXd e = v;
@@ -250,24 +256,13 @@ TEST(ClipBody, FrictionForcesAndTangentAreTheEnergysDerivatives) {
     bl.frame(1, th, t1, n1, w1);
     const std::vector<fem::BladeGrip> grips{{2, 1, x2.dot(t1) + 0.0004, x2.dot(w1) - 0.0003, 20.0}, {3, -1, x3.dot(t) - 0.08, x3.dot(w) + 0.06, 0.5}};
     const fem::ClipBody clip(*b.body, b.X, {2, 3}, v, bl, test_spring(), p, &grips);
-    const Eigen::VectorXd g = clip.internal_force(v);
-    const Eigen::MatrixXd K = Eigen::MatrixXd(clip.tangent(v));
     const fem::BladeLoads L = clip.loads(v);
     EXPECT_EQ(L.sliding[0], 0);
     EXPECT_EQ(L.sliding[1], 1);
     const double s2 = std::hypot(0.0004, 0.0003) / 1e-3;
     EXPECT_NEAR(L.friction_n[0], 0.3 * 20.0 * (2 * s2 - s2 * s2), 1e-9);   // sticking: μλ (2s − s²), s = |Δ|/ε
     EXPECT_NEAR(L.friction_n[1], 0.3 * 0.5, 1e-12);                        // sliding: μ λ
-    const double h = 1e-8;
-    for (Eigen::Index i = 6; i < clip.dofs(); ++i) {
-        Eigen::VectorXd pl = v, mi = v;
-        pl[i] += h;
-        mi[i] -= h;
-        EXPECT_NEAR(g[i], (clip.energy(pl) - clip.energy(mi)) / (2 * h), 1e-5 * (1 + std::abs(g[i]))) << "dof " << i;
-        const Eigen::VectorXd col = (clip.internal_force(pl) - clip.internal_force(mi)) / (2 * h);
-        for (Eigen::Index j = 6; j < clip.dofs(); ++j)
-            EXPECT_NEAR(K(j, i), col[j], 1e-4 * (1 + std::abs(col[j]))) << "entry " << j << ", " << i;
-    }
+    expect_derivatives(clip, v, 6, 1e-8);
     // A grip on a node that cannot touch the blades is an input error, as is a negative coefficient.
     const std::vector<fem::BladeGrip> bad{{0, 1, 0, 0, 1.0}};
     EXPECT_THROW(fem::ClipBody(*b.body, b.X, {2, 3}, v, bl, test_spring(), p, &bad), InputError);
