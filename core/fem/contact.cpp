@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include "aneu/core/error.hpp"
@@ -27,11 +28,10 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     if (p.stiffness > 0) {
         m_kappa = p.stiffness;
     } else {
-        m_kappa = detail::default_penalty(body);
+        m_kappa = detail::default_penalty(body) / 100.0;  // the largest diagonal entry at rest
     }
     if (p.exclude_rings < 0) throw InputError("contact: exclude_rings must be >= 0");
     if (m_p.depth_mm <= 0) m_p.depth_mm = 0.25;
-    constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration a step may end with (the limit)
 
     // Candidates: a surface vertex and a face without it, apart in the reference shape (opposite walls), near in
     // the starting state.
@@ -78,11 +78,10 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
             if ((x(u0, v) - centre).norm() > r + p.search_mm) continue;
             if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
-            // A vertex already behind the face where the solve starts did not come through it (a crease of
-            // the wall, the other side of a fold): not a pair. One in contact from the last step is.
-            double d;
-            Eigen::Vector3d bc, n;
-            if (project(u0, {v, static_cast<int>(f)}, d, bc, n) && d < -BEHIND_AT_START) continue;
+            // A vertex behind the face (over it) where the solve starts did not come through it — the barrier lets
+            // none through — but lies there: a crease of the wall, the other side of a fold. Not a pair: its
+            // barrier would hold it on that side.
+            if (signed_distance(u0, {v, static_cast<int>(f)}) <= 0) continue;
             m_pairs.push_back({v, static_cast<int>(f)});
         }
     }
@@ -103,68 +102,139 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     m_body_to_pattern = std::move(mp.body_to_pattern);
 }
 
-bool ContactBody::measure(const Eigen::VectorXd& u, const Pair& q, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const {
-    return project(u, q, d, b, n) && d < m_p.gap_mm && d >= -m_p.depth_mm;
-}
+namespace {
 
-bool ContactBody::project(const Eigen::VectorXd& u, const Pair& q, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const {
-    const Eigen::Vector3d p = x(u, q.v), a = x(u, m_F(q.f, 0)), e1 = x(u, m_F(q.f, 1)) - a, e2 = x(u, m_F(q.f, 2)) - a;
-    n = e1.cross(e2);
-    const double area2 = n.norm();
-    if (area2 <= 0) return false;
-    n /= area2;
-    d = (p - a).dot(n);
-    // Barycentrics of the projection onto the face's plane.
-    const Eigen::Vector3d w = p - a - d * n;
+using Vec3 = Eigen::Vector3d;
+using Vec12 = Eigen::Matrix<double, 12, 1>;
+using Mat12 = Eigen::Matrix<double, 12, 12>;
+
+/// D = the squared distance from p to the closest point of the triangle (a, b, c), its gradient and Hessian over
+/// (p, a, b, c). The closest point is r = Σ cᵢ xᵢ in parameters s (none at a corner, t along an edge, two
+/// barycentrics inside), D = |r|² minimised over s: by the envelope theorem ∇D = 2 cᵢ r, and
+/// ∇²D = G_xx − G_xs G_ss⁻¹ G_sx of g(x, s) = |r(x, s)|² (r is linear in s).
+struct PointTriangle {
+    double D = 0;
+    Vec12 g = Vec12::Zero();
+    Mat12 H = Mat12::Zero();
+    bool inside = false;  ///< the closest point is inside the face
+};
+
+PointTriangle point_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, bool hessian) {
+    const Vec3 x[4] = {p, a, b, c};
+    double cf[4] = {1, 0, 0, 0};   // r = Σ cf_i x_i
+    double dc[2][4] = {};          // ∂cf_i/∂s_k
+    Vec3 S[2];                     // ∂r/∂s_k
+    int k = 0;                     // number of parameters
+    const Vec3 e1 = b - a, e2 = c - a, w = p - a;
     const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2);
     const double den = d11 * d22 - d12 * d12;
     const double b1 = (d22 * w1 - d12 * w2) / den, b2 = (d11 * w2 - d12 * w1) / den;
-    b = Eigen::Vector3d(1 - b1 - b2, b1, b2);
-    constexpr double EDGE_TOLERANCE = 1e-3;  // a vertex over a shared edge belongs to both faces' pairs
-    return b.minCoeff() >= -EDGE_TOLERANCE;
+    PointTriangle out;
+    if (den > 0 && b1 >= 0 && b2 >= 0 && b1 + b2 <= 1) {
+        out.inside = true;
+        cf[1] = -(1 - b1 - b2);
+        cf[2] = -b1;
+        cf[3] = -b2;
+        k = 2;
+        dc[0][1] = 1, dc[0][2] = -1;
+        dc[1][1] = 1, dc[1][3] = -1;
+        S[0] = -e1;
+        S[1] = -e2;
+    } else {
+        // The nearest of the three edges (a corner when the parameter is clamped).
+        double best = std::numeric_limits<double>::infinity();
+        int bi = 0, bj = 1;
+        double bt = 0;
+        for (int e = 0; e < 3; ++e) {
+            const int i = 1 + e, j = 1 + (e + 1) % 3;
+            const Vec3 ed = x[j] - x[i];
+            const double len2 = ed.squaredNorm();
+            const double t = len2 > 0 ? std::clamp((p - x[i]).dot(ed) / len2, 0.0, 1.0) : 0.0;
+            const double dd = (p - x[i] - t * ed).squaredNorm();
+            if (dd < best) best = dd, bi = i, bj = j, bt = t;
+        }
+        if (bt <= 0 || bt >= 1) {
+            cf[bt <= 0 ? bi : bj] = -1;
+        } else {
+            cf[bi] = -(1 - bt);
+            cf[bj] = -bt;
+            k = 1;
+            dc[0][bi] = 1, dc[0][bj] = -1;
+            S[0] = x[bi] - x[bj];
+        }
+    }
+    Vec3 r = Vec3::Zero();
+    for (int i = 0; i < 4; ++i) r += cf[i] * x[i];
+    out.D = r.squaredNorm();
+    for (int i = 0; i < 4; ++i) out.g.segment<3>(3 * i) = 2 * cf[i] * r;
+    if (!hessian) return out;
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) out.H.block<3, 3>(3 * i, 3 * j) = 2 * cf[i] * cf[j] * Eigen::Matrix3d::Identity();
+    if (k > 0) {
+        Eigen::Matrix<double, 12, 2> Gxs = Eigen::Matrix<double, 12, 2>::Zero();
+        Eigen::Matrix2d Gss = Eigen::Matrix2d::Identity();
+        for (int q = 0; q < k; ++q) {
+            for (int i = 0; i < 4; ++i) Gxs.block<3, 1>(3 * i, q) = 2 * (dc[q][i] * r + cf[i] * S[q]);
+            for (int l = 0; l < k; ++l) Gss(q, l) = 2 * S[q].dot(S[l]);
+        }
+        if (k == 1)
+            out.H -= Gxs.col(0) * Gxs.col(0).transpose() / Gss(0, 0);
+        else
+            out.H -= Gxs * Gss.inverse() * Gxs.transpose();
+    }
+    return out;
 }
 
-namespace {
+/// b(x) = −(x − 1)² ln x and its first two derivatives (x < 1).
+struct Barrier {
+    double b, d1, d2;
+};
+Barrier barrier(double x) {
+    const double l = std::log(x), m = x - 1;
+    return {-m * m * l, -2 * m * l - m * m / x, -2 * l - 4 * m / x + m * m / (x * x)};
+}
 
-/// ∂d/∂(p, a, b, c) of d = (p − a)·n, n = (b − a)×(c − a) / |…|: the exact gradient, so that Newton's line
-/// search on the energy sees the force it minimises (holding n fixed is not a gradient and stalls it).
-Eigen::Matrix<double, 12, 1> distance_gradient(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                               const Eigen::Vector3d& c) {
-    const Eigen::Vector3d e1 = b - a, e2 = c - a, N = e1.cross(e2);
-    const double len = N.norm();
-    const Eigen::Vector3d n = N / len;
-    const Eigen::Vector3d q = ((p - a) - n * n.dot(p - a)) / len;  // ∂d/∂N
-    Eigen::Matrix<double, 12, 1> g;
-    g.segment<3>(0) = n;
-    g.segment<3>(3) = -n + (e1 - e2).cross(q);
-    g.segment<3>(6) = e2.cross(q);
-    g.segment<3>(9) = q.cross(e1);
-    return g;
+/// The positive semidefinite part of a symmetric 12 × 12 matrix.
+Mat12 psd(const Mat12& H) {
+    const Eigen::SelfAdjointEigenSolver<Mat12> es(H);
+    if (es.eigenvalues().minCoeff() >= 0) return H;
+    const Vec12 l = es.eigenvalues().cwiseMax(0.0);
+    return es.eigenvectors() * l.asDiagonal() * es.eigenvectors().transpose();
 }
 
 }  // namespace
 
+double ContactBody::signed_distance(const Eigen::VectorXd& u, const Pair& q) const {
+    const Vec3 p = x(u, q.v), a = x(u, m_F(q.f, 0)), b = x(u, m_F(q.f, 1)), c = x(u, m_F(q.f, 2));
+    const PointTriangle pt = point_triangle(p, a, b, c, false);
+    const double d = std::sqrt(pt.D);
+    if (pt.inside && (p - a).dot((b - a).cross(c - a)) < 0) return -d;
+    return d;
+}
+
 double ContactBody::energy(const Eigen::VectorXd& u) const {
     double e = m_body.energy(u);
     if (!std::isfinite(e)) return e;
+    const double Dh = m_p.gap_mm * m_p.gap_mm;
     for (const auto& q : m_pairs) {
-        double d;
-        Eigen::Vector3d b, n;
-        if (measure(u, q, d, b, n)) e += 0.5 * m_kappa * (m_p.gap_mm - d) * (m_p.gap_mm - d);
+        const PointTriangle pt = point_triangle(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)), false);
+        if (pt.D >= Dh) continue;
+        if (pt.D <= 0) return std::numeric_limits<double>::infinity();
+        e += m_kappa * Dh * barrier(pt.D / Dh).b;
     }
     return e;
 }
 
 Eigen::VectorXd ContactBody::internal_force(const Eigen::VectorXd& u) const {
     Eigen::VectorXd g = m_body.internal_force(u);
+    const double Dh = m_p.gap_mm * m_p.gap_mm;
     for (const auto& q : m_pairs) {
-        double d;
-        Eigen::Vector3d b, n;
-        if (!measure(u, q, d, b, n)) continue;
-        const double s = -m_kappa * (m_p.gap_mm - d);  // ∂E/∂d
-        const auto gd = distance_gradient(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)));
-        g.segment<3>(3 * q.v) += s * gd.segment<3>(0);
-        for (int k = 0; k < 3; ++k) g.segment<3>(3 * m_F(q.f, k)) += s * gd.segment<3>(3 + 3 * k);
+        const PointTriangle pt = point_triangle(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)), false);
+        if (pt.D >= Dh) continue;
+        if (pt.D <= 0) throw NumericalError("contact: a vertex lies on a face of the opposite wall");
+        const double s = m_kappa * barrier(pt.D / Dh).d1;  // ∂E/∂D
+        g.segment<3>(3 * q.v) += s * pt.g.segment<3>(0);
+        for (int k = 0; k < 3; ++k) g.segment<3>(3 * m_F(q.f, k)) += s * pt.g.segment<3>(3 + 3 * k);
     }
     return g;
 }
@@ -174,25 +244,62 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::V
     RowSparse K = m_pattern;
     double* val = K.valuePtr();
     for (size_t p = 0; p < m_body_to_pattern.size(); ++p) val[m_body_to_pattern[p]] += Kb.valuePtr()[p];
+    const double Dh = m_p.gap_mm * m_p.gap_mm;
     for (size_t k = 0; k < m_pairs.size(); ++k) {
-        double d;
-        Eigen::Vector3d b, n;
-        if (!measure(u, m_pairs[k], d, b, n)) continue;
         const auto& q = m_pairs[k];
-        const auto gd = distance_gradient(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)));
-        const Eigen::Matrix<double, 12, 12> H = m_kappa * gd * gd.transpose();  // Gauss–Newton: κ ∇d ∇dᵀ
+        const PointTriangle pt = point_triangle(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)), true);
+        if (pt.D >= Dh) continue;
+        if (pt.D <= 0) throw NumericalError("contact: a vertex lies on a face of the opposite wall");
+        const Barrier bb = barrier(pt.D / Dh);
+        Mat12 H = m_kappa * (bb.d2 / Dh * pt.g * pt.g.transpose() + bb.d1 * pt.H);
+        if (project || m_p.project_pairs) H = psd(H);
         for (int i = 0; i < 12; ++i)
             for (int j = 0; j < 12; ++j) val[m_pair_slots[k][static_cast<size_t>(12 * i + j)]] += H(i, j);
     }
     return K;
 }
 
+double ContactBody::max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const {
+    // Additive CCD (Li, Kaufman & Jiang 2021): along the step, a pair's distance falls at most as fast as
+    // l = |Δp| + max |Δcorner| (the step's common translation removed), so advancing by a fraction of d / l
+    // at a time never passes the face; stop where d is a tenth of its start.
+    constexpr double SHRINK = 0.1;
+    double alpha = m_body.max_step(u, du);
+    for (const auto& q : m_pairs) {
+        const int nodes[4] = {q.v, m_F(q.f, 0), m_F(q.f, 1), m_F(q.f, 2)};
+        Vec3 dx[4], mean = Vec3::Zero();
+        for (int i = 0; i < 4; ++i) mean += (dx[i] = du.segment<3>(3 * nodes[i])) / 4.0;
+        for (auto& d : dx) d -= mean;
+        const double l = dx[0].norm() + std::max({dx[1].norm(), dx[2].norm(), dx[3].norm()});
+        if (!(l > 0)) continue;
+        auto dist = [&](double t) {
+            Vec3 y[4];
+            for (int i = 0; i < 4; ++i) y[i] = x(u, nodes[i]) + t * du.segment<3>(3 * nodes[i]);
+            return std::sqrt(point_triangle(y[0], y[1], y[2], y[3], false).D);
+        };
+        const double d0 = dist(0);
+        if ((1 - SHRINK) * d0 >= alpha * l) continue;  // cannot come near within the step
+        // The first advance, (1 − SHRINK) d0 / l, cannot bring it below SHRINK · d0.
+        double t = 0, tl = (1 - SHRINK) * d0 / l;
+        for (int it = 0;; ++it) {
+            if (t + tl >= alpha) break;  // reaches α without coming near
+            const double dn = dist(t + tl);
+            if ((it > 0 && dn < SHRINK * d0) || it == 10000) {
+                alpha = t;
+                break;
+            }
+            t += tl;
+            tl = 0.9 * dn / l;
+        }
+    }
+    return alpha;
+}
+
 std::size_t ContactBody::active(const Eigen::VectorXd& u) const {
     std::size_t n_active = 0;
     for (const auto& q : m_pairs) {
-        double d;
-        Eigen::Vector3d b, n;
-        n_active += measure(u, q, d, b, n) ? 1 : 0;
+        const double d = signed_distance(u, q);
+        n_active += d < m_p.gap_mm && d >= -m_p.depth_mm ? 1 : 0;
     }
     return n_active;
 }
@@ -200,9 +307,8 @@ std::size_t ContactBody::active(const Eigen::VectorXd& u) const {
 double ContactBody::min_distance(const Eigen::VectorXd& u) const {
     double m = std::numeric_limits<double>::infinity();
     for (const auto& q : m_pairs) {
-        double d;
-        Eigen::Vector3d b, n;
-        if (measure(u, q, d, b, n)) m = std::min(m, d);
+        const double d = signed_distance(u, q);
+        if (d >= -m_p.depth_mm) m = std::min(m, d);
     }
     return m;
 }

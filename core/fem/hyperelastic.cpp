@@ -446,7 +446,23 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         // released clip's spring) it would be a full Newton step without the line search, which can jump
         // through a contact; the corrector's line-searched iterations start from u instead.
         const bool moves = dp.cwiseAbs().maxCoeff() > 0;
-        Eigen::VectorXd v = moves ? Eigen::VectorXd(u + newton_step(u, g, &dp)) : u;
+        Eigen::VectorXd v = u;
+        if (moves) {
+            // A contact may cut the predictor short (max_step): the prescribed DOFs still move all the way, the
+            // free ones as far as admitted; a step that still runs into a contact (a prescribed node's own) is
+            // halved.
+            const Eigen::VectorXd step = newton_step(u, g, &dp);
+            const double a = solid.max_step(u, step);
+            v += step;
+            if (a < 1) {
+                for (Eigen::Index r = 0; r < n; ++r)
+                    if (free_index[static_cast<size_t>(r)] >= 0) v[r] = u[r] + a * step[r];
+                if (solid.max_step(u, v - u) < 1) {
+                    last_failure = "the predictor runs into a contact";
+                    return false;
+                }
+            }
+        }
         double E = solid.energy(v);
         if (!std::isfinite(E)) {
             last_failure = "the predictor inverts elements";
@@ -473,7 +489,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             const Eigen::VectorXd du = newton_step(v, g, nullptr);
             const double slope = g.dot(du);
             if (trace) std::fprintf(stderr, "newton s %.4g it %d residual %.3e / %.3e energy %.12e slope %.3e |du| %.3e\n", s1, it, r, scale, E, slope, du.norm());
-            double alpha = 1;
+            double alpha = solid.max_step(v, du);  // 1 unless a contact stops the step short
             bool accepted = false;
             for (int ls = 0; ls < 40; ++ls, alpha *= 0.5) {
                 const Eigen::VectorXd trial = v + alpha * du;

@@ -4,6 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+
+#include <Eigen/Eigenvalues>
 
 #include "aneu/core/error.hpp"
 #include "aneu/fem/contact.hpp"
@@ -122,4 +125,89 @@ TEST(WallContact, NeighboursAreNotPairs) {
         EXPECT_EQ(body.active(Eigen::VectorXd::Zero(solid.dofs())), 0u);
     }
     EXPECT_THROW(fem::ContactBody(solid, a.V.topRows(3), faces, Eigen::VectorXd::Zero(solid.dofs()), cp), InputError);
+}
+
+TEST(WallContact, ForcesAndTangentAreTheBarriersDerivatives) {
+    // The plates 0.004–0.008 mm apart (inside the barrier's reach d̂ = 0.01 mm) and shifted sideways by a few
+    // µm, with a random jitter: the top grid's vertices at x or y = 0.5 lie a few µm beside the bottom grid's
+    // lines and its rim vertices beside the bottom plate's rim, so the faces' inside, edges and corners are all
+    // closest points of active pairs.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    std::srand(7);
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i) {
+        if (p.V(i, 2) < Plates::H + 1e-9) continue;
+        u[3 * i + 0] = 0.004 + 0.002 * (std::rand() / double(RAND_MAX) - 0.5);
+        u[3 * i + 1] = -0.003 + 0.002 * (std::rand() / double(RAND_MAX) - 0.5);
+        u[3 * i + 2] = -(Plates::GAP - 0.006) + 0.004 * (std::rand() / double(RAND_MAX) - 0.5);
+    }
+    fem::ContactParams cp;
+    cp.stiffness = 1.0;
+    const fem::ContactBody body(solid, p.V, p.faces, u, cp);
+    const auto n_active = body.active(u);
+    ASSERT_GT(n_active, 40u);
+    const Eigen::VectorXd g = body.internal_force(u);
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> K = body.tangent(u);
+    const Eigen::VectorXd gs = solid.internal_force(u);
+    double worst_g = 0, worst_k = 0, scale_g = 0, scale_k = 0;
+    constexpr double h = 1e-7;
+    int checked = 0;
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i) {
+        const double z = p.V(i, 2);
+        if (std::abs(z - Plates::H) > 1e-9 && std::abs(z - Plates::H - Plates::GAP) > 1e-9) continue;  // facing nodes only
+        for (int a = 0; a < 3; ++a) {
+            const Eigen::Index dof = 3 * i + a;
+            Eigen::VectorXd up = u, um = u;
+            up[dof] += h;
+            um[dof] -= h;
+            const double fd = (body.energy(up) - body.energy(um)) / (2 * h);
+            worst_g = std::max(worst_g, std::abs(fd - g[dof]));
+            scale_g = std::max(scale_g, std::abs(g[dof] - gs[dof]));
+            const Eigen::VectorXd col = (body.internal_force(up) - body.internal_force(um)) / (2 * h);
+            for (Eigen::Index r = 0; r < col.size(); ++r) {
+                worst_k = std::max(worst_k, std::abs(col[r] - K.coeff(r, dof)));
+                scale_k = std::max(scale_k, std::abs(K.coeff(r, dof)));
+            }
+            ++checked;
+        }
+    }
+    std::printf("barrier derivatives: %d DOFs, %zu pairs active, force error %.3g of %.3g N, tangent error %.3g of %.3g N/mm\n", checked,
+                n_active, worst_g, scale_g, worst_k, scale_k);
+    ASSERT_GT(scale_g, 1e-3);  // the barrier pushes
+    EXPECT_LT(worst_g, 1e-5 * scale_g);
+    EXPECT_LT(worst_k, 1e-4 * scale_k);
+    // Projected (tangent(u, true)): positive semidefinite pair blocks, so the sum with the projected solid is too.
+    const Eigen::MatrixXd Kp = Eigen::MatrixXd(body.tangent(u, true));
+    EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Kp).eigenvalues().minCoeff(), -1e-9 * scale_k);
+}
+
+TEST(WallContact, NoStepPassesThroughAFace) {
+    // A vertex sent straight through the opposite plate (and one sent sideways past it): the step is cut where
+    // the vertex is a tenth of its distance from the face, and the energy there is finite; a step that stays clear
+    // is not cut.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
+    const Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    fem::ContactParams cp;
+    const fem::ContactBody body(solid, p.V, p.faces, u, cp);
+    int centre = -1;  // the top plate's facing vertex nearest (0.5, 0.5)
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
+        if (std::abs(p.V(i, 2) - Plates::H - Plates::GAP) < 1e-9 &&
+            (centre < 0 || (p.V.row(i).head<2>() - Eigen::RowVector2d(0.5, 0.5)).norm() <
+                               (p.V.row(centre).head<2>() - Eigen::RowVector2d(0.5, 0.5)).norm()))
+            centre = static_cast<int>(i);
+    ASSERT_GE(centre, 0);
+    Eigen::VectorXd du = Eigen::VectorXd::Zero(solid.dofs());
+    du[3 * centre + 2] = -0.2;  // 0.05 mm gap: through the bottom plate's face at a quarter of the step
+    const double a = body.max_step(u, du);
+    EXPECT_GT(a, 0.2 * 0.9 * 0.25);
+    EXPECT_LT(a, 0.25 * (1 - 0.1) + 1e-12);  // stops at or before a tenth of the distance
+    const Eigen::VectorXd at = u + a * du;
+    EXPECT_GT(body.min_distance(at), 0.0);
+    EXPECT_TRUE(std::isfinite(body.energy(at)));
+    EXPECT_LT(body.min_distance(u + 0.3 * du), -0.005);  // the whole step would have passed through unseen by the barrier
+    du.setZero();
+    du[3 * centre + 0] = 0.01;  // sideways along the gap
+    EXPECT_EQ(body.max_step(u, du), 1.0);
 }

@@ -124,6 +124,9 @@ public:
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& v, bool project = false) const override;
     const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_pattern; }
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
+    double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override {
+        return m_body.max_step(v.head(m_body.dofs()), dv.head(m_body.dofs()));
+    }
     BladeLoads loads(const Eigen::VectorXd& v) const;
     /// The grips after a solve that ended at v, for the next one: a grip that held stays where it was, one that
     /// slid follows its node (ε behind it); nodes that press on a blade at v without a grip take one where they

@@ -2,15 +2,18 @@
 #pragma once
 /// @file
 /// Wall-on-wall contact (issue #15, item 4): opposite parts of a body's surface — the inner walls of a neck
-/// the clip flattens — touch and do not pass through each other. Vertex–triangle pairs, one-sided (a vertex
-/// is pushed back only from the front of a face, along the face's deformed normal), neighbours excluded
-/// (a vertex within `exclude_rings` edges of a face on the surface mesh is the same wall), a penalty
-/// ½ κ (gap − d)² when the vertex comes nearer than `gap_mm` to the face. It decorates an ElasticBody (the
-/// neo-Hookean solid or the nonlinear patch), so the contact is solved in the same Newton problem as the
-/// blades' prescribed displacements. Candidate pairs are collected when the decorator is made (within
-/// `search_mm` of each other in the state it starts from, and not already behind the face there: a crease of
-/// the wall or the far side of a fold), which fixes the tangent's pattern for one solve; make a new one for the
-/// next load step.
+/// the clip flattens — touch and do not pass through each other. Vertex–triangle pairs (a vertex and a face of
+/// the opposite wall facing it; neighbours excluded: a vertex within `exclude_rings` edges of a face on the
+/// surface mesh is the same wall) repel by a barrier on their distance (the incremental-potential contact of
+/// Li et al. 2020): d is the distance from the vertex to the closest point of the closed triangle (its
+/// inside, an edge or a corner), so it is C1 as a vertex passes from one face to the next; each pair adds
+///     κ d̂² b(d²/d̂²),   b(x) = −(x − 1)² ln x for x < 1, 0 beyond,
+/// which is C2, zero from d = d̂ (`gap_mm`) outward and infinite at d = 0. Newton's line search never steps
+/// through a face: `max_step` bounds each step by continuous collision detection (additive CCD, Li et al. 2021).
+/// It decorates an ElasticBody (the neo-Hookean solid or the nonlinear patch), so the contact is solved in the
+/// same Newton problem as the blades. Candidate pairs are collected when the decorator is made (within
+/// `search_mm` of each other in the state it starts from, and not behind the face there: a crease of the wall or
+/// the far side of a fold), which fixes the tangent's pattern for one solve; make a new one for the next step.
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -23,11 +26,15 @@
 namespace aneu::fem {
 
 struct ContactParams {
-    double gap_mm = 0.01;        ///< a vertex is held at about this distance in front of a face
-    double stiffness = 0;        ///< κ [N/mm] per pair; 0 = 100 × the largest diagonal entry of the body's tangent at rest
+    double gap_mm = 0.01;        ///< d̂: the barrier acts on pairs nearer than this; touching walls end between 0 and d̂ apart
+    double stiffness = 0;        ///< κ [N/mm]; 0 = the largest diagonal entry of the body's tangent at rest
     double search_mm = 0.6;      ///< candidate pairs: nearer than this in the starting state
     int exclude_rings = 2;       ///< a vertex within this many surface edges of a face's corners is its neighbour, never its pair
-    double depth_mm = 0.0;       ///< a vertex more than this behind a face is on the far side, not in contact (0 = 0.25 mm)
+    double depth_mm = 0.0;       ///< min_distance: a vertex more than this behind a face is on the far side (0 = 0.25 mm)
+    /// Each pair's 12 × 12 tangent projected onto a positive semidefinite one (projected Newton, as IPC does): the
+    /// barrier's curvature across a face edge or corner is negative. false: the exact Hessian (tangent(u, true)
+    /// projects it anyway).
+    bool project_pairs = false;
 };
 
 class ContactBody final : public ElasticBody {
@@ -47,21 +54,22 @@ public:
 
     /// Candidate vertex–face pairs.
     std::size_t candidates() const { return m_pairs.size(); }
-    /// Pairs in contact (d < gap) at u, and the smallest signed distance among the candidates in front of
-    /// their face (negative: interpenetration).
+    /// Pairs in contact (d < gap) at u, and the smallest signed distance among the candidates (negative: the
+    /// vertex is behind its face, over it, by less than depth_mm; interpenetration).
     std::size_t active(const Eigen::VectorXd& u) const;
     double min_distance(const Eigen::VectorXd& u) const;
     double stiffness() const { return m_kappa; }
+    /// The largest α ≤ 1 such that no candidate vertex comes nearer to its face than a tenth of its distance at u
+    /// along u + α du (additive CCD).
+    double max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const override;
 
 private:
     struct Pair {
         int v, f;
     };
-    /// Distance of the pair at u: d, barycentrics and the face normal; false when the vertex does not project
-    /// onto the face or lies beyond `depth` behind it.
-    bool measure(const Eigen::VectorXd& u, const Pair& p, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const;
-    /// The same without the gap and depth limits: whether the vertex projects onto the face, and d.
-    bool project(const Eigen::VectorXd& u, const Pair& p, double& d, Eigen::Vector3d& b, Eigen::Vector3d& n) const;
+    /// The signed distance of the pair at u: to the closest point of the face, negative when the vertex projects
+    /// into the face from behind it.
+    double signed_distance(const Eigen::VectorXd& u, const Pair& p) const;
     Eigen::Vector3d x(const Eigen::VectorXd& u, int node) const { return m_X.row(node).transpose() + u.segment<3>(3 * node); }
 
     const ElasticBody& m_body;

@@ -32,6 +32,13 @@ public:
     virtual Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const = 0;
     virtual const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const = 0;
     virtual double min_jacobian(const Eigen::VectorXd& u) const = 0;
+    /// The largest fraction α ≤ 1 of the step du from u that the body admits (a contact's barrier must not be
+    /// stepped through: continuous collision detection); 1 for a body without contact.
+    virtual double max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const {
+        (void)u;
+        (void)du;
+        return 1.0;
+    }
 };
 
 /// Ψ(F) = μ/2 (tr FᵀF − 3) − μ ln J + λ/2 (ln J)² per unit reference volume (Bonet & Wood's compressible
