@@ -22,9 +22,11 @@
 // interface — with its errors against the same reference.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
 //                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
-//                           [--patch-mm 0] [--no-reference] [--wall-contact]
+//                           [--patch-mm 0] [--no-reference] [--wall-contact] [--proximal]
 // --wall-contact: the nonlinear models (reference and patch) also keep the lumen's opposite inner walls apart
 // (fem::ContactBody on the corner nodes of the inner surface, gap 0.01 mm); the linear model cannot.
+// --proximal: where a nonlinear model's Newton solve stops (a limit point: the sac buckles under the blades), proximal
+// point iterations carry it to the equilibrium beyond (solve_through below); the steps taken are in the JSON lines.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -70,7 +72,7 @@ struct Track {
     std::map<int, Contact> active;  // node -> contact
     Eigen::VectorXd u;
     double force = 0;               // mean y force of the two blades on the wall [N], > 0 squeezing
-    int rounds = 0, iterations = 0, substeps = 0, shifted = 0;
+    int rounds = 0, iterations = 0, substeps = 0, shifted = 0, prox_steps = 0;
     double min_J = 1, seconds = 0;
     double wall_gap = std::numeric_limits<double>::infinity();  // smallest inner-wall distance among pairs in contact
     std::size_t wall_pairs = 0;
@@ -85,6 +87,79 @@ std::vector<std::pair<int, double>> prescribed_of(const Track& t, const Eigen::M
         p.emplace_back(3 * v + 2, c.z - X(v, 2));
     }
     return p;
+}
+
+/// E(u) + β/2 |u − a|²: one step of the proximal point method. Where the static path turns (the sac buckles under
+/// the blades and a displacement-controlled Newton solve finds no neighbouring equilibrium), the sequence of
+/// proximal solves, each anchored at the last, walks down the energy to the equilibrium beyond; its fixed point is
+/// an equilibrium of E itself (β (u − a) → 0).
+class ProximalBody final : public fem::ElasticBody {
+public:
+    ProximalBody(const fem::ElasticBody& body, const Eigen::VectorXd& anchor, double beta) : m_body(body), m_a(anchor), m_beta(beta) {}
+    Eigen::Index dofs() const override { return m_body.dofs(); }
+    double energy(const Eigen::VectorXd& u) const override { return m_body.energy(u) + 0.5 * m_beta * (u - m_a).squaredNorm(); }
+    Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override { return m_body.internal_force(u) + m_beta * (u - m_a); }
+    Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const override {
+        Eigen::SparseMatrix<double, Eigen::RowMajor> K = m_body.tangent(u, project);
+        for (Eigen::Index r = 0; r < K.rows(); ++r) K.coeffRef(r, r) += m_beta;  // the diagonal is in every body's pattern
+        return K;
+    }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_body.pattern(); }
+    double min_jacobian(const Eigen::VectorXd& u) const override { return m_body.min_jacobian(u); }
+    double max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const override { return m_body.max_step(u, du); }
+
+private:
+    const fem::ElasticBody& m_body;
+    Eigen::VectorXd m_a;
+    double m_beta;
+};
+
+/// Newton's static solve; where it stops (a limit point of the path), proximal point iterations from the last
+/// state to the equilibrium beyond it, each followed by a plain Newton attempt. β starts at 1 % of the largest
+/// diagonal entry of the tangent, grows ×10 when a proximal solve fails and shrinks ÷3 when one converges quickly.
+fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::VectorXi& fixed, const std::vector<std::pair<int, double>>& pres,
+                                const Eigen::VectorXd& start, const fem::NewtonOptions& no, bool proximal, int& prox_steps) {
+    try {
+        return fem::solve_neo_hookean(body, fixed, pres, start, no);
+    } catch (const NumericalError& e) {
+        if (!proximal) throw;
+        std::fprintf(stderr, "  Newton stopped (%s); proximal point iterations\n", e.what());
+    }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> K0 = body.tangent(start);
+    double dmax = 0;
+    for (Eigen::Index r = 0; r < K0.rows(); ++r) dmax = std::max(dmax, K0.coeff(r, r));
+    double beta = 1e-2 * dmax;
+    fem::NewtonOptions po = no;
+    po.max_total_iterations = 40;
+    Eigen::VectorXd a = start;
+    bool moved_prescribed = false;
+    int total = 0;
+    for (int k = 0; k < 400; ++k) {
+        fem::NewtonResult r;
+        try {
+            r = fem::solve_neo_hookean(ProximalBody(body, a, beta), fixed, pres, a, po);
+        } catch (const NumericalError&) {
+            beta *= 10;
+            if (beta > 1e3 * dmax) break;
+            continue;
+        }
+        total += r.iterations;
+        ++prox_steps;
+        const double move = (r.u - a).cwiseAbs().maxCoeff();
+        a = r.u;
+        moved_prescribed = true;
+        if (r.iterations <= 5) beta /= 3;
+        if (k % 4 == 3 || move < 1e-4) {
+            try {
+                fem::NewtonResult f = fem::solve_neo_hookean(body, fixed, pres, a, no);
+                std::fprintf(stderr, "  equilibrium after %d proximal steps (%d Newton iterations, last β %.3g N/mm)\n", k + 1, total, beta);
+                f.iterations += total;
+                return f;
+            } catch (const NumericalError&) {
+            }
+        }
+    }
+    throw NumericalError(std::string("proximal point iterations did not reach an equilibrium") + (moved_prescribed ? "" : " (no proximal step converged)"));
 }
 
 }  // namespace
@@ -103,11 +178,16 @@ int main(int argc, char** argv) {
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     double patch_mm = 0;
-    bool reference = true, wall_contact = false;
+    bool reference = true, wall_contact = false, proximal = false;
     for (int a = 2; a < argc; a += 2) {
         const std::string k = argv[a];
         if (k == "--no-reference" || k == "--wall-contact") {
             (k == "--no-reference" ? reference : wall_contact) = k == "--wall-contact";
+            --a;
+            continue;
+        }
+        if (k == "--proximal") {
+            proximal = true;
             --a;
             continue;
         }
@@ -245,11 +325,11 @@ int main(int argc, char** argv) {
                 fem::NewtonResult r;
                 if (wall_contact) {
                     const fem::ContactBody body(*patch, patch_X, patch_faces, start, contact);
-                    r = fem::solve_neo_hookean(body, patch->fixed_dofs(), lp, start, no);
+                    r = solve_through(body, patch->fixed_dofs(), lp, start, no, proximal, t.prox_steps);
                     t.wall_gap = body.min_distance(r.u);
                     t.wall_pairs = body.active(r.u);
                 } else {
-                    r = fem::solve_neo_hookean(*patch, patch->fixed_dofs(), lp, start, no);
+                    r = solve_through(*patch, patch->fixed_dofs(), lp, start, no, proximal, t.prox_steps);
                 }
                 t.u = patch->full_displacement(r.u);
                 reaction = r.reaction;
@@ -263,11 +343,11 @@ int main(int argc, char** argv) {
                 fem::NewtonResult r;
                 if (wall_contact) {
                     const fem::ContactBody body(solid, X, inner_faces, t.u, contact);
-                    r = fem::solve_neo_hookean(body, fem.fixed_dofs, pres, t.u, no);
+                    r = solve_through(body, fem.fixed_dofs, pres, t.u, no, proximal, t.prox_steps);
                     t.wall_gap = body.min_distance(r.u);
                     t.wall_pairs = body.active(r.u);
                 } else {
-                    r = fem::solve_neo_hookean(solid, fem.fixed_dofs, pres, t.u, no);
+                    r = solve_through(solid, fem.fixed_dofs, pres, t.u, no, proximal, t.prox_steps);
                 }
                 t.u = r.u;
                 reaction = r.reaction;
@@ -389,7 +469,8 @@ int main(int argc, char** argv) {
                             {"rounds_linear", lin.rounds},
                             {"rounds_nonlinear", nl.rounds},
                             {"seconds_linear", lin.seconds},
-                            {"seconds_nonlinear", nl.seconds}};
+                            {"seconds_nonlinear", nl.seconds},
+                            {"proximal_steps", nl.prox_steps}};
         if (wall_contact && reference) {
             j["wall_pairs"] = nl.wall_pairs;
             j["wall_gap_mm"] = std::isfinite(nl.wall_gap) ? nl.wall_gap : -1.0;
@@ -403,6 +484,7 @@ int main(int argc, char** argv) {
                 j["contacts_patch"] = pt.active.size();
                 j["newton_iterations_patch"] = pt.iterations;
                 j["seconds_patch"] = pt.seconds;
+                j["proximal_steps_patch"] = pt.prox_steps;
                 j["min_J_patch"] = pt.min_J;
                 if (wall_contact) {
                     j["wall_pairs_patch"] = pt.wall_pairs;

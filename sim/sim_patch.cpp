@@ -35,6 +35,21 @@ bool near_wedge(const fem::ClipBlades& b, double theta, const Eigen::Vector3d& p
     return std::abs(rel.dot(b.up)) <= rr * std::tan(0.5 * theta) + 0.5 * b.closed_gap_mm + b.thickness_mm + margin;
 }
 
+/// How many of the nodes (at X) lie inside a blade's solid, or within `gap` in front of its face, at opening θ.
+int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, double gap) {
+    int n = 0;
+    for (int s : {1, -1}) {
+        Eigen::Vector3d t, nn, w;
+        b.frame(s, theta, t, nn, w);
+        for (int a : nodes) {
+            const Eigen::Vector3d rel = X.row(a).transpose() - b.hinge;
+            const double r = rel.dot(t), across = rel.dot(w), p = 0.5 * b.closed_gap_mm + rel.dot(nn);
+            if (r >= 0 && r <= b.length_mm && std::abs(across) <= 0.5 * b.width_mm && p < gap && p > -b.thickness_mm) ++n;
+        }
+    }
+    return n;
+}
+
 }  // namespace
 
 bool Simulator::Impl::patch_holds_instrument(size_t i) const {
@@ -149,6 +164,23 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
     P.v = Eigen::VectorXd::Zero(pm.dofs() + 1);
     P.v[pm.dofs()] = theta;
+    // The handover from the linear model: the patch starts at rest, where tissue the linear model pushed aside with
+    // the jaws (open, coming round the vessel, or already closing) lies inside a blade. A blade would then push such
+    // nodes out through its back, or hold them with forces of tens of N. So a first patch's blades start at the
+    // smallest opening (from θ up, in 0.25° steps) that holds no node inside them; the frames then close them to the
+    // applier's opening (the clip's θ is prescribed each frame; a frame that cannot reach it carries on from where
+    // it got).
+    int inside = 0;
+    if (old < 0) {
+        const ClipModel& cm = scene.clip_models.at(clips[static_cast<size_t>(clip)].model);
+        const double top = std::max(theta, cm.max_opening_deg * DEG);
+        inside = nodes_in_blades(blades, theta, P.X, P.cand, 0.01);
+        for (double th = theta; inside > 0 && th <= top; th += 0.25 * DEG)
+            if (nodes_in_blades(blades, th, P.X, P.cand, 0.01) == 0) {
+                P.v[pm.dofs()] = th;
+                break;
+            }
+    }
     P.hinge_prev = blades.hinge;
     P.stats.clip = clip;
     P.stats.builds = 1;
@@ -195,6 +227,11 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
                   old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
                   sw.seconds());
     warn(b);
+    if (inside > 0) {
+        std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lay inside the blades at %.2f deg: the patch's blades start at %.2f deg and close from there",
+                      clip, inside, theta / DEG, N.v[N.pm->dofs()] / DEG);
+        warn(b);
+    }
 }
 
 // Each patch's Newton solve with its clip, then the surface's displacement from it.

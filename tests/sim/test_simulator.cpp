@@ -743,6 +743,74 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
                 ref_min, p.wall_pairs_touching, p.mean_iterations, p.mean_solve_ms);
 }
 
+TEST(SimulatorPatch, APatchTakesOverTissueTheLinearModelPushedWithTheOpenJaws) {
+    // The handover: the applier slides over the tube with its jaws only 22° open, so that the linear model pushes
+    // the wall aside with them (the blades would cut 0.27 mm into the wall), and only then closes. The patch is made
+    // at rest, where those wall nodes lie inside the blades; its blades start open enough to hold none and close to
+    // the applier's opening from there. The end state is the one the clip reaches closing from clear air (the test
+    // above): nothing behind a blade, walls apart, every frame converged, the same blade force (friction makes it
+    // path dependent: within 5 %).
+    test::TempDir d("handover");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    json j = flattening_scene(bundle, "patch", false);
+    const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
+    json keys = json::array();
+    json k0 = key(0.0, {FLAT_HINGE_X + 12, 0, 4.0}, ax, up, 22);
+    k0["load"] = "flat";
+    keys.push_back(k0);
+    keys.push_back(key(0.05, {FLAT_HINGE_X, 0, 4.0}, ax, up, 22));
+    keys.push_back(key(0.06, {FLAT_HINGE_X, 0, 4.0}, ax, up, 22));
+    keys.push_back(key(0.14, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
+    keys.push_back(key(0.16, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
+    j["instruments"][0]["keyframes"] = keys;
+    sim::Simulator s = make(j, d.file(""), "handover.json");
+    std::vector<std::string> msgs;
+    sim::RunOptions opt;
+    opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
+    const sim::Assessment a = sim::run_scene(s, opt);
+    int pushed = 0;
+    double start_deg = 0;
+    for (const auto& m : msgs) {
+        const auto at = m.find("surface nodes the linear model had pushed lay inside the blades at");
+        if (at == std::string::npos) continue;
+        std::sscanf(m.c_str() + m.find(": ") + 2, "%d", &pushed);
+        std::sscanf(m.c_str() + m.find("start at ") + 9, "%lf", &start_deg);
+    }
+    EXPECT_GT(pushed, 5) << "the linear model pushed no wall node into the blades' rest position: no handover tested";
+    EXPECT_GT(start_deg, 26.0);  // the wall's outer radius (1.9 mm) touches the blades at 26° when they are centred on it
+    EXPECT_LT(start_deg, 45.0);
+    ASSERT_EQ(a.patches.size(), 1u);
+    const auto& p = a.patches[0];
+    EXPECT_EQ(p.unconverged_frames, 0);
+    EXPECT_GT(p.wall_pairs_touching, 0);
+    EXPECT_GT(p.min_wall_distance_mm, -0.02);
+    const sim::Clip& c = s.clips().at(0);
+    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+    const Eigen::MatrixX3d x = s.deformed_surface();
+    fem::ClipBlades jb;
+    jb.hinge = {FLAT_HINGE_X, 0, 4};
+    jb.axis = {-1, 0, 0};
+    jb.up = {0, 1, 0};
+    jb.closed_gap_mm = 0.2;
+    double worst = 1e9;
+    for (int sgn : {1, -1}) {
+        Eigen::Vector3d t, n, w;
+        jb.frame(sgn, FLAT_END_DEG * aneu::DEG, t, n, w);
+        for (Eigen::Index v = 0; v < x.rows(); ++v) {
+            const Eigen::Vector3d rel = x.row(v).transpose() - jb.hinge;
+            const double r = rel.dot(t);
+            if (std::abs(rel.dot(w)) > 0.6 || r < 0 || r > 10.5) continue;
+            worst = std::min(worst, 0.5 * jb.closed_gap_mm + rel.dot(n));
+        }
+    }
+    EXPECT_GT(worst, -0.02);
+    constexpr double FROM_CLEAR_AIR_N = 0.4941;  // the test above's blade force (closing from 40° in clear air)
+    EXPECT_NEAR(c.grip_force_n, FROM_CLEAR_AIR_N, 0.05 * FROM_CLEAR_AIR_N);
+    std::printf("handover: %d wall nodes inside the blades at rest, blades start at %.2f deg; end: blade force %.4f N (from clear air %.4f N), "
+                "walls %.4f mm apart, deepest %.4f mm in front of a blade, %d frames (%d unconverged)\n",
+                pushed, start_deg, c.grip_force_n, FROM_CLEAR_AIR_N, p.min_wall_distance_mm, worst, static_cast<int>(p.frames), static_cast<int>(p.unconverged_frames));
+}
+
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
     // A clip with a 0.3 N spring (at the label point) on the tube: the applier can only hold it open, so as the
     // applier closes, the clip stops where the tissue's moment about the hinge equals the spring's torque, short
