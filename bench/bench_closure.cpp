@@ -115,8 +115,9 @@ private:
 };
 
 /// Newton's static solve; where it stops (a limit point of the path), proximal point iterations from the last
-/// state to the equilibrium beyond it, each followed by a plain Newton attempt. β starts at 1 % of the largest
-/// diagonal entry of the tangent, grows ×10 when a proximal solve fails and shrinks ÷3 when one converges quickly.
+/// state to the equilibrium beyond it, every fourth followed by a brief plain Newton attempt (15 iterations). β starts
+/// at 1 % of the tangent's mean diagonal entry, grows ×10 when a proximal solve fails and shrinks ÷3 when one converges
+/// quickly.
 fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::VectorXi& fixed, const std::vector<std::pair<int, double>>& pres,
                                 const Eigen::VectorXd& start, const fem::NewtonOptions& no, bool proximal, int& prox_steps) {
     try {
@@ -126,9 +127,12 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
         std::fprintf(stderr, "  Newton stopped (%s); proximal point iterations\n", e.what());
     }
     const Eigen::SparseMatrix<double, Eigen::RowMajor> K0 = body.tangent(start);
-    double dmax = 0;
-    for (Eigen::Index r = 0; r < K0.rows(); ++r) dmax = std::max(dmax, K0.coeff(r, r));
-    double beta = 1e-2 * dmax;
+    double dmax = 0, dsum = 0;
+    for (Eigen::Index r = 0; r < K0.rows(); ++r) {
+        dmax = std::max(dmax, K0.coeff(r, r));
+        dsum += K0.coeff(r, r);
+    }
+    double beta = 1e-2 * dsum / static_cast<double>(std::max<Eigen::Index>(1, K0.rows()));  // of the mean diagonal entry
     fem::NewtonOptions po = no;
     po.max_total_iterations = 40;
     Eigen::VectorXd a = start;
@@ -149,9 +153,13 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
         a = r.u;
         moved_prescribed = true;
         if (r.iterations <= 5) beta /= 3;
+        std::fprintf(stderr, "  proximal step %d: β %.3g N/mm, %d Newton iterations, largest move %.3g mm\n", k + 1, beta, r.iterations, move);
         if (k % 4 == 3 || move < 1e-4) {
             try {
-                fem::NewtonResult f = fem::solve_neo_hookean(body, fixed, pres, a, no);
+                // Plain Newton from here, briefly: near the equilibrium beyond the limit point it converges fast.
+                fem::NewtonOptions quick = no;
+                quick.max_total_iterations = 15;
+                fem::NewtonResult f = fem::solve_neo_hookean(body, fixed, pres, a, quick);
                 std::fprintf(stderr, "  equilibrium after %d proximal steps (%d Newton iterations, last β %.3g N/mm)\n", k + 1, total, beta);
                 f.iterations += total;
                 return f;

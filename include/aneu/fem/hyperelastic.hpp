@@ -119,7 +119,8 @@ struct NewtonResult {
 /// ordered and analysed once per call (a tangent that is not positive definite — buckling — is replaced by
 /// the sum of the element tangents projected onto positive semidefinite ones, shifted by a multiple of its
 /// diagonal if still singular),
-/// backtracking line search on the energy (an inverting step is never taken), and halving of the prescribed
+/// backtracking line search on the energy from the largest step the body admits (ElasticBody::max_step: a contact's
+/// collision detection; an inverting step is never taken), and halving of the prescribed
 /// increment when a substep does not converge.
 /// @throws InputError bad DOF indices; NumericalError when no substep of the allowed size converges (names the
 ///         residual and the smallest J reached)
