@@ -171,14 +171,16 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     // applier's opening (the clip's θ is prescribed each frame; a frame that cannot reach it carries on from where
     // it got).
     int inside = 0;
+    bool cleared = true;
     if (old < 0) {
         const ClipModel& cm = scene.clip_models.at(clips[static_cast<size_t>(clip)].model);
         const double top = std::max(theta, cm.max_opening_deg * DEG);
         inside = nodes_in_blades(blades, theta, P.X, P.cand, 0.01);
-        for (double th = theta; inside > 0 && th <= top; th += 0.25 * DEG)
+        cleared = inside == 0;
+        for (double th = theta; !cleared && th <= top; th += 0.25 * DEG)
             if (nodes_in_blades(blades, th, P.X, P.cand, 0.01) == 0) {
                 P.v[pm.dofs()] = th;
-                break;
+                cleared = true;
             }
     }
     P.hinge_prev = blades.hinge;
@@ -227,9 +229,13 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
                   old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
                   sw.seconds());
     warn(b);
-    if (inside > 0) {
+    if (inside > 0 && cleared) {
         std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lay inside the blades at %.2f deg: the patch's blades start at %.2f deg and close from there",
                       clip, inside, theta / DEG, N.v[N.pm->dofs()] / DEG);
+        warn(b);
+    } else if (inside > 0) {
+        std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lie inside the blades at every opening up to the clip's largest: the patch starts with them there",
+                      clip, inside);
         warn(b);
     }
 }

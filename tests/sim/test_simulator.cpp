@@ -636,6 +636,34 @@ json flattening_scene(const std::string& bundle, const std::string& wall, bool r
 
 }  // namespace
 
+namespace {
+
+/// The flattening clip's blades at its end opening: how many surface vertices lie under them (within the blades'
+/// width and length), and the deepest one's distance in front of a blade's inner face (negative: behind it).
+std::pair<int, double> under_the_flat_blades(const Eigen::MatrixX3d& x) {
+    fem::ClipBlades jb;
+    jb.hinge = {FLAT_HINGE_X, 0, 4};
+    jb.axis = {-1, 0, 0};
+    jb.up = {0, 1, 0};
+    jb.closed_gap_mm = 0.2;
+    double worst = 1e9;
+    int under = 0;
+    for (int sgn : {1, -1}) {
+        Eigen::Vector3d t, n, w;
+        jb.frame(sgn, FLAT_END_DEG * aneu::DEG, t, n, w);
+        for (Eigen::Index v = 0; v < x.rows(); ++v) {
+            const Eigen::Vector3d rel = x.row(v).transpose() - jb.hinge;
+            const double r = rel.dot(t);
+            if (std::abs(rel.dot(w)) > 0.6 || r < 0 || r > 10.5) continue;
+            worst = std::min(worst, 0.5 * jb.closed_gap_mm + rel.dot(n));  // in front of the blade's inner face: > 0
+            ++under;
+        }
+    }
+    return {under, worst};
+}
+
+}  // namespace
+
 TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWallsDoNotCross) {
     // The nonlinear patch (model.wall = "patch") against the whole tube as a neo-Hookean solid with the same
     // blades (friction μ = 0.3, the default) and wall contact, solved offline to convergence along the same
@@ -662,26 +690,7 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
     // The surface the simulator shows is the patch's: no vertex under a blade lies behind its inner face (by more
     // than the contact's 0.02 mm).
     {
-        const Eigen::MatrixX3d x = s.deformed_surface();
-        fem::ClipBlades jb;
-        jb.hinge = {FLAT_HINGE_X, 0, 4};
-        jb.axis = {-1, 0, 0};
-        jb.up = {0, 1, 0};
-        jb.closed_gap_mm = 0.2;
-        double worst = 1e9;
-        int under = 0;
-        for (int sgn : {1, -1}) {
-            Eigen::Vector3d t, n, w;
-            jb.frame(sgn, FLAT_END_DEG * aneu::DEG, t, n, w);
-            for (Eigen::Index v = 0; v < x.rows(); ++v) {
-                const Eigen::Vector3d rel = x.row(v).transpose() - jb.hinge;
-                const double r = rel.dot(t);
-                if (std::abs(rel.dot(w)) > 0.6 || r < 0 || r > 10.5) continue;
-                const double dist = 0.5 * jb.closed_gap_mm + rel.dot(n);  // in front of the blade's inner face: > 0
-                worst = std::min(worst, dist);
-                ++under;
-            }
-        }
+        const auto [under, worst] = under_the_flat_blades(s.deformed_surface());
         EXPECT_GT(under, 20);
         EXPECT_GT(worst, -0.02);
         std::printf("%d surface vertices under the blades, the deepest %.4f mm in front of a blade face\n", under, worst);
@@ -786,23 +795,7 @@ TEST(SimulatorPatch, APatchTakesOverTissueTheLinearModelPushedWithTheOpenJaws) {
     EXPECT_GT(p.min_wall_distance_mm, -0.02);
     const sim::Clip& c = s.clips().at(0);
     EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
-    const Eigen::MatrixX3d x = s.deformed_surface();
-    fem::ClipBlades jb;
-    jb.hinge = {FLAT_HINGE_X, 0, 4};
-    jb.axis = {-1, 0, 0};
-    jb.up = {0, 1, 0};
-    jb.closed_gap_mm = 0.2;
-    double worst = 1e9;
-    for (int sgn : {1, -1}) {
-        Eigen::Vector3d t, n, w;
-        jb.frame(sgn, FLAT_END_DEG * aneu::DEG, t, n, w);
-        for (Eigen::Index v = 0; v < x.rows(); ++v) {
-            const Eigen::Vector3d rel = x.row(v).transpose() - jb.hinge;
-            const double r = rel.dot(t);
-            if (std::abs(rel.dot(w)) > 0.6 || r < 0 || r > 10.5) continue;
-            worst = std::min(worst, 0.5 * jb.closed_gap_mm + rel.dot(n));
-        }
-    }
+    const double worst = under_the_flat_blades(s.deformed_surface()).second;
     EXPECT_GT(worst, -0.02);
     constexpr double FROM_CLEAR_AIR_N = 0.4941;  // the test above's blade force (closing from 40° in clear air)
     EXPECT_NEAR(c.grip_force_n, FROM_CLEAR_AIR_N, 0.05 * FROM_CLEAR_AIR_N);
