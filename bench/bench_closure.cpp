@@ -136,7 +136,7 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
     fem::NewtonOptions po = no;
     po.max_total_iterations = 40;
     Eigen::VectorXd a = start;
-    bool moved_prescribed = false;
+    bool any_step = false;
     int total = 0;
     for (int k = 0; k < 400; ++k) {
         fem::NewtonResult r;
@@ -151,7 +151,7 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
         ++prox_steps;
         const double move = (r.u - a).cwiseAbs().maxCoeff();
         a = r.u;
-        moved_prescribed = true;
+        any_step = true;
         if (r.iterations <= 5) beta /= 3;
         std::fprintf(stderr, "  proximal step %d: β %.3g N/mm, %d Newton iterations, largest move %.3g mm\n", k + 1, beta, r.iterations, move);
         if (k % 4 == 3 || move < 1e-4) {
@@ -167,7 +167,7 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
             }
         }
     }
-    throw NumericalError(std::string("proximal point iterations did not reach an equilibrium") + (moved_prescribed ? "" : " (no proximal step converged)"));
+    throw NumericalError(std::string("proximal point iterations did not reach an equilibrium") + (any_step ? "" : " (no proximal step converged)"));
 }
 
 }  // namespace

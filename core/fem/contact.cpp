@@ -28,7 +28,7 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     if (p.stiffness > 0) {
         m_kappa = p.stiffness;
     } else {
-        m_kappa = detail::default_penalty(body) / 100.0;  // the largest diagonal entry at rest
+        m_kappa = detail::max_diagonal(body);
     }
     if (p.exclude_rings < 0) throw InputError("contact: exclude_rings must be >= 0");
     if (m_p.depth_mm <= 0) m_p.depth_mm = 0.25;
@@ -247,8 +247,9 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::V
     const double Dh = m_p.gap_mm * m_p.gap_mm;
     for (size_t k = 0; k < m_pairs.size(); ++k) {
         const auto& q = m_pairs[k];
-        const PointTriangle pt = point_triangle(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)), true);
-        if (pt.D >= Dh) continue;
+        const Vec3 p = x(u, q.v), a = x(u, m_F(q.f, 0)), b = x(u, m_F(q.f, 1)), c = x(u, m_F(q.f, 2));
+        if (point_triangle(p, a, b, c, false).D >= Dh) continue;  // most candidates: no Hessian for them
+        const PointTriangle pt = point_triangle(p, a, b, c, true);
         if (pt.D <= 0) throw NumericalError("contact: a vertex lies on a face of the opposite wall");
         const Barrier bb = barrier(pt.D / Dh);
         Mat12 H = m_kappa * (bb.d2 / Dh * pt.g * pt.g.transpose() + bb.d1 * pt.H);

@@ -81,12 +81,15 @@ MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& 
     return m;
 }
 
-/// A contact penalty stiff against the body: 100 × the largest diagonal entry of its tangent at rest [N/mm].
-inline double default_penalty(const ElasticBody& body) {
+/// The largest diagonal entry of the body's tangent at rest [N/mm]: the stiffest node's own stiffness.
+inline double max_diagonal(const ElasticBody& body) {
     const Eigen::SparseMatrix<double, Eigen::RowMajor> K0 = body.tangent(Eigen::VectorXd::Zero(body.dofs()));
     double dmax = 0;
     for (Eigen::Index r = 0; r < K0.rows(); ++r) dmax = std::max(dmax, K0.coeff(r, r));
-    return 100.0 * dmax;
+    return dmax;
 }
+
+/// A contact penalty stiff against the body: 100 × its largest diagonal entry at rest [N/mm].
+inline double default_penalty(const ElasticBody& body) { return 100.0 * max_diagonal(body); }
 
 }  // namespace aneu::fem::detail
