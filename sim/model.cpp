@@ -36,10 +36,12 @@ std::string fmt3(const Eigen::Vector3d& p) {
 }
 
 // Neck: the loops between "aneurysm" faces and the others (aneu/core/label_loops.hpp).
-std::vector<std::vector<int>> neck_loops_of(const Eigen::MatrixX3i& F, const Eigen::VectorXi& face_region, const std::vector<std::string>& region_names) {
+// Loops round islands of either label (labelling noise: a few faces) are not neck line.
+std::vector<std::vector<int>> neck_loops_of(const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& X, const Eigen::VectorXi& face_region,
+                                            const std::vector<std::string>& region_names) {
     const auto it = std::find(region_names.begin(), region_names.end(), "aneurysm");
     if (it == region_names.end()) return {};
-    return label_border_loops(F, face_region, static_cast<int>(it - region_names.begin()));
+    return neck_border_loops(F, X, face_region, static_cast<int>(it - region_names.begin()));
 }
 
 }  // namespace
@@ -145,7 +147,7 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
         for (int k = 0; k < 3; ++k) L.F(static_cast<Eigen::Index>(f), k) = tris[f][static_cast<size_t>(k)];
         L.face_region[static_cast<Eigen::Index>(f)] = reg[f];
     }
-    L.neck_loops = neck_loops_of(L.F, L.face_region, s.region_names);
+    L.neck_loops = neck_loops_of(L.F, L.X, L.face_region, s.region_names);
     return L;
 }
 
@@ -248,7 +250,7 @@ SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi&
         s.adj_offsets[static_cast<size_t>(i) + 1] = s.adj_offsets[static_cast<size_t>(i)] + static_cast<int>(l.size());
         s.adj.insert(s.adj.end(), l.begin(), l.end());
     }
-    s.neck_loops = neck_loops_of(s.F, s.face_region, s.region_names);
+    s.neck_loops = neck_loops_of(s.F, s.X, s.face_region, s.region_names);
     return s;
 }
 

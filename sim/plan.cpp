@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
+#include <vector>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -86,10 +88,35 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     for (Eigen::Index v = 0; v < s.thickness.size(); ++v)
         if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
     constexpr double JAW_W = 1.0, JAW_T = 0.5;
-    // The jaws' mid-plane lies just above the neck plane on the sac's side (the parent artery stays free): the
-    // jaws' width spans the normal direction.
-    const double lift = 0.5 * JAW_W + 0.2;
     const Eigen::Vector3d u = nf.long_axis, w = nf.short_axis, n = nf.normal;
+    // The jaws' width spans the normal direction; their mid-plane lies at the height (along the normal) where the
+    // width covers the most neck line, so that the blades pinch the neck line itself. A neck line is seldom flat
+    // (a saddle between the sac and the parent's curve): where it is higher than the jaws are wide, the height
+    // that covers the most is taken. Of equals, the highest (the sac's side: the parent artery stays freer); a
+    // neck line narrower than the jaws then lies along their lower edge. Heights are the edges' midpoints'.
+    double lift = 0, covered = -1;
+    {
+        std::vector<std::pair<double, double>> seg;  // height of each neck-line edge's midpoint, its length
+        double h_lo = 1e300, h_hi = -1e300;
+        for (const auto& loop : s.lumen.neck_loops)
+            for (size_t k = 0; k < loop.size(); ++k) {
+                const Eigen::Vector3d a = s.lumen.X.row(loop[k]), b = s.lumen.X.row(loop[(k + 1) % loop.size()]);
+                const double h = (0.5 * (a + b) - nf.centre).dot(n);
+                seg.emplace_back(h, (b - a).norm());
+                h_lo = std::min(h_lo, h);
+                h_hi = std::max(h_hi, h);
+            }
+        for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 1e-9; c += 0.01) {
+            double in = 0;
+            for (const auto& [h, len] : seg)
+                if (std::abs(h - c) <= 0.5 * JAW_W) in += len;
+            if (in >= covered - 1e-9) {
+                covered = in;
+                lift = c;
+            }
+        }
+        covered /= nf.line_mm;
+    }
     // The opening (80 % of the clip's largest) and the hinge's distance before the neck's near end: every neck
     // point must pass between the open jaws with its wall and 0.5 mm to spare, at least 1 mm.
     const double opening = 0.8 * o.max_opening_deg;
@@ -171,9 +198,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
                   "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes along the neck's long axis from the freer side, open %.0f deg,\n"
-                  "// closes across the neck at t = %.1f s and is released; the suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
+                  "// closes across the neck at t = %.1f s and is released; its jaws (%.1f mm wide) lie %.2f mm above the neck's centre, where\n"
+                  "// they cover %.0f %% of the neck line. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close);
+                  blade, opening, t_close, JAW_W, lift, 100.0 * covered);
     return std::string(head) + j.dump(2) + "\n";
 }
 

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The planner on a tube whose "sac" patch has a known neck: z 2.5 … 5.5 mm (3 mm long, along z) and ±22.5° of +x
 // on the lumen (r 1.5 mm: a chord of 1.15 mm), so the neck's long axis is z, its normal +x.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -73,7 +74,19 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_GT(std::abs(closed.up.y()), 0.99);
     const double margin = std::abs(closed.position.z() - nf.centre.z()) - 0.5 * nf.length_mm;
     EXPECT_GE(margin, 1.0);
-    EXPECT_GT(closed.position.x(), 1.5);
+    // The jaws' width (along the normal, x) covers the whole neck line, its lower edge at the line's lowest point
+    // (the highest of the heights that cover it all: the sac's side). Heights of the edges' midpoints.
+    double x_lo = 1e9, x_hi = -1e9;
+    const auto& LX = m.surface.lumen.X;
+    for (const auto& loop : m.surface.lumen.neck_loops)
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const double x = 0.5 * (LX(loop[k], 0) + LX(loop[(k + 1) % loop.size()], 0));
+            x_lo = std::min(x_lo, x);
+            x_hi = std::max(x_hi, x);
+        }
+    ASSERT_LT(x_hi - x_lo, cm.jaw_width_mm);
+    EXPECT_NEAR(closed.position.x() - 0.5 * cm.jaw_width_mm, x_lo, 0.02) << x_lo << " … " << x_hi;
+    EXPECT_NE(text.find("they cover 100 % of the neck line"), std::string::npos) << text.substr(0, 600);
     // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
     const double half = 0.5 * keys[0].opening_deg * M_PI / 180;
     EXPECT_GE((margin + 0.5 * nf.length_mm) * std::tan(half), 0.5 * nf.width_mm + 0.4 + 0.5 - 0.3);
