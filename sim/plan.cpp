@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 
 namespace aneu::sim {
 
@@ -87,36 +88,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     double t_max = 0;
     for (Eigen::Index v = 0; v < s.thickness.size(); ++v)
         if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
-    constexpr double JAW_W = 1.0, JAW_T = 0.5;
+    constexpr double JAW_W = 1.0, JAW_T = 0.5, CLEAR = 0.2;
     const Eigen::Vector3d u = nf.long_axis, w = nf.short_axis, n = nf.normal;
-    // The jaws' width spans the normal direction; their mid-plane lies at the height (along the normal) where the
-    // width covers the most neck line, so that the blades pinch the neck line itself. A neck line is seldom flat
-    // (a saddle between the sac and the parent's curve): where it is higher than the jaws are wide, the height
-    // that covers the most is taken. Of equals, the highest (the sac's side: the parent artery stays freer); a
-    // neck line narrower than the jaws then lies along their lower edge. Heights are the edges' midpoints'.
-    double lift = 0, covered = -1;
-    {
-        std::vector<std::pair<double, double>> seg;  // height of each neck-line edge's midpoint, its length
-        double h_lo = 1e300, h_hi = -1e300;
-        for (const auto& loop : s.lumen.neck_loops)
-            for (size_t k = 0; k < loop.size(); ++k) {
-                const Eigen::Vector3d a = s.lumen.X.row(loop[k]), b = s.lumen.X.row(loop[(k + 1) % loop.size()]);
-                const double h = (0.5 * (a + b) - nf.centre).dot(n);
-                seg.emplace_back(h, (b - a).norm());
-                h_lo = std::min(h_lo, h);
-                h_hi = std::max(h_hi, h);
-            }
-        for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 1e-9; c += 0.01) {
-            double in = 0;
-            for (const auto& [h, len] : seg)
-                if (std::abs(h - c) <= 0.5 * JAW_W) in += len;
-            if (in >= covered - 1e-9) {
-                covered = in;
-                lift = c;
-            }
-        }
-        covered /= nf.line_mm;
-    }
     // The opening (80 % of the clip's largest) and the hinge's distance before the neck's near end: every neck
     // point must pass between the open jaws with its wall and 0.5 mm to spare, at least 1 mm.
     const double opening = 0.8 * o.max_opening_deg;
@@ -131,32 +104,130 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             }
         return m;
     };
-    // The side to come from: the one with fewer simulated-surface vertices in the corridor the open jaws sweep.
-    auto corridor = [&](double side) {
+    // The neck line's edges: midpoint (from the centre) and length.
+    std::vector<std::pair<Eigen::Vector3d, double>> seg;
+    double h_lo = 1e300, h_hi = -1e300;
+    for (const auto& loop : s.lumen.neck_loops)
+        for (size_t k = 0; k < loop.size(); ++k) {
+            const Eigen::Vector3d a = s.lumen.X.row(loop[k]), b = s.lumen.X.row(loop[(k + 1) % loop.size()]);
+            seg.emplace_back(0.5 * (a + b) - nf.centre, (b - a).norm());
+            h_lo = std::min(h_lo, seg.back().first.dot(n));
+            h_hi = std::max(h_hi, seg.back().first.dot(n));
+        }
+    // Outer-surface vertices within CLEAR of either open blade (boxes: length, width, thickness) with the hinge at
+    // `hinge`, anywhere along the approach (the hinge every 0.25 mm back to approach_mm before it).
+    auto approach_hits = [&](const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+        fem::ClipBlades bl;
+        bl.axis = axis;
+        bl.up = w;
+        bl.length_mm = length;
+        bl.width_mm = JAW_W;
+        bl.thickness_mm = JAW_T;
+        int hits = 0;
+        for (int sb : {1, -1}) {
+            Eigen::Vector3d t, nn, ww;
+            bl.frame(sb, opening * PI / 180.0, t, nn, ww);
+            for (Eigen::Index v = 0; v < s.size(); ++v) {
+                const Eigen::Vector3d rel0 = s.X.row(v).transpose() - hinge;
+                // Along the approach the hinge is at hinge − k·0.25·axis: the vertex's coordinates in the blade's
+                // frame shift by k·0.25·(axis·t, axis·ww, axis·nn).
+                const double r0 = rel0.dot(t), a0 = rel0.dot(ww), p0 = rel0.dot(nn);
+                const double dr = axis.dot(t), da = axis.dot(ww), dp = axis.dot(nn);
+                for (double back = 0; back <= o.approach_mm + 1e-9; back += 0.25) {
+                    const double r = r0 + back * dr, across = a0 + back * da, p = p0 + back * dp;
+                    if (r >= -CLEAR && r <= length + CLEAR && std::abs(across) <= 0.5 * JAW_W + CLEAR && p < CLEAR && p > -JAW_T - CLEAR) {
+                        ++hits;
+                        break;
+                    }
+                }
+            }
+        }
+        return hits;
+    };
+    // Where the jaws go: their width spans the normal direction and their mid-plane should hold the neck line,
+    // so that the blades pinch the line itself. A neck line is seldom flat (a saddle between the sac and the
+    // parent's curve), and the parent artery runs on under the hinge: a blade lying on the neck plane would cut
+    // into it there. So the candidates are: the side to come from (along ±the long axis), the blades' tilt α about
+    // the short axis (the hinge raised, the tips down to the neck), the mid-plane's height c at the neck's centre,
+    // and how far back the hinge stands (further back, the open jaws are wider at the neck: a dome wider than the
+    // neck passes between them). Kept: the one whose open blades touch no vessel along the approach and whose width
+    // covers the most neck line; of equals the smaller tilt, the hinge nearer, the side with fewer vertices in the
+    // way, then the higher (the sac's side).
+    struct Candidate {
+        double side, alpha, c, extra, covered;
+        int order;
+    };
+    auto corridor = [&](double side) {  // the simulated-surface vertices in the way of the approach
         const double back = 0.5 * nf.length_mm + margin_for(side);
         int count = 0;
         for (Eigen::Index v = 0; v < s.size(); ++v) {
             const Eigen::Vector3d q = s.X.row(v).transpose() - nf.centre;
-            const double along = side * q.dot(u), across = std::abs(q.dot(w)), up = q.dot(n) - lift;
-            if (along < -back && along > -(back + o.approach_mm) && across < 0.5 * nf.width_mm + 2.0 && std::abs(up) < JAW_W) ++count;
+            const double along = side * q.dot(u), across = std::abs(q.dot(w)), up = q.dot(n);
+            if (along < -back && along > -(back + o.approach_mm) && across < 0.5 * nf.width_mm + 2.0 && std::abs(up) < 2.0) ++count;
         }
         return count;
     };
-    const double side = corridor(1.0) <= corridor(-1.0) ? 1.0 : -1.0;
-    const double margin = margin_for(side);
-    // The clip: straight blades of the shortest standard length (3 … 15 mm in 2 mm steps) reaching 0.5 mm past the neck.
-    double blade = 0;
-    for (double l = 3; l <= 15; l += 2)
-        if (l >= margin + nf.length_mm + 0.5) {
-            blade = l;
-            break;
+    const double preferred = corridor(1.0) <= corridor(-1.0) ? 1.0 : -1.0;
+    std::vector<Candidate> cands;
+    for (double side : {preferred, -preferred})
+        for (int ia = 0; ia <= 10; ++ia) {
+            const double alpha = ia * 3.0 * PI / 180.0;
+            const Eigen::Vector3d nprime = std::sin(alpha) * side * u + std::cos(alpha) * n;  // the tilted mid-plane's normal
+            for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 3.0 + 1e-9; c += 0.05) {
+                double in = 0;
+                for (const auto& [q, len] : seg)
+                    if (std::abs((q - c * n).dot(nprime)) <= 0.5 * JAW_W) in += len;
+                for (double extra = 0; extra <= 6; extra += 1)  // the hinge further back: the jaws wider at the neck
+                    cands.push_back({side, alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size())});
+            }
         }
-    if (blade == 0) {
+    std::stable_sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) {
+        if (std::abs(a.covered - b.covered) > 1e-9) return a.covered > b.covered;
+        if (a.alpha != b.alpha) return a.alpha < b.alpha;
+        if (a.extra != b.extra) return a.extra < b.extra;
+        if (a.side != b.side) return a.order < b.order;  // the preferred side first
+        return a.c > b.c;
+    });
+    // The clip for a candidate: its axis, hinge and the shortest standard blade (3 … 15 mm in 2 mm steps) whose
+    // tip reaches 0.5 mm past the neck's far end.
+    auto pose_of = [&](const Candidate& k, Eigen::Vector3d& axis, Eigen::Vector3d& hinge, double& blade) {
+        const double margin = margin_for(k.side) + k.extra;
+        axis = std::cos(k.alpha) * k.side * u - std::sin(k.alpha) * n;
+        const double back = 0.5 * nf.length_mm + margin;  // along the long axis, from the neck's centre
+        hinge = nf.centre + k.c * n - back * k.side * u + back * std::tan(k.alpha) * n;
+        blade = 0;
+        for (double l = 3; l <= 15; l += 2)
+            if (l * std::cos(k.alpha) >= back + 0.5 * nf.length_mm + 0.5) {
+                blade = l;
+                break;
+            }
+        return blade > 0;
+    };
+    // The first clear one; if none of the best-covering 3000 is clear, the one that touches the fewest vertices.
+    const Candidate* chosen = nullptr;
+    int fewest = std::numeric_limits<int>::max(), checked = 0;
+    Eigen::Vector3d axis, hinge;
+    double blade = 0;
+    for (const Candidate& k : cands) {
+        Eigen::Vector3d ax, hi;
+        double l = 0;
+        if (!pose_of(k, ax, hi, l)) continue;
+        const int h = approach_hits(hi, ax, l);
+        if (h < fewest) {
+            fewest = h;
+            chosen = &k;
+            axis = ax;
+            hinge = hi;
+            blade = l;
+        }
+        if (h == 0 || ++checked >= 3000) break;
+    }
+    if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
                          " mm; the longest straight clip planned (15 mm, open " + std::to_string(opening) + " deg) does not span it");
     }
-    const Eigen::Vector3d axis = side * u;
-    const Eigen::Vector3d hinge = nf.centre - (0.5 * nf.length_mm + margin) * axis + lift * n;
+    const double lift = chosen->c, covered = chosen->covered, tilt_deg = chosen->alpha * 180.0 / PI;
+    const int hits = fewest;
     const Eigen::Vector3d start = hinge - o.approach_mm * axis;
     // The suction tube parked beside the neck, 3 mm clear of the vessel, pointing at it.
     Eigen::Vector3d park = nf.centre - (0.5 * nf.width_mm + 4.0) * w + 2.0 * n;
@@ -198,10 +269,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
                   "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes along the neck's long axis from the freer side, open %.0f deg,\n"
-                  "// closes across the neck at t = %.1f s and is released; its jaws (%.1f mm wide) lie %.2f mm above the neck's centre, where\n"
-                  "// they cover %.0f %% of the neck line. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
+                  "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
+                  "// tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line; %d outer-surface vertices lie within %.1f mm\n"
+                  "// of the open blades along the approach. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close, JAW_W, lift, 100.0 * covered);
+                  blade, opening, t_close, JAW_W, lift, tilt_deg, 100.0 * covered, hits, CLEAR);
     return std::string(head) + j.dump(2) + "\n";
 }
 

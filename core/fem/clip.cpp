@@ -101,15 +101,20 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
         }
     }
 
-    const auto th = static_cast<int>(body.dofs());
-    std::vector<std::array<int, 4>> groups;  // each candidate's DOFs and θ
-    groups.reserve(m_nodes.size() + 1);
-    for (int c : m_nodes) groups.push_back({3 * c, 3 * c + 1, 3 * c + 2, th});
-    groups.push_back({th, th, th, th});  // (θ, θ) even without candidates
-    detail::MergedPattern mp = detail::merge_pattern(body.pattern(), dofs(), groups);
-    for (size_t k = 0; k < m_nodes.size(); ++k) m_slots.push_back(mp.block(groups[k]));
-    m_pattern = std::move(mp.pattern);
-    m_body_to_pattern = std::move(mp.body_to_pattern);
+}
+
+void ClipBody::build_pattern() const {
+    std::call_once(m_pattern_once, [this] {
+        const auto th = static_cast<int>(m_body.dofs());
+        std::vector<std::array<int, 4>> groups;  // each candidate's DOFs and θ
+        groups.reserve(m_nodes.size() + 1);
+        for (int c : m_nodes) groups.push_back({3 * c, 3 * c + 1, 3 * c + 2, th});
+        groups.push_back({th, th, th, th});  // (θ, θ) even without candidates
+        detail::MergedPattern mp = detail::merge_pattern(m_body.pattern(), dofs(), groups);
+        for (size_t k = 0; k < m_nodes.size(); ++k) m_slots.push_back(mp.block(groups[k]));
+        m_pattern = std::move(mp.pattern);
+        m_body_to_pattern = std::move(mp.body_to_pattern);
+    });
 }
 
 std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const {
@@ -292,6 +297,7 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::VectorXd& v, bool project) const {
     const RowSparse Kb = m_body.tangent(v.head(m_body.dofs()), project);
+    build_pattern();
     RowSparse K = m_pattern;
     double* val = K.valuePtr();
     for (size_t p = 0; p < m_body_to_pattern.size(); ++p) val[m_body_to_pattern[p]] += Kb.valuePtr()[p];

@@ -24,7 +24,6 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     for (Eigen::Index f = 0; f < faces.rows(); ++f)
         for (int k = 0; k < 3; ++k)
             if (faces(f, k) < 0 || faces(f, k) >= X.rows()) throw InputError("contact: face " + std::to_string(f) + " names a node outside the body");
-    const RowSparse& bp = body.pattern();
     if (p.stiffness > 0) {
         m_kappa = p.stiffness;
     } else {
@@ -85,21 +84,25 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             m_pairs.push_back({v, static_cast<int>(f)});
         }
     }
-    // Pattern: the body's and a 12 × 12 block per pair.
-    auto dofs_of = [&](const Pair& q) {
-        std::array<int, 12> d{};
-        const int nodes[4] = {q.v, m_F(q.f, 0), m_F(q.f, 1), m_F(q.f, 2)};
-        for (int i = 0; i < 4; ++i)
-            for (int ax = 0; ax < 3; ++ax) d[static_cast<size_t>(3 * i + ax)] = 3 * nodes[i] + ax;
-        return d;
-    };
-    std::vector<std::array<int, 12>> groups;
-    groups.reserve(m_pairs.size());
-    for (const auto& q : m_pairs) groups.push_back(dofs_of(q));
-    detail::MergedPattern mp = detail::merge_pattern(bp, body.dofs(), groups);
-    for (const auto& g : groups) m_pair_slots.push_back(mp.block(g));
-    m_pattern = std::move(mp.pattern);
-    m_body_to_pattern = std::move(mp.body_to_pattern);
+}
+
+void ContactBody::build_pattern() const {
+    std::call_once(m_pattern_once, [this] {
+        auto dofs_of = [&](const Pair& q) {
+            std::array<int, 12> d{};
+            const int nodes[4] = {q.v, m_F(q.f, 0), m_F(q.f, 1), m_F(q.f, 2)};
+            for (int i = 0; i < 4; ++i)
+                for (int ax = 0; ax < 3; ++ax) d[static_cast<size_t>(3 * i + ax)] = 3 * nodes[i] + ax;
+            return d;
+        };
+        std::vector<std::array<int, 12>> groups;
+        groups.reserve(m_pairs.size());
+        for (const auto& q : m_pairs) groups.push_back(dofs_of(q));
+        detail::MergedPattern mp = detail::merge_pattern(m_body.pattern(), m_body.dofs(), groups);
+        for (const auto& g : groups) m_pair_slots.push_back(mp.block(g));
+        m_pattern = std::move(mp.pattern);
+        m_body_to_pattern = std::move(mp.body_to_pattern);
+    });
 }
 
 namespace {
@@ -241,6 +244,7 @@ Eigen::VectorXd ContactBody::internal_force(const Eigen::VectorXd& u) const {
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::VectorXd& u, bool project) const {
     const RowSparse Kb = m_body.tangent(u, project);
+    build_pattern();
     RowSparse K = m_pattern;
     double* val = K.valuePtr();
     for (size_t p = 0; p < m_body_to_pattern.size(); ++p) val[m_body_to_pattern[p]] += Kb.valuePtr()[p];

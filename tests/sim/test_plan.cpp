@@ -98,8 +98,11 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_LE(std::min(closed.position.z(), tip), 2.5 - 0.5);
     EXPECT_GE(std::max(closed.position.z(), tip), 5.5 + 0.5);
     // And it runs: the clip is loaded, closed and left on the vessel.
+    EXPECT_NE(text.find("; 0 outer-surface vertices lie within 0.2 mm"), std::string::npos)
+        << text.substr(0, 800);
     sim::Scene run = sc;
-    run.log = run.series = run.report = "";
+    run.series = run.report = "";
+    run.log = (t.dir / "run_log.csv").string();
     sim::Simulator s(run, sim::load_model(t.bundle.string()));
     sim::RunOptions opt;
     opt.deterministic = true;
@@ -107,6 +110,25 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_EQ(a.clips_used, 1);
     EXPECT_EQ(a.clips_deposited, 1);
     EXPECT_GT(a.peak_vessel_force_n, 0.0) << "the clip touched the vessel";
+    // The open jaws come in without touching the vessel (no contact node until the applier starts closing at
+    // keys[1].t), and touch it while they close.
+    std::ifstream log(run.log);
+    std::string line;
+    std::getline(log, line);
+    ASSERT_EQ(line.rfind("t_s,contact_nodes,", 0), 0u) << line;
+    int rows_in = 0, touched_closing = 0;
+    while (std::getline(log, line)) {
+        const double tt = std::stod(line);
+        const int contacts = std::stoi(line.substr(line.find(',') + 1));
+        if (tt < keys[1].t - 1e-9) {
+            ++rows_in;
+            EXPECT_EQ(contacts, 0) << "at t = " << tt;
+        } else if (tt <= keys[2].t + 1e-9 && contacts > 0) {
+            ++touched_closing;
+        }
+    }
+    EXPECT_GT(rows_in, 100);
+    EXPECT_GT(touched_closing, 0);
     // --flow asks for the residual flow after the session, on the scene's own series.
     EXPECT_TRUE(sc.flow.empty());
     sim::PlanOptions po;

@@ -23,6 +23,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <mutex>
+
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
@@ -122,7 +124,10 @@ public:
     double energy(const Eigen::VectorXd& v) const override;
     Eigen::VectorXd internal_force(const Eigen::VectorXd& v) const override;
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& v, bool project = false) const override;
-    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_pattern; }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override {
+        build_pattern();
+        return m_pattern;
+    }
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
     double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override {
         return m_body.max_step(v.head(m_body.dofs()), dv.head(m_body.dofs()));
@@ -160,6 +165,9 @@ private:
     /// is no grip. slid: |Δ| ≥ ε.
     bool grip_terms(const Eigen::VectorXd& v, size_t k, int s, const Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project, bool* slid = nullptr) const;
+    /// The tangent's pattern (the body's, each candidate's DOFs coupled to θ), made when first needed (a frame whose
+    /// blades touch nothing needs none; a patch's has millions of entries).
+    void build_pattern() const;
     struct Grip {
         bool on = false;
         double r = 0, a = 0, lambda = 0;
@@ -174,9 +182,10 @@ private:
     ClipContactParams m_p;
     double m_kappa = 0, m_stop = 0;  // node penalty; the closed stop's penalty on θ < 0 [N·mm/rad]
     double m_rho = EDGE_MM;          // edge radius [mm]
-    Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
-    std::vector<std::int64_t> m_body_to_pattern;
-    std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
+    mutable std::once_flag m_pattern_once;
+    mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
+    mutable std::vector<std::int64_t> m_body_to_pattern;
+    mutable std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
 };
 
 /// A linear elastic body: Ψ = ½ uᵀ K u (K symmetric, both triangles). The linear model in the same contact

@@ -18,6 +18,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <mutex>
+
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
@@ -49,7 +51,10 @@ public:
     double energy(const Eigen::VectorXd& u) const override;
     Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override;
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const override;
-    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override { return m_pattern; }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override {
+        build_pattern();
+        return m_pattern;
+    }
     double min_jacobian(const Eigen::VectorXd& u) const override { return m_body.min_jacobian(u); }
 
     /// Candidate vertex–face pairs.
@@ -71,6 +76,9 @@ private:
     /// into the face from behind it.
     double signed_distance(const Eigen::VectorXd& u, const Pair& p) const;
     Eigen::Vector3d x(const Eigen::VectorXd& u, int node) const { return m_X.row(node).transpose() + u.segment<3>(3 * node); }
+    /// The tangent's pattern (the body's and a 12 × 12 block per pair), made when first needed: a patch's has
+    /// millions of entries (its dense exterior block), and a frame whose blades touch nothing needs none.
+    void build_pattern() const;
 
     const ElasticBody& m_body;
     Eigen::MatrixX3d m_X;
@@ -78,9 +86,10 @@ private:
     ContactParams m_p;
     double m_kappa = 0;
     std::vector<Pair> m_pairs;
-    Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
-    std::vector<std::int64_t> m_body_to_pattern;
-    std::vector<std::array<std::int64_t, 144>> m_pair_slots;  // 12 × 12 entries of each pair
+    mutable std::once_flag m_pattern_once;
+    mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
+    mutable std::vector<std::int64_t> m_body_to_pattern;
+    mutable std::vector<std::array<std::int64_t, 144>> m_pair_slots;  // 12 × 12 entries of each pair
 };
 
 }  // namespace aneu::fem
