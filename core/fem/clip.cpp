@@ -296,11 +296,10 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
 }
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::VectorXd& v, bool project) const {
-    const RowSparse Kb = m_body.tangent(v.head(m_body.dofs()), project);
     build_pattern();
     RowSparse K = m_pattern;
     double* val = K.valuePtr();
-    for (size_t p = 0; p < m_body_to_pattern.size(); ++p) val[m_body_to_pattern[p]] += Kb.valuePtr()[p];
+    m_body.add_tangent(v.head(m_body.dofs()), project, val, m_body_to_pattern.data());
     const double theta = v[theta_dof()];
     const auto th = theta_dof();
     val[m_pattern.outerIndexPtr()[th + 1] - 1] += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row

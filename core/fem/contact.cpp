@@ -243,11 +243,24 @@ Eigen::VectorXd ContactBody::internal_force(const Eigen::VectorXd& u) const {
 }
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::VectorXd& u, bool project) const {
-    const RowSparse Kb = m_body.tangent(u, project);
     build_pattern();
     RowSparse K = m_pattern;
-    double* val = K.valuePtr();
-    for (size_t p = 0; p < m_body_to_pattern.size(); ++p) val[m_body_to_pattern[p]] += Kb.valuePtr()[p];
+    m_body.add_tangent(u, project, K.valuePtr(), m_body_to_pattern.data());
+    add_pair_tangents(u, project, K.valuePtr(), nullptr);
+    return K;
+}
+
+void ContactBody::add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
+    build_pattern();
+    // The body's entries go to where[m_body_to_pattern[p]] (composed each call into a kept buffer: no allocation).
+    const std::lock_guard<std::mutex> lock(m_compose_mutex);
+    m_compose.resize(m_body_to_pattern.size());
+    for (size_t p = 0; p < m_body_to_pattern.size(); ++p) m_compose[p] = where[m_body_to_pattern[p]];
+    m_body.add_tangent(u, project, values, m_compose.data());
+    add_pair_tangents(u, project, values, where);
+}
+
+void ContactBody::add_pair_tangents(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
     const double Dh = m_p.gap_mm * m_p.gap_mm;
     for (size_t k = 0; k < m_pairs.size(); ++k) {
         const auto& q = m_pairs[k];
@@ -259,9 +272,11 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::V
         Mat12 H = m_kappa * (bb.d2 / Dh * pt.g * pt.g.transpose() + bb.d1 * pt.H);
         if (project || m_p.project_pairs) H = psd(H);
         for (int i = 0; i < 12; ++i)
-            for (int j = 0; j < 12; ++j) val[m_pair_slots[k][static_cast<size_t>(12 * i + j)]] += H(i, j);
+            for (int j = 0; j < 12; ++j) {
+                const std::int64_t slot = m_pair_slots[k][static_cast<size_t>(12 * i + j)];
+                values[where ? where[slot] : slot] += H(i, j);
+            }
     }
-    return K;
 }
 
 double ContactBody::max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const {

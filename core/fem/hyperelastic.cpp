@@ -488,7 +488,12 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             ++out.iterations;
             const Eigen::VectorXd du = newton_step(v, g, nullptr);
             const double slope = g.dot(du);
-            if (trace) std::fprintf(stderr, "newton s %.4g it %d residual %.3e / %.3e energy %.12e slope %.3e |du| %.3e\n", s1, it, r, scale, E, slope, du.norm());
+            if (trace) {
+                Eigen::Index worst = 0;
+                du.cwiseAbs().maxCoeff(&worst);
+                std::fprintf(stderr, "newton s %.4g it %d residual %.3e / %.3e energy %.12e slope %.3e |du| %.3e (largest at DOF %lld: %.3e; projected tangents so far %d)\n", s1,
+                             it, r, scale, E, slope, du.norm(), static_cast<long long>(worst), du[worst], out.shifted);
+            }
             double alpha = solid.max_step(v, du);  // 1 unless a contact stops the step short
             bool accepted = false;
             for (int ls = 0; ls < 40; ++ls, alpha *= 0.5) {

@@ -262,6 +262,15 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> PatchModel::tangent(const Eigen::Ve
     return K;
 }
 
+void PatchModel::add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
+    const RowSparse Ks = m->solid->tangent(u, project);
+    for (size_t p = 0; p < m->solid_to_pattern.size(); ++p) values[where[m->solid_to_pattern[p]]] += Ks.valuePtr()[p];
+    const Eigen::Index ni = m->S.rows();
+    size_t q = 0;
+    for (Eigen::Index a = 0; a < ni; ++a)
+        for (Eigen::Index b = 0; b < ni; ++b) values[where[m->s_to_pattern[q++]]] += m->S(a, b);
+}
+
 const Eigen::SparseMatrix<double, Eigen::RowMajor>& PatchModel::pattern() const { return m->pattern; }
 double PatchModel::min_jacobian(const Eigen::VectorXd& u) const { return m->solid->min_jacobian(u); }
 const std::vector<int>& PatchModel::nodes() const { return m->nodes; }

@@ -9,6 +9,7 @@
 #include <Eigen/Eigenvalues>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 #include "aneu/fem/contact.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 #include "aneu/fem/static_solve.hpp"
@@ -180,6 +181,30 @@ TEST(WallContact, ForcesAndTangentAreTheBarriersDerivatives) {
     // Projected (tangent(u, true)): positive semidefinite pair blocks, so the sum with the projected solid is too.
     const Eigen::MatrixXd Kp = Eigen::MatrixXd(body.tangent(u, true));
     EXPECT_GT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Kp).eigenvalues().minCoeff(), -1e-9 * scale_k);
+}
+
+TEST(WallContact, ADecoratorOverTheContactHasItsTangentEntryForEntry) {
+    // A clip body over the wall contact (as in a patch frame) fills its tangent through the contact body's
+    // add_tangent, with no copy of the contact body's own: its block on the body's DOFs must be the contact
+    // body's tangent (active pairs included) entry for entry. Blades far off: no candidate.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
+        if (p.V(i, 2) > Plates::H + 1e-9) u[3 * i + 2] = -(Plates::GAP - 0.005);
+    fem::ContactParams cp;
+    cp.stiffness = 1.0;
+    const fem::ContactBody body(solid, p.V, p.faces, u, cp);
+    ASSERT_GT(body.active(u), 10u);
+    fem::ClipBlades bl;
+    bl.hinge = Eigen::Vector3d(100, 100, 100);
+    const fem::ClipBody clip(body, p.V, {}, (Eigen::VectorXd(u.size() + 1) << u, 0.3).finished(), bl, fem::ClipSpring{1.0, 0.1});
+    Eigen::VectorXd v(u.size() + 1);
+    v << u, 0.3;
+    const Eigen::MatrixXd Kc = Eigen::MatrixXd(clip.tangent(v)).topLeftCorner(u.size(), u.size());
+    const Eigen::MatrixXd Kb = Eigen::MatrixXd(body.tangent(u));
+    EXPECT_EQ((Kc - Kb).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_GT((Kb - Eigen::MatrixXd(solid.tangent(u))).cwiseAbs().maxCoeff(), 0.1) << "the pairs are in it";
 }
 
 TEST(WallContact, NoStepPassesThroughAFace) {

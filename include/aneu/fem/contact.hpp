@@ -55,6 +55,7 @@ public:
         build_pattern();
         return m_pattern;
     }
+    void add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const override;
     double min_jacobian(const Eigen::VectorXd& u) const override { return m_body.min_jacobian(u); }
 
     /// Candidate vertex–face pairs.
@@ -90,6 +91,11 @@ private:
     mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
     mutable std::vector<std::int64_t> m_body_to_pattern;
     mutable std::vector<std::array<std::int64_t, 144>> m_pair_slots;  // 12 × 12 entries of each pair
+    // add_tangent into a decorator's matrix: the body's entries' places there (a buffer kept between calls).
+    mutable std::mutex m_compose_mutex;
+    mutable std::vector<std::int64_t> m_compose;
+    /// The pairs' terms at u, added into values at where[slot] (where null: the slots themselves).
+    void add_pair_tangents(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const;
 };
 
 }  // namespace aneu::fem

@@ -31,6 +31,14 @@ public:
     /// Both triangles, on pattern(); `project`: positive semidefinite element tangents. @throws NumericalError
     virtual Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const = 0;
     virtual const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const = 0;
+    /// Adds tangent(u, project) into `values`, the value array of a larger matrix whose pattern holds this body's:
+    /// this body's p-th stored pattern entry goes to values[where[p]]. A decorator (contact, clip) fills its own
+    /// tangent so, with no copy of the body's (a patch's has millions of entries: its dense exterior block).
+    /// The default makes tangent(u, project) and scatters it.
+    virtual void add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
+        const Eigen::SparseMatrix<double, Eigen::RowMajor> K = tangent(u, project);
+        for (Eigen::Index p = 0; p < K.nonZeros(); ++p) values[where[p]] += K.valuePtr()[p];
+    }
     virtual double min_jacobian(const Eigen::VectorXd& u) const = 0;
     /// The largest fraction α ≤ 1 of the step du from u that the body admits (a contact's barrier must not be
     /// stepped through: continuous collision detection); 1 for a body without contact.

@@ -42,6 +42,7 @@ public:
     Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override;
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const override;
     const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override;
+    void add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const override;
     double min_jacobian(const Eigen::VectorXd& u) const override;
 
     /// Global node of each patch node.
