@@ -89,21 +89,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     for (Eigen::Index v = 0; v < s.thickness.size(); ++v)
         if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
     constexpr double JAW_W = 1.0, JAW_T = 0.5, CLEAR = 0.2;
-    const Eigen::Vector3d u = nf.long_axis, w = nf.short_axis, n = nf.normal;
-    // The opening (80 % of the clip's largest) and the hinge's distance before the neck's near end: every neck
-    // point must pass between the open jaws with its wall and 0.5 mm to spare, at least 1 mm.
-    const double opening = 0.8 * o.max_opening_deg;
-    const double tan_half = std::tan(0.5 * opening * PI / 180.0);
-    auto margin_for = [&](double side) {
-        double m = 1.0;
-        for (const auto& loop : s.lumen.neck_loops)
-            for (int v : loop) {
-                const Eigen::Vector3d q = s.lumen.X.row(v).transpose() - nf.centre;
-                const double from_near = side * q.dot(u) + 0.5 * nf.length_mm;
-                m = std::max(m, (std::abs(q.dot(w)) + t_max + 0.5) / tan_half - from_near);
-            }
-        return m;
-    };
+    const Eigen::Vector3d n = nf.normal;
     // The neck line's edges: midpoint (from the centre) and length.
     std::vector<std::pair<Eigen::Vector3d, double>> seg;
     double h_lo = 1e300, h_hi = -1e300;
@@ -114,27 +100,58 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             h_lo = std::min(h_lo, seg.back().first.dot(n));
             h_hi = std::max(h_hi, seg.back().first.dot(n));
         }
+    // The blades run along u (the neck's long axis turned by a yaw ψ about the normal), close across w, open to
+    // `opening`. The hinge stands before the neck's near end (along u) so far that every neck point passes between
+    // the open jaws with its wall and 0.5 mm to spare, at least 1 mm; `reach` is how far the neck's far end lies.
+    struct Way {
+        Eigen::Vector3d u, w;
+        double yaw, opening, side, margin, near, far;
+    };
+    auto way_of = [&](double yaw, double opening, double side) {
+        Way f;
+        f.yaw = yaw;
+        f.opening = opening;
+        f.side = side;
+        f.u = std::cos(yaw) * nf.long_axis + std::sin(yaw) * nf.short_axis;
+        f.w = n.cross(f.u).normalized();
+        const double tan_half = std::tan(0.5 * opening * PI / 180.0);
+        f.near = 1e300;
+        f.far = -1e300;
+        for (const auto& loop : s.lumen.neck_loops)
+            for (int v : loop) {
+                const double a = side * (s.lumen.X.row(v).transpose() - nf.centre).dot(f.u);
+                f.near = std::min(f.near, a);
+                f.far = std::max(f.far, a);
+            }
+        f.margin = 1.0;
+        for (const auto& loop : s.lumen.neck_loops)
+            for (int v : loop) {
+                const Eigen::Vector3d q = s.lumen.X.row(v).transpose() - nf.centre;
+                f.margin = std::max(f.margin, (std::abs(q.dot(f.w)) + t_max + 0.5) / tan_half - (side * q.dot(f.u) - f.near));
+            }
+        return f;
+    };
     // Outer-surface vertices within CLEAR of either open blade (boxes: length, width, thickness) with the hinge at
     // `hinge`, anywhere along the approach (the hinge every 0.25 mm back to approach_mm before it).
-    auto approach_hits = [&](const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+    auto approach_hits = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
         fem::ClipBlades bl;
         bl.axis = axis;
-        bl.up = w;
+        bl.up = f.w;
         bl.length_mm = length;
         bl.width_mm = JAW_W;
         bl.thickness_mm = JAW_T;
         int hits = 0;
         for (int sb : {1, -1}) {
             Eigen::Vector3d t, nn, ww;
-            bl.frame(sb, opening * PI / 180.0, t, nn, ww);
+            bl.frame(sb, f.opening * PI / 180.0, t, nn, ww);
+            const double dr = axis.dot(t), da = axis.dot(ww), dp = axis.dot(nn);
             for (Eigen::Index v = 0; v < s.size(); ++v) {
+                // Along the approach the hinge is at hinge − b·axis: the vertex's coordinates in the blade's frame
+                // shift by b·(axis·t, axis·ww, axis·nn).
                 const Eigen::Vector3d rel0 = s.X.row(v).transpose() - hinge;
-                // Along the approach the hinge is at hinge − k·0.25·axis: the vertex's coordinates in the blade's
-                // frame shift by k·0.25·(axis·t, axis·ww, axis·nn).
                 const double r0 = rel0.dot(t), a0 = rel0.dot(ww), p0 = rel0.dot(nn);
-                const double dr = axis.dot(t), da = axis.dot(ww), dp = axis.dot(nn);
-                for (double back = 0; back <= o.approach_mm + 1e-9; back += 0.25) {
-                    const double r = r0 + back * dr, across = a0 + back * da, p = p0 + back * dp;
+                for (double b = 0; b <= o.approach_mm + 1e-9; b += 0.25) {
+                    const double r = r0 + b * dr, across = a0 + b * da, p = p0 + b * dp;
                     if (r >= -CLEAR && r <= length + CLEAR && std::abs(across) <= 0.5 * JAW_W + CLEAR && p < CLEAR && p > -JAW_T - CLEAR) {
                         ++hits;
                         break;
@@ -144,66 +161,80 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         }
         return hits;
     };
-    // Where the jaws go: their width spans the normal direction and their mid-plane should hold the neck line,
-    // so that the blades pinch the line itself. A neck line is seldom flat (a saddle between the sac and the
-    // parent's curve), and the parent artery runs on under the hinge: a blade lying on the neck plane would cut
-    // into it there. So the candidates are: the side to come from (along ±the long axis), the blades' tilt α about
-    // the short axis (the hinge raised, the tips down to the neck), the mid-plane's height c at the neck's centre,
-    // and how far back the hinge stands (further back, the open jaws are wider at the neck: a dome wider than the
-    // neck passes between them). Kept: the one whose open blades touch no vessel along the approach and whose width
-    // covers the most neck line; of equals the smaller tilt, the hinge nearer, the side with fewer vertices in the
-    // way, then the higher (the sac's side).
+    // Where the jaws go: their width spans the normal direction and their mid-plane should hold the neck line, so
+    // that the blades pinch the line itself. A neck line is seldom flat (a saddle between the sac and the parent's
+    // curve), the parent artery runs on under the hinge (a blade lying on the neck plane cuts into it there) and a
+    // dome wider than the neck overhangs it. So the candidates are: the way in (the side to come from along the
+    // long axis, turned by a yaw ψ of 0, ±15° or ±30°, open to 80 % of the clip's largest or to all of it), the
+    // blades' tilt α about w (the hinge raised, the tips down to the neck), the mid-plane's height c at the neck's
+    // centre, and how much further back the hinge stands (the open jaws wider at the neck). Kept: the one whose open
+    // blades touch no vessel along the approach and whose width covers the most neck line (in steps of 5 %); of
+    // equals the smaller tilt, the hinge nearer, the smaller yaw and opening, the side with fewer vertices in the
+    // way, the more covered, the higher c.
     struct Candidate {
-        double side, alpha, c, extra, covered;
+        int way;
+        double alpha, c, extra, covered;
         int order;
     };
-    auto corridor = [&](double side) {  // the simulated-surface vertices in the way of the approach
-        const double back = 0.5 * nf.length_mm + margin_for(side);
+    auto corridor = [&](const Way& f) {  // the simulated-surface vertices in the way of the approach
+        const double back = f.margin - f.near;
         int count = 0;
         for (Eigen::Index v = 0; v < s.size(); ++v) {
             const Eigen::Vector3d q = s.X.row(v).transpose() - nf.centre;
-            const double along = side * q.dot(u), across = std::abs(q.dot(w)), up = q.dot(n);
+            const double along = f.side * q.dot(f.u), across = std::abs(q.dot(f.w)), up = q.dot(n);
             if (along < -back && along > -(back + o.approach_mm) && across < 0.5 * nf.width_mm + 2.0 && std::abs(up) < 2.0) ++count;
         }
         return count;
     };
-    const double preferred = corridor(1.0) <= corridor(-1.0) ? 1.0 : -1.0;
+    std::vector<Way> ways;
+    for (double opening : {0.8 * o.max_opening_deg, o.max_opening_deg})
+        for (double yaw_deg : {0.0, 15.0, -15.0, 30.0, -30.0}) {
+            Way a = way_of(yaw_deg * PI / 180.0, opening, 1.0), b = way_of(yaw_deg * PI / 180.0, opening, -1.0);
+            if (corridor(b) < corridor(a)) std::swap(a, b);
+            ways.push_back(a);
+            ways.push_back(b);
+        }
     std::vector<Candidate> cands;
-    for (double side : {preferred, -preferred})
+    for (size_t wi = 0; wi < ways.size(); ++wi)
         for (int ia = 0; ia <= 10; ++ia) {
             const double alpha = ia * 3.0 * PI / 180.0;
-            const Eigen::Vector3d nprime = std::sin(alpha) * side * u + std::cos(alpha) * n;  // the tilted mid-plane's normal
+            const Way& f = ways[wi];
+            const Eigen::Vector3d nprime = std::sin(alpha) * f.side * f.u + std::cos(alpha) * n;  // the tilted mid-plane's normal
             for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 3.0 + 1e-9; c += 0.05) {
                 double in = 0;
                 for (const auto& [q, len] : seg)
                     if (std::abs((q - c * n).dot(nprime)) <= 0.5 * JAW_W) in += len;
-                for (double extra = 0; extra <= 6; extra += 1)  // the hinge further back: the jaws wider at the neck
-                    cands.push_back({side, alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size())});
+                for (double extra = 0; extra <= 6; extra += 1)
+                    cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size())});
             }
         }
     std::stable_sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) {
-        if (std::abs(a.covered - b.covered) > 1e-9) return a.covered > b.covered;
+        // Coverage in steps of 5 % first: a pose covering 1 % more is not worth a turn or a tilt.
+        const int ba = static_cast<int>(std::floor(20 * a.covered + 1e-9)), bb = static_cast<int>(std::floor(20 * b.covered + 1e-9));
+        if (ba != bb) return ba > bb;
         if (a.alpha != b.alpha) return a.alpha < b.alpha;
         if (a.extra != b.extra) return a.extra < b.extra;
-        if (a.side != b.side) return a.order < b.order;  // the preferred side first
+        if (a.way != b.way) return a.way < b.way;  // smaller yaw and opening first, the freer side first
+        if (std::abs(a.covered - b.covered) > 1e-9) return a.covered > b.covered;
         return a.c > b.c;
     });
     // The clip for a candidate: its axis, hinge and the shortest standard blade (3 … 15 mm in 2 mm steps) whose
     // tip reaches 0.5 mm past the neck's far end.
     auto pose_of = [&](const Candidate& k, Eigen::Vector3d& axis, Eigen::Vector3d& hinge, double& blade) {
-        const double margin = margin_for(k.side) + k.extra;
-        axis = std::cos(k.alpha) * k.side * u - std::sin(k.alpha) * n;
-        const double back = 0.5 * nf.length_mm + margin;  // along the long axis, from the neck's centre
-        hinge = nf.centre + k.c * n - back * k.side * u + back * std::tan(k.alpha) * n;
+        const Way& f = ways[static_cast<size_t>(k.way)];
+        axis = std::cos(k.alpha) * f.side * f.u - std::sin(k.alpha) * n;
+        const double back = f.margin + k.extra - f.near;  // along u, from the neck's centre to below the hinge
+        hinge = nf.centre + k.c * n - back * f.side * f.u + back * std::tan(k.alpha) * n;
         blade = 0;
         for (double l = 3; l <= 15; l += 2)
-            if (l * std::cos(k.alpha) >= back + 0.5 * nf.length_mm + 0.5) {
+            if (l * std::cos(k.alpha) >= back + f.far + 0.5) {
                 blade = l;
                 break;
             }
         return blade > 0;
     };
-    // The first clear one; if none of the best-covering 3000 is clear, the one that touches the fewest vertices.
+    // The first clear one; if none of the best-covering 6000 that a standard blade spans is clear, the one that
+    // touches the fewest vertices.
     const Candidate* chosen = nullptr;
     int fewest = std::numeric_limits<int>::max(), checked = 0;
     Eigen::Vector3d axis, hinge;
@@ -212,7 +243,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         Eigen::Vector3d ax, hi;
         double l = 0;
         if (!pose_of(k, ax, hi, l)) continue;
-        const int h = approach_hits(hi, ax, l);
+        const int h = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
         if (h < fewest) {
             fewest = h;
             chosen = &k;
@@ -220,12 +251,15 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             hinge = hi;
             blade = l;
         }
-        if (h == 0 || ++checked >= 3000) break;
+        if (h == 0 || ++checked >= 6000) break;
     }
     if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
-                         " mm; the longest straight clip planned (15 mm, open " + std::to_string(opening) + " deg) does not span it");
+                         " mm; the longest straight clip planned (15 mm, open up to " + std::to_string(o.max_opening_deg) + " deg) does not span it");
     }
+    const Way& way = ways[static_cast<size_t>(chosen->way)];
+    const Eigen::Vector3d w = way.w;
+    const double opening = way.opening, yaw_deg = way.yaw * 180.0 / PI;
     const double lift = chosen->c, covered = chosen->covered, tilt_deg = chosen->alpha * 180.0 / PI;
     const int hits = fewest;
     const Eigen::Vector3d start = hinge - o.approach_mm * axis;
@@ -270,10 +304,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
                   "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes along the neck's long axis from the freer side, open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
-                  "// tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line; %d outer-surface vertices lie within %.1f mm\n"
-                  "// of the open blades along the approach. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
+                  "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line;\n"
+                  "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach. The suction tube is parked\n"
+                  "// 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close, JAW_W, lift, tilt_deg, 100.0 * covered, hits, CLEAR);
+                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, hits, CLEAR);
     return std::string(head) + j.dump(2) + "\n";
 }
 

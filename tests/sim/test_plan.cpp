@@ -98,7 +98,7 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_LE(std::min(closed.position.z(), tip), 2.5 - 0.5);
     EXPECT_GE(std::max(closed.position.z(), tip), 5.5 + 0.5);
     // And it runs: the clip is loaded, closed and left on the vessel.
-    EXPECT_NE(text.find("; 0 outer-surface vertices lie within 0.2 mm"), std::string::npos)
+    EXPECT_NE(text.find("// 0 outer-surface vertices lie within 0.2 mm"), std::string::npos)
         << text.substr(0, 800);
     sim::Scene run = sc;
     run.series = run.report = "";
