@@ -96,7 +96,7 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
             for (size_t k = 0; k < m_nodes.size(); ++k)
                 for (int s : {1, -1}) {
                     Touch& c = tc[s > 0 ? 0 : 1];
-                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, m_kappa * (m_p.gap_mm - c.d)};
+                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, press(m_p.gap_mm - c.d).f};
                 }
         }
     }
@@ -146,6 +146,25 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     return dist - m_rho;
 }
 
+ClipBody::Press ClipBody::press(double P) const {
+    // The penalty ½ κ P² with its kink at P = 0 rounded: a cubic over the first δ = gap/2 of pressing, so that the
+    // stiffness rises from 0 to κ continuously (C2). A node pressed by a small force sits where the stiffness is
+    // between (P = √(2δF/κ)): without the rounding it sat on the kink, 1e-7 mm in, and Newton's steps alternated
+    // between a tangent with the blade and one without it. Past δ the force is κ (P − δ/2): the same law shifted.
+    const double d = 0.5 * m_p.gap_mm;
+    Press r;
+    if (d <= 0 || P >= d) {
+        r.e = m_kappa * (0.5 * P * P - 0.5 * d * P + d * d / 6);
+        r.f = m_kappa * (P - 0.5 * d);
+        r.k = m_kappa;
+    } else {
+        r.e = m_kappa * P * P * P / (6 * d);
+        r.f = m_kappa * P * P / (2 * d);
+        r.k = m_kappa * P / d;
+    }
+    return r;
+}
+
 bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) const {
     if (!m_front[k][s > 0 ? 0 : 1]) return false;
     const int node = m_nodes[k];
@@ -159,19 +178,21 @@ bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, d
                           bool project) const {
     if (!measure(v, k, s, c)) return false;
     const double P = m_p.gap_mm - c.d;  // > 0: pressing
-    // ½ κ P², P = gap − D. ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's frame (u: the unit vector from the core's
-    // nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2), q = rel·n.
+    // ψ(P) (press(): ½ κ P² with its kink rounded), P = gap − D. ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
+    // frame (u: the unit vector from the core's nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2),
+    // q = rel·n.
     Eigen::Vector4d dP;
     dP << -(c.u[0] * c.t + c.u[1] * c.w + c.u[2] * c.n), -(c.u[0] * (-0.5 * c.q) + c.u[2] * 0.5 * c.r);
-    e = 0.5 * m_kappa * P * P;
-    grad = m_kappa * P * dP;
+    const Press pr = press(P);
+    e = pr.e;
+    grad = pr.f * dP;
     if (H) {
         // κ ∇P ∇Pᵀ (Gauss–Newton) + κ P ∇²P from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
         // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4); dropped for a projected (semidefinite) tangent. The turning of u around
         // a rounded edge ((I − u uᵀ)/|v|) is left out: the Gauss–Newton part stays positive semidefinite.
-        *H = m_kappa * dP * dP.transpose();
+        *H = pr.k * dP * dP.transpose();
         if (!project) {
-            const double kp = m_kappa * P;
+            const double kp = pr.f;
             const Eigen::Vector3d xt = -(c.u[0] * (-0.5) * c.n + c.u[2] * 0.5 * c.t);
             H->block<3, 1>(0, 3) += kp * xt;
             H->block<1, 3>(3, 0) += kp * xt.transpose();
@@ -239,7 +260,7 @@ std::vector<BladeGrip> ClipBody::grips(const Eigen::VectorXd& v) const {
             BladeGrip g;
             g.node = node;
             g.blade = s;
-            g.normal_n = m_kappa * (m_p.gap_mm - c.d);
+            g.normal_n = press(m_p.gap_mm - c.d).f;
             Eigen::Vector2d anchor = at;
             const Grip& old = m_grip[k][s > 0 ? 0 : 1];
             if (old.on) {
@@ -339,7 +360,7 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
             }
             if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
             b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
-            const double f = m_kappa * (m_p.gap_mm - c.d);
+            const double f = press(m_p.gap_mm - c.d).f;
             b.force_n[i] += f;
             b.moment_nmm[i] -= 2 * g[3];  // f r on the face; around a rounded edge the force's own lever
             ++b.contacts[i];

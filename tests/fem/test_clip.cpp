@@ -50,12 +50,22 @@ fem::ClipSpring test_spring() {
 
 /// The moment balance of blade +1 on the block, independently of ClipBody: the node moves along the blade's
 /// normal only (its ground spring is isotropic, the blade frictionless), so its force is that of the ground
-/// spring and the penalty in series, F = Kκ/(K+κ) (g − d₀), acting at r = its distance along the blade.
+/// spring and the blade's push in series over g − d₀ (below), acting at r = its distance along the blade.
 double block_residual(double theta, const fem::ClipSpring& s, double kappa, double gap) {
     const double phi = 0.5 * theta;
     const double d0 = Block::A * std::sin(phi) - Block::H * std::cos(phi);
     const double r = Block::A * std::cos(phi) + Block::H * std::sin(phi);
-    const double F = gap > d0 ? Block::K * kappa / (Block::K + kappa) * (gap - d0) : 0.0;
+    // The block's spring K and the blade's push ψ'(P) in series over the total gap − d0: ψ'(P) = κ (P − δ/2) past
+    // δ = gap/2, κ P² / (2δ) before (ClipBody::press: the penalty's kink rounded).
+    const double dl = 0.5 * gap, total = gap - d0, K = Block::K;
+    double F = 0;
+    if (total > 0) {
+        F = K * kappa / (K + kappa) * (total - 0.5 * dl);
+        if (total - F / K < dl) {
+            const double P = (-dl * K + std::sqrt(dl * dl * K * K + 2 * kappa * dl * K * total)) / kappa;
+            F = kappa * P * P / (2 * dl);
+        }
+    }
     return s.torque(theta) - F * r;
 }
 

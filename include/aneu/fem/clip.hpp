@@ -11,7 +11,8 @@
 /// third of the blade from the tip) fixes one point of it. ClipBody adds the blades to an ElasticBody as one more
 /// unknown, θ, and the blade faces as a penalty on the body's surface nodes: the total potential
 ///
-///     Π(u, θ) = Ψ(u) + Σ ½ κ (g − D_i(u, θ))²  [D_i < g]  + k (θ²/2 + θ₀ θ)
+///     Π(u, θ) = Ψ(u) + Σ ψ(g − D_i(u, θ))  [D_i < g]  + k (θ²/2 + θ₀ θ),   ψ ≈ ½ κ P² (its kink at P = 0
+///                                                                         rounded over g/2: ClipBody::press)
 ///
 /// (D_i: how far node i lies in front of a blade, the blades being solids whose sides and tip are rounded to a
 /// 0.1 mm radius, so that tissue pressed past an edge is pushed off it along the rounded surface's normal; and,
@@ -152,6 +153,11 @@ private:
     /// D: how far the point hinge + rel lies in front of the blade whose frame c holds (its face flat over the
     /// blade's core, its sides and tip rounded to the radius ρ), and in c.u its derivative in the blade's frame.
     double blade_distance(const Eigen::Vector3d& rel, Touch& c) const;
+    /// The blade's push on a node pressing by P = gap − D > 0: energy, force and stiffness (press()).
+    struct Press {
+        double e = 0, f = 0, k = 0;
+    };
+    Press press(double P) const;
     /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
     bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project) const;
