@@ -102,7 +102,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         }
     // The blades run along u (the neck's long axis turned by a yaw ψ about the normal), close across w, open to
     // `opening`. The hinge stands before the neck's near end (along u) so far that every neck point passes between
-    // the open jaws with its wall and 0.5 mm to spare, at least 1 mm; `reach` is how far the neck's far end lies.
+    // the open jaws with its wall and 0.5 mm to spare, at least 1 mm; `near` and `far` are the neck's ends along
+    // the way in (from its centre, forwards positive).
     struct Way {
         Eigen::Vector3d u, w;
         double yaw, opening, side, margin, near, far;
@@ -302,7 +303,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     char head[1024];
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
-                  "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes along the neck's long axis from the freer side, open %.0f deg,\n"
+                  "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
                   "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line;\n"
                   "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach. The suction tube is parked\n"
