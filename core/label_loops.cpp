@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <map>
 #include <numeric>
+#include <unordered_map>
 
 #include <Eigen/Geometry>
-#include <unordered_map>
 
 namespace aneu {
 

@@ -251,24 +251,20 @@ Eigen::VectorXd PatchModel::internal_force(const Eigen::VectorXd& u) const {
 }
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> PatchModel::tangent(const Eigen::VectorXd& u, bool project) const {
-    const RowSparse Ks = m->solid->tangent(u, project);
     RowSparse K = m->pattern;
-    double* val = K.valuePtr();
-    for (size_t p = 0; p < m->solid_to_pattern.size(); ++p) val[m->solid_to_pattern[p]] += Ks.valuePtr()[p];
-    const Eigen::Index ni = m->S.rows();
-    size_t q = 0;
-    for (Eigen::Index a = 0; a < ni; ++a)
-        for (Eigen::Index b = 0; b < ni; ++b) val[m->s_to_pattern[q++]] += m->S(a, b);
+    add_tangent(u, project, K.valuePtr(), nullptr);
     return K;
 }
 
+// The solid's tangent and the exterior's S at their places in the pattern, or at where[place] in a caller's matrix.
 void PatchModel::add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
     const RowSparse Ks = m->solid->tangent(u, project);
-    for (size_t p = 0; p < m->solid_to_pattern.size(); ++p) values[where[m->solid_to_pattern[p]]] += Ks.valuePtr()[p];
+    auto at = [&](std::int64_t place) -> double& { return values[where ? where[place] : place]; };
+    for (size_t p = 0; p < m->solid_to_pattern.size(); ++p) at(m->solid_to_pattern[p]) += Ks.valuePtr()[p];
     const Eigen::Index ni = m->S.rows();
     size_t q = 0;
     for (Eigen::Index a = 0; a < ni; ++a)
-        for (Eigen::Index b = 0; b < ni; ++b) values[where[m->s_to_pattern[q++]]] += m->S(a, b);
+        for (Eigen::Index b = 0; b < ni; ++b) at(m->s_to_pattern[q++]) += m->S(a, b);
 }
 
 const Eigen::SparseMatrix<double, Eigen::RowMajor>& PatchModel::pattern() const { return m->pattern; }
