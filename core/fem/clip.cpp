@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include <Eigen/Geometry>
@@ -53,26 +54,35 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
         throw InputError("clip: blade length, width and thickness must be > 0 and the closed gap >= 0");
     if (std::abs(blades.axis.norm() - 1) > 1e-9 || std::abs(blades.up.norm() - 1) > 1e-9 || std::abs(blades.axis.dot(blades.up)) > 1e-9)
         throw InputError("clip: the blade axis and opening direction must be orthonormal");
-    if (!(p.gap_mm >= 0)) throw InputError("clip: the contact gap must be >= 0");
+    if (!(p.gap_mm > 0)) throw InputError("clip: the blades' barrier distance d̂ (gap) must be > 0 mm (got " + std::to_string(p.gap_mm) + ")");
     if (!(p.friction >= 0) || !std::isfinite(p.friction)) throw InputError("clip: the blades' friction coefficient must be >= 0 (got " + std::to_string(p.friction) + ")");
     if (!(p.stick_mm > 0)) throw InputError("clip: the friction's stick slip must be > 0 mm (got " + std::to_string(p.stick_mm) + ")");
     if (v0.size() != dofs()) throw InputError("clip: the starting state has " + std::to_string(v0.size()) + " entries, expected " + std::to_string(dofs()));
     m_rho = std::min({EDGE_MM, 0.5 * blades.thickness_mm, 0.25 * blades.width_mm, 0.25 * blades.length_mm});
-    constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration a step may end with (the issue's limit)
+    // Which blade faces each candidate can touch, and from where. A node in front of a blade where the solve starts
+    // (D > 0) meets the barrier at its true distance. One just behind it (D ≤ 0, up to 0.02 mm: the blades moved
+    // with the applier since the last frame, or the linear model's handover) meets it at a distance counted from
+    // a tenth of d̂ behind where it is, so that it is pushed back out, not through (the barrier is infinite at
+    // D = 0); deeper nodes are outside the clip (tissue beside the blades) and left alone.
+    constexpr double BEHIND_AT_START = 0.02;  // mm: the interpenetration the issue allows
+    if (p.stiffness > 0) {
+        m_kappa = p.stiffness;
+    } else {
+        m_kappa = detail::max_diagonal(body);
+    }
     for (int c : m_nodes) {
         std::array<bool, 2> f{};
+        std::array<double, 2> off{0, 0};
         for (int i = 0; i < 2; ++i) {
             Touch tc;
             blades.frame(i == 0 ? 1 : -1, v0[body.dofs()], tc.t, tc.n, tc.w);
             const Eigen::Vector3d rel = X.row(c).transpose() + v0.segment<3>(3 * c) - blades.hinge;
-            f[static_cast<size_t>(i)] = blade_distance(rel, tc) >= -BEHIND_AT_START;
+            const double d = blade_distance(rel, tc);
+            f[static_cast<size_t>(i)] = d >= -BEHIND_AT_START;
+            if (d <= 0) off[static_cast<size_t>(i)] = d - 0.1 * p.gap_mm;
         }
         m_front.push_back(f);
-    }
-    if (p.stiffness > 0) {
-        m_kappa = p.stiffness;
-    } else {
-        m_kappa = detail::default_penalty(body);
+        m_offset.push_back(off);
     }
     // The closed stop: blades that meet cannot close further. A penalty on θ < 0 stiff enough that the preload
     // pushes them past closed by 1e-4 of θ₀ at most.
@@ -96,7 +106,7 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
             for (size_t k = 0; k < m_nodes.size(); ++k)
                 for (int s : {1, -1}) {
                     Touch& c = tc[s > 0 ? 0 : 1];
-                    if (measure(v0, k, s, c) && m_p.gap_mm > c.d) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, press(m_p.gap_mm - c.d).f};
+                    if (measure(v0, k, s, c)) m_grip[k][s > 0 ? 0 : 1] = Grip{true, c.r, c.a, press(c.d).f};
                 }
         }
     }
@@ -146,22 +156,20 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     return dist - m_rho;
 }
 
-ClipBody::Press ClipBody::press(double P) const {
-    // The penalty ½ κ P² with its kink at P = 0 rounded: a cubic over the first δ = gap/2 of pressing, so that the
-    // stiffness rises from 0 to κ continuously (C2). A node pressed by a small force sits where the stiffness is
-    // between (P = √(2δF/κ)): without the rounding it sat on the kink, 1e-7 mm in, and Newton's steps alternated
-    // between a tangent with the blade and one without it. Past δ the force is κ (P − δ/2): the same law shifted.
-    const double d = 0.5 * m_p.gap_mm;
+ClipBody::Press ClipBody::press(double D) const {
+    // The barrier κ d̂² b(D/d̂), b(x) = −(x − 1)² ln x (Li et al. 2020): zero from d̂ outward, C2 there, infinite at
+    // D = 0. With b' and b'': e = κ d̂² b, f = −κ d̂ b' (≥ 0, the push), k = κ b'' (> 0).
+    const double dh = m_p.gap_mm;
     Press r;
-    if (d <= 0 || P >= d) {
-        r.e = m_kappa * (0.5 * P * P - 0.5 * d * P + d * d / 6);
-        r.f = m_kappa * (P - 0.5 * d);
-        r.k = m_kappa;
-    } else {
-        r.e = m_kappa * P * P * P / (6 * d);
-        r.f = m_kappa * P * P / (2 * d);
-        r.k = m_kappa * P / d;
+    if (D >= dh) return r;
+    if (D <= 0) {
+        r.e = std::numeric_limits<double>::infinity();
+        return r;
     }
+    const double x = D / dh, l = std::log(x), m = x - 1;
+    r.e = m_kappa * dh * dh * (-m * m * l);
+    r.f = -m_kappa * dh * (-2 * m * l - m * m / x);
+    r.k = m_kappa * (-2 * l - 4 * m / x + m * m / (x * x));
     return r;
 }
 
@@ -169,7 +177,7 @@ bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) cons
     if (!m_front[k][s > 0 ? 0 : 1]) return false;
     const int node = m_nodes[k];
     const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
-    c.d = blade_distance(rel, c);
+    c.d = blade_distance(rel, c) - m_offset[k][s > 0 ? 0 : 1];
     c.q = rel.dot(c.n);
     return c.d < m_p.gap_mm;
 }
@@ -177,17 +185,17 @@ bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) cons
 bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                           bool project) const {
     if (!measure(v, k, s, c)) return false;
-    const double P = m_p.gap_mm - c.d;  // > 0: pressing
-    // ψ(P) (press(): ½ κ P² with its kink rounded), P = gap − D. ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
+    // ψ(D) (press(): the barrier); with P = −D, ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
     // frame (u: the unit vector from the core's nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2),
     // q = rel·n.
     Eigen::Vector4d dP;
     dP << -(c.u[0] * c.t + c.u[1] * c.w + c.u[2] * c.n), -(c.u[0] * (-0.5 * c.q) + c.u[2] * 0.5 * c.r);
-    const Press pr = press(P);
+    const Press pr = press(c.d);
     e = pr.e;
+    if (!std::isfinite(e)) return true;  // on or behind the face: infinite energy (a step that got there is rejected)
     grad = pr.f * dP;
     if (H) {
-        // κ ∇P ∇Pᵀ (Gauss–Newton) + κ P ∇²P from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
+        // ψ'' ∇P ∇Pᵀ (Gauss–Newton) + ψ' ∇²P from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
         // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4); dropped for a projected (semidefinite) tangent. The turning of u around
         // a rounded edge ((I − u uᵀ)/|v|) is left out: the Gauss–Newton part stays positive semidefinite.
         *H = pr.k * dP * dP.transpose();
@@ -256,11 +264,11 @@ std::vector<BladeGrip> ClipBody::grips(const Eigen::VectorXd& v) const {
             const int node = m_nodes[k];
             const Eigen::Vector3d rel = m_X.row(node).transpose() + v.segment<3>(3 * node) - m_blades.hinge;
             const Eigen::Vector2d at(rel.dot(c.t), rel.dot(c.w));
-            if (!measure(v, k, s, c) || !(m_p.gap_mm > c.d)) continue;  // not pressing: let go
+            if (!measure(v, k, s, c)) continue;  // not pressing: let go
             BladeGrip g;
             g.node = node;
             g.blade = s;
-            g.normal_n = press(m_p.gap_mm - c.d).f;
+            g.normal_n = press(c.d).f;
             Eigen::Vector2d anchor = at;
             const Grip& old = m_grip[k][s > 0 ? 0 : 1];
             if (old.on) {
@@ -305,6 +313,7 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
             if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, nullptr, false)) {
+                if (!std::isfinite(ek)) throw NumericalError("clip: node " + std::to_string(m_nodes[k]) + " lies on or behind a blade's face");
                 g.segment<3>(3 * m_nodes[k]) += gk.head<3>();
                 gt += gk[3];
             }
@@ -330,14 +339,58 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
     Eigen::Matrix4d H;
     for (size_t k = 0; k < m_nodes.size(); ++k)
         for (int s : {1, -1}) {
-            if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project))
+            if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project)) {
+                if (!std::isfinite(ek)) throw NumericalError("clip: node " + std::to_string(m_nodes[k]) + " lies on or behind a blade's face");
                 for (int i = 0; i < 4; ++i)
                     for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
+            }
             if (grip_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project))
                 for (int i = 0; i < 4; ++i)
                     for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
         }
     return K;
+}
+
+double ClipBody::max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const {
+    // Additive CCD (Li, Kaufman & Jiang 2021), as for the walls (ContactBody::max_step): a node's distance D from a
+    // blade is 1-Lipschitz in its place in the blade's frame, and along the step that place moves by at most
+    // l = |Δx| + R |Δθ|/2 (the blade turns by θ/2 about the hinge; R bounds the node's distance from the hinge on
+    // the way), so advancing by a fraction of D / l at a time never reaches the face; stop where D is a tenth of
+    // its start.
+    constexpr double SHRINK = 0.1;
+    double alpha = m_body.max_step(v.head(m_body.dofs()), dv.head(m_body.dofs()));
+    const double dth = std::abs(dv[theta_dof()]);
+    for (size_t k = 0; k < m_nodes.size(); ++k) {
+        const int node = m_nodes[k];
+        const Eigen::Vector3d x0 = m_X.row(node).transpose() + v.segment<3>(3 * node), dx = dv.segment<3>(3 * node);
+        const double R = (x0 - m_blades.hinge).norm() + dx.norm();
+        const double l = dx.norm() + 0.5 * R * dth;
+        if (!(l > 0)) continue;
+        for (int s : {1, -1}) {
+            const size_t i = s > 0 ? 0 : 1;
+            if (!m_front[k][i]) continue;
+            auto dist = [&](double t) {
+                Touch c;
+                m_blades.frame(s, v[theta_dof()] + t * dv[theta_dof()], c.t, c.n, c.w);
+                return blade_distance(x0 + t * dx - m_blades.hinge, c) - m_offset[k][i];
+            };
+            const double d0 = dist(0);
+            if (!(d0 > 0)) return 0;                       // already on the face: no step is admissible
+            if ((1 - SHRINK) * d0 >= alpha * l) continue;  // cannot come near within the step
+            double t = 0, tl = (1 - SHRINK) * d0 / l;
+            for (int it = 0;; ++it) {
+                if (t + tl >= alpha) break;
+                const double dn = dist(t + tl);
+                if ((it > 0 && dn < SHRINK * d0) || it == 10000) {
+                    alpha = t;
+                    break;
+                }
+                t += tl;
+                tl = 0.9 * dn / l;
+            }
+        }
+    }
+    return alpha;
 }
 
 BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
@@ -360,7 +413,7 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
             }
             if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
             b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
-            const double f = press(m_p.gap_mm - c.d).f;
+            const double f = press(c.d).f;
             b.force_n[i] += f;
             b.moment_nmm[i] -= 2 * g[3];  // f r on the face; around a rounded edge the force's own lever
             ++b.contacts[i];

@@ -48,25 +48,40 @@ fem::ClipSpring test_spring() {
     return fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, 0.0), 1.5, 40 * DEG, 2.5);
 }
 
+/// The barrier's push at distance D from a blade face (ClipBody's law, written out here): −κ d̂ b'(D/d̂),
+/// b(x) = −(x − 1)² ln x, for 0 < D < d̂.
+double barrier_push(double D, double kappa, double gap) {
+    if (D >= gap) return 0;
+    const double x = D / gap, m = x - 1;
+    return kappa * gap * (2 * m * std::log(x) + m * m / x);
+}
+
 /// The moment balance of blade +1 on the block, independently of ClipBody: the node moves along the blade's
 /// normal only (its ground spring is isotropic, the blade frictionless), so its force is that of the ground
-/// spring and the blade's push in series over g − d₀ (below), acting at r = its distance along the blade.
+/// spring and the blade's barrier in series: K (D − d₀) = push(D), D its distance from the face, d₀ that of its
+/// rest place, acting at r = its distance along the blade.
 double block_residual(double theta, const fem::ClipSpring& s, double kappa, double gap) {
     const double phi = 0.5 * theta;
     const double d0 = Block::A * std::sin(phi) - Block::H * std::cos(phi);
     const double r = Block::A * std::cos(phi) + Block::H * std::sin(phi);
-    // The block's spring K and the blade's push ψ'(P) in series over the total gap − d0: ψ'(P) = κ (P − δ/2) past
-    // δ = gap/2, κ P² / (2δ) before (ClipBody::press: the penalty's kink rounded).
-    const double dl = 0.5 * gap, total = gap - d0, K = Block::K;
     double F = 0;
-    if (total > 0) {
-        F = K * kappa / (K + kappa) * (total - 0.5 * dl);
-        if (total - F / K < dl) {
-            const double P = (-dl * K + std::sqrt(dl * dl * K * K + 2 * kappa * dl * K * total)) / kappa;
-            F = kappa * P * P / (2 * dl);
+    if (d0 < gap) {  // bisection on K (D − d₀) − push(D): negative just above max(d₀, 0), positive at d̂
+        double lo = std::max(d0, 0.0), hi = gap;
+        for (int it = 0; it < 200; ++it) {
+            const double mid = 0.5 * (lo + hi);
+            (Block::K * (mid - d0) - barrier_push(mid, kappa, gap) < 0 ? lo : hi) = mid;
         }
+        F = Block::K * (0.5 * (lo + hi) - d0);
     }
     return s.torque(theta) - F * r;
+}
+
+/// The displacement that puts block node `node` (2: on blade +1, 3: on blade −1) at (r along, a across, p in
+/// front of) its blade at opening θ.
+Eigen::Vector3d place(const Block& b, const fem::ClipBlades& bl, int node, double theta, double r, double a, double p) {
+    Eigen::Vector3d t, n, w;
+    bl.frame(node == 2 ? 1 : -1, theta, t, n, w);
+    return bl.hinge + r * t + a * w + (p - 0.5 * bl.closed_gap_mm) * n - b.X.row(node).transpose();
 }
 
 /// The clip's force is its energy's derivative and its tangent the force's, by central differences of step h over
@@ -110,7 +125,7 @@ TEST(ClipBody, ReleasedOnABlockItStopsAtTheAnalyticAngle) {
     Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
     v0[12] = 40 * DEG;
     const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, blades, spring);
-    EXPECT_DOUBLE_EQ(clip.stiffness(), 100 * Block::K);
+    EXPECT_DOUBLE_EQ(clip.stiffness(), Block::K);  // κ: the largest diagonal entry of the body's tangent
     fem::NewtonOptions no;
     no.tolerance = 1e-12;
     const fem::NewtonResult r = fem::solve_neo_hookean(clip, b.fixed, {}, v0, no);
@@ -155,8 +170,9 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     v0[12] = 40 * DEG;  // open: both nodes in front of their blade
     const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, fem::ClipBlades{}, test_spring());
     Eigen::VectorXd v = Eigen::VectorXd::Zero(clip.dofs());
-    v.segment<3>(6) << 0.01, -0.03, 0.02;   // node 2 pressing on blade +1
-    v.segment<3>(9) << -0.02, 0.01, 0.01;   // node 3 pressing on blade −1
+    const fem::ClipBlades bl;
+    v.segment<3>(6) = place(b, bl, 2, 0.2, 4.01, 0.02, 0.004);   // node 2 within d̂ of blade +1
+    v.segment<3>(9) = place(b, bl, 3, 0.2, 3.98, 0.01, 0.007);   // node 3 within d̂ of blade −1
     v[clip.theta_dof()] = 0.2;
     const fem::BladeLoads L = clip.loads(v);
     ASSERT_EQ(L.contacts[0] + L.contacts[1], 2);
@@ -171,10 +187,10 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     expect_derivatives(clip, v, 6, h);
     // Over a rounded edge (node 2 over the blade's side edge, node 3 over its tip; the edges' radius is 0.1 mm):
     // the force there is the energy's derivative too, and the tangent its derivative (the frame's part).
+    // (ρ = 0.1: over the side edge, 0.05 out from the core, D = √(0.05² + (p + ρ)²) − ρ = 0.005 at p = −0.00767.)
     Eigen::VectorXd e = v;
-    e.segment<3>(6) << 0.01, -0.03, 0.45;
-    e[9] = 6.9 - Block::A;
-    e[10] = -0.22;
+    e.segment<3>(6) = place(b, bl, 2, 0.2, 4.01, 0.45, -0.00767);
+    e.segment<3>(9) = place(b, bl, 3, 0.2, 6.95, 0.0, -0.00767);
     ASSERT_EQ(clip.loads(e).contacts[0] + clip.loads(e).contacts[1], 2) << clip.loads(e).contacts[0] << " " << clip.loads(e).contacts[1];
     EXPECT_LT((clip.loads(e).net_force - net_of(e)).norm(), 1e-12 * (1 + net_of(e).norm()));  // around the edges too
     const Eigen::VectorXd ge = clip.internal_force(e);
@@ -190,8 +206,42 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     EXPECT_GT(f2.z(), 0.1 * f2.norm());
     // Past closed, the stop pushes back: the torque turns steeply opening-wards below θ = 0.
     Eigen::VectorXd c = Eigen::VectorXd::Zero(clip.dofs());
+    c[6] = c[9] = 4.0;  // the block nodes 1 mm beyond the blades' tips
     c[clip.theta_dof()] = -1e-3;
     EXPECT_LT(clip.internal_force(c)[clip.theta_dof()], 0.0);
+}
+
+TEST(ClipBody, NoStepPassesThroughABlade) {
+    // Node 2 0.05 mm in front of blade +1 at θ = 0.2: sent 0.2 mm through the face, the step is cut where it is a
+    // tenth of its distance from it; the blades closing to θ = 0 (which would leave it 0.4 mm behind blade +1)
+    // are cut too; a step along the face is not.
+    const Block b;
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, fem::ClipBlades{}, test_spring());
+    Eigen::VectorXd v = v0;
+    v.segment<3>(6) = place(b, fem::ClipBlades{}, 2, 0.2, 4.0, 0.0, 0.05);
+    v.segment<3>(9) = place(b, fem::ClipBlades{}, 3, 0.2, 4.0, 0.0, 0.5);
+    v[12] = 0.2;
+    Eigen::Vector3d t, n, w;
+    fem::ClipBlades{}.frame(1, 0.2, t, n, w);
+    Eigen::VectorXd dv = Eigen::VectorXd::Zero(13);
+    dv.segment<3>(6) = -0.2 * n;  // through the face at a quarter of the step
+    const double a = clip.max_step(v, dv);
+    EXPECT_GT(a, 0.2 * 0.9 * 0.25);
+    EXPECT_LT(a, 0.25 * (1 - 0.1) + 1e-12);
+    EXPECT_TRUE(std::isfinite(clip.energy(v + a * dv)));
+    EXPECT_FALSE(std::isfinite(clip.energy(v + 0.3 * dv)));  // past the face: the barrier's infinity
+    dv.setZero();
+    dv[12] = -0.2;  // the blades close onto it and beyond
+    const double ac = clip.max_step(v, dv);
+    EXPECT_GT(ac, 0.0);
+    EXPECT_LT(ac, 1.0);
+    EXPECT_TRUE(std::isfinite(clip.energy(v + ac * dv)));
+    EXPECT_FALSE(std::isfinite(clip.energy(v + dv)));
+    dv.setZero();
+    dv.segment<3>(6) = 0.3 * t;  // along the face
+    EXPECT_EQ(clip.max_step(v, dv), 1.0);
 }
 
 TEST(ClipBody, ReleasedOnANeoHookeanBlockTheBladesBalanceTheSpringWithoutPassingThrough) {
@@ -247,8 +297,8 @@ TEST(ClipBody, ReleasedOnANeoHookeanBlockTheBladesBalanceTheSpringWithoutPassing
 TEST(ClipBody, FrictionForcesAndTangentAreTheEnergysDerivatives) {
     const Block b;
     Eigen::VectorXd v = Eigen::VectorXd::Zero(13);
-    v.segment<3>(6) << 0.01, -0.03, 0.02;
-    v.segment<3>(9) << -0.02, 0.01, 0.01;
+    v.segment<3>(6) = place(b, fem::ClipBlades{}, 2, 0.2, 4.01, 0.02, 0.004);
+    v.segment<3>(9) = place(b, fem::ClipBlades{}, 3, 0.2, 3.98, 0.01, 0.007);
     v[12] = 0.2;
     fem::ClipContactParams p;
     p.friction = 0.3;

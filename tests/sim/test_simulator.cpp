@@ -797,7 +797,7 @@ TEST(SimulatorPatch, APatchTakesOverTissueTheLinearModelPushedWithTheOpenJaws) {
     EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
     const double worst = under_the_flat_blades(s.deformed_surface()).second;
     EXPECT_GT(worst, -0.02);
-    constexpr double FROM_CLEAR_AIR_N = 0.4941;  // the test above's blade force (closing from 40° in clear air)
+    constexpr double FROM_CLEAR_AIR_N = 0.4886;  // the test above's blade force (closing from 40° in clear air)
     EXPECT_NEAR(c.grip_force_n, FROM_CLEAR_AIR_N, 0.05 * FROM_CLEAR_AIR_N);
     std::printf("handover: %d wall nodes inside the blades at rest, blades start at %.2f deg; end: blade force %.4f N (from clear air %.4f N), "
                 "walls %.4f mm apart, deepest %.4f mm in front of a blade, %d frames (%d unconverged)\n",

@@ -9,14 +9,15 @@
 /// so the force one blade applies at distance r from the hinge is τ / r: the hyperbola along the blade that Ooka
 /// 1997 measured on aneurysm clips, and the label convention of ISO 9713 (the closing force at 1 mm opening, a
 /// third of the blade from the tip) fixes one point of it. ClipBody adds the blades to an ElasticBody as one more
-/// unknown, θ, and the blade faces as a penalty on the body's surface nodes: the total potential
+/// unknown, θ, and the blade faces as a barrier on the body's surface nodes: the total potential
 ///
-///     Π(u, θ) = Ψ(u) + Σ ψ(g − D_i(u, θ))  [D_i < g]  + k (θ²/2 + θ₀ θ),   ψ ≈ ½ κ P² (its kink at P = 0
-///                                                                         rounded over g/2: ClipBody::press)
+///     Π(u, θ) = Ψ(u) + Σ κ d̂² b(D_i(u, θ)/d̂)  [D_i < d̂]  + k (θ²/2 + θ₀ θ),   b(x) = −(x − 1)² ln x
 ///
 /// (D_i: how far node i lies in front of a blade, the blades being solids whose sides and tip are rounded to a
-/// 0.1 mm radius, so that tissue pressed past an edge is pushed off it along the rounded surface's normal; and,
-/// with friction, the grips' energy, ClipContactParams::friction) is minimised by
+/// 0.1 mm radius, so that tissue pressed past an edge is pushed off it along the rounded surface's normal; the
+/// barrier is zero from d̂ outward, C2 there and infinite on the face (incremental potential contact, Li et al.
+/// 2020, as for the inner walls), and every Newton step is bounded by continuous collision detection, so no node
+/// passes a blade; with friction, the grips' energy, ClipContactParams::friction) is minimised by
 /// the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
 /// released clip (θ free) stops where the tissue pushes back as hard as its spring; a clip held open by the
 /// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
@@ -65,8 +66,8 @@ struct ClipBlades {
 };
 
 struct ClipContactParams {
-    double gap_mm = 0.01;      ///< a node is held at about this distance in front of a blade face
-    double stiffness = 0;      ///< κ [N/mm] per node; 0 = 100 × the largest diagonal entry of the body's tangent at rest
+    double gap_mm = 0.01;      ///< d̂: the barrier acts on nodes nearer a blade face than this; pressed nodes end between 0 and d̂
+    double stiffness = 0;      ///< κ [N/mm]; 0 = the largest diagonal entry of the body's tangent at rest
     /// μ: Coulomb friction between the blades' faces and the tissue, 0 = frictionless. A node pressed on a blade
     /// grips a point there: its tangential force rises smoothly with its slip from that point, reaching μ λ at
     /// `stick_mm` (λ: its normal force when the grip was last renewed, lagged as in incremental-potential friction,
@@ -96,7 +97,7 @@ struct BladeLoads {
     std::array<int, 2> sliding{0, 0};        ///< grips at their friction limit (sliding), per blade
     double opening_rad = 0;
     double spring_torque_nmm = 0;
-    /// The tissue's net force on the clip [N]: the blades' penalty and friction forces (−Σ the forces the
+    /// The tissue's net force on the clip [N]: the blades' barrier and friction forces (−Σ the forces the
     /// blades apply to the body's nodes).
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();
 };
@@ -109,8 +110,9 @@ public:
     ///                   couples each to θ
     /// @param v0         the state the solve starts from (body DOFs and θ): a candidate is pushed by a blade only if
     ///                   it lies in front of that blade's face there (not more than 0.02 mm behind it: tissue
-    ///                   outside the clip stays outside), and then however deep it goes, so that no step can
-    ///                   tunnel through a blade. Make a new ClipBody for the next load step.
+    ///                   outside the clip stays outside; one behind it by up to that meets the barrier as if the
+    ///                   face were 0.1 d̂ behind it, and is pushed back out). Make a new ClipBody for the next
+    ///                   load step.
     /// @param grips      with friction: where nodes grip the blades (grips() of the last solve; the blades' frame
     ///                   moves with the clip, so a rigid move of the clip carries them). Null: taken at v0, the
     ///                   nodes pressing on a blade there gripping where they are. A grip of a node that is not a
@@ -130,9 +132,9 @@ public:
         return m_pattern;
     }
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
-    double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override {
-        return m_body.max_step(v.head(m_body.dofs()), dv.head(m_body.dofs()));
-    }
+    /// The largest fraction of the step dv that keeps every node in front of the blades it faces (and the body's
+    /// own bound): continuous collision detection of the nodes' and the blades' motion.
+    double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override;
     BladeLoads loads(const Eigen::VectorXd& v) const;
     /// The grips after a solve that ended at v, for the next one: a grip that held stays where it was, one that
     /// slid follows its node (ε behind it); nodes that press on a blade at v without a grip take one where they
@@ -153,11 +155,12 @@ private:
     /// D: how far the point hinge + rel lies in front of the blade whose frame c holds (its face flat over the
     /// blade's core, its sides and tip rounded to the radius ρ), and in c.u its derivative in the blade's frame.
     double blade_distance(const Eigen::Vector3d& rel, Touch& c) const;
-    /// The blade's push on a node pressing by P = gap − D > 0: energy, force and stiffness (press()).
+    /// The blade's barrier on a node at distance D: energy, push f = −∂e/∂D ≥ 0 and stiffness ∂²e/∂D² (zero from
+    /// d̂ on; infinite energy at D ≤ 0).
     struct Press {
         double e = 0, f = 0, k = 0;
     };
-    Press press(double P) const;
+    Press press(double D) const;
     /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
     bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project) const;
@@ -181,12 +184,13 @@ private:
     const ElasticBody& m_body;
     Eigen::MatrixX3d m_X;
     std::vector<int> m_nodes;
-    std::vector<std::array<bool, 2>> m_front;  // per candidate: in front of blade +1 / −1 at v0
+    std::vector<std::array<bool, 2>> m_front;     // per candidate: in front of blade +1 / −1 at v0
+    std::vector<std::array<double, 2>> m_offset;  // per candidate: where its distance from blade +1 / −1 counts from
     std::vector<std::array<Grip, 2>> m_grip;   // per candidate: its grip on blade +1 / −1
     ClipBlades m_blades;
     ClipSpring m_spring;
     ClipContactParams m_p;
-    double m_kappa = 0, m_stop = 0;  // node penalty; the closed stop's penalty on θ < 0 [N·mm/rad]
+    double m_kappa = 0, m_stop = 0;  // the barrier's κ; the closed stop's penalty on θ < 0 [N·mm/rad]
     double m_rho = EDGE_MM;          // edge radius [mm]
     mutable std::once_flag m_pattern_once;
     mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
