@@ -284,7 +284,7 @@ int main(int argc, char** argv) {
         out.back().setup_s = patch.setup_seconds();
     }
     if (linear) {
-        const fem::LinearBody lin(fem.K);
+        const fem::LinearBody lin(fem.K, fem.K_upper_only);
         out.push_back(run("linear", lin, X, swept, Eigen::MatrixX3i(0, 3), fem.fixed_dofs, identity));  // no wall contact: the linear model's own
     }
     const Outcome* ref = nullptr;

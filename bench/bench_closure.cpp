@@ -25,6 +25,14 @@
 //                           [--patch-mm 0] [--no-reference] [--wall-contact] [--proximal]
 // --wall-contact: the nonlinear models (reference and patch) also keep the lumen's opposite inner walls apart
 // (fem::ContactBody on the corner nodes of the inner surface, gap 0.01 mm); the linear model cannot.
+// --clip-body: the blades are the simulator's (fem::ClipBody, issue #15) for all three models instead of the
+// prescribed, sticking contact above: rigid blades as a barrier with collision-bounded steps, Coulomb friction
+// `--friction` (0.3, the simulator's default; grips renewed after each closure step, as the simulator renews them
+// each frame), the opening θ prescribed. To keep the blades parallel as above they hinge 100 mm behind the
+// blades' proximal end (along −z; over the 7 mm the gap differs by 3.4 % of its excess over the full gap), and
+// close to the full gap at θ = 0: full closure is the same parallel pair of faces. The candidates are the outer
+// nodes over the blades' footprint (0.5 mm beside it and beyond the tip); the linear model is fem::LinearBody (K)
+// in the same contact problem.
 // --proximal: where a nonlinear model's Newton solve stops (a limit point: the sac buckles under the blades), proximal
 // point iterations carry it to the equilibrium beyond (solve_through below); the steps taken are in the JSON lines.
 #include <chrono>
@@ -44,6 +52,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "bench_util.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 #include "aneu/fem/contact.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 #include "aneu/fem/patch.hpp"
@@ -76,6 +85,9 @@ struct Track {
     double min_J = 1, seconds = 0;
     double wall_gap = std::numeric_limits<double>::infinity();  // smallest inner-wall distance among pairs in contact
     std::size_t wall_pairs = 0;
+    double theta = -1;                    // --clip-body: the blades' opening [rad] (< 0: not yet placed)
+    std::vector<fem::BladeGrip> grips;    // --clip-body: the grips of the last step (the track's own numbering)
+    int blade_contacts = 0;
 };
 
 std::vector<std::pair<int, double>> prescribed_of(const Track& t, const Eigen::MatrixX3d& X, const Clip& clip) {
@@ -186,9 +198,15 @@ int main(int argc, char** argv) {
     std::vector<double> closures = {0.005, 0.01, 0.02, 0.03, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0};
     std::string label = "sac";
     double patch_mm = 0;
-    bool reference = true, wall_contact = false, proximal = false;
+    bool reference = true, wall_contact = false, proximal = false, clip_body = false;
+    double friction = 0.3;
     for (int a = 2; a < argc; a += 2) {
         const std::string k = argv[a];
+        if (k == "--clip-body") {
+            clip_body = true;
+            --a;
+            continue;
+        }
         if (k == "--no-reference" || k == "--wall-contact") {
             (k == "--no-reference" ? reference : wall_contact) = k == "--wall-contact";
             --a;
@@ -218,6 +236,8 @@ int main(int argc, char** argv) {
             region = std::atof(v);
         } else if (k == "--max-seconds") {
             max_seconds = std::atof(v);
+        } else if (k == "--friction") {
+            friction = std::atof(v);
         } else if (k == "--max-newton") {
             max_newton = std::atoi(v);
         } else if (k == "--label") {
@@ -403,6 +423,92 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "contact set did not settle in 30 rounds\n");
     };
 
+    // --clip-body: the simulator's blades (above). Coordinates Xc (the blades close about y = 0).
+    constexpr double HINGE_BACK_MM = 100.0;
+    fem::ClipBlades blades;
+    blades.hinge = Eigen::Vector3d(clip.centre.x(), 0, clip.centre.z() - 0.5 * clip.length - HINGE_BACK_MM);
+    blades.axis = Eigen::Vector3d::UnitZ();
+    blades.up = Eigen::Vector3d::UnitY();
+    blades.length_mm = HINGE_BACK_MM + clip.length;
+    blades.width_mm = clip.width;
+    blades.thickness_mm = 0.5;
+    blades.closed_gap_mm = full_gap;
+    const double r_centre = HINGE_BACK_MM + 0.5 * clip.length;
+    std::vector<int> cand_all;  // outer nodes over the footprint
+    for (Eigen::Index k = 0; k < outer.size(); ++k) {
+        const Eigen::Vector3d p = X.row(outer[k]);
+        const double dz = p.z() - clip.centre.z();
+        if (std::abs(p.x() - clip.centre.x()) <= 0.5 * clip.width + 0.5 && dz >= -0.5 * clip.length && dz <= 0.5 * clip.length + 0.5)
+            cand_all.push_back(outer[k]);
+    }
+    const fem::LinearBody linear_body(fem.K, fem.K_upper_only);
+    auto solve_clip = [&](Track& t, Model model) {
+        const Stopwatch ts;
+        const double theta = 2 * std::asin(std::max(0.0, clip.gap - full_gap) / (2 * r_centre));
+        if (t.theta < 0) t.theta = 2 * std::asin((gap0 + 0.2 - full_gap) / (2 * r_centre));  // clear of the outer wall
+        fem::NewtonOptions no;
+        no.max_total_iterations = max_newton;
+        fem::NewtonResult r;
+        // The body under the blades, its node positions, candidates and start in its own numbering.
+        const fem::ElasticBody* base = &solid;
+        const Eigen::MatrixX3d* XB = &Xc;
+        Eigen::MatrixX3d patch_Xc;
+        std::vector<int> cand = cand_all;
+        Eigen::VectorXd start = t.u;
+        Eigen::VectorXi fixed = fem.fixed_dofs;
+        const Eigen::MatrixX3i* faces = &inner_faces;
+        if (model == Model::LINEAR) {
+            base = &linear_body;
+        } else if (model == Model::PATCH) {
+            base = patch.get();
+            patch_Xc.resize(static_cast<Eigen::Index>(patch->nodes().size()), 3);
+            for (size_t a = 0; a < patch->nodes().size(); ++a) patch_Xc.row(static_cast<Eigen::Index>(a)) = Xc.row(patch->nodes()[a]);
+            XB = &patch_Xc;
+            for (int& c : cand) {
+                const int a = patch->local(c);
+                if (a < 0 || patch->on_interface(a)) throw NumericalError("a blade candidate (node " + std::to_string(c) + ") outside the patch's interior: widen --patch-mm");
+                c = a;
+            }
+            start = patch->restrict_to_patch(t.u);
+            fixed = patch->fixed_dofs();
+            faces = &patch_faces;
+        }
+        std::unique_ptr<fem::ContactBody> wall;
+        if (wall_contact && model != Model::LINEAR) wall = std::make_unique<fem::ContactBody>(*base, *XB, *faces, start, contact);
+        const fem::ElasticBody& body = wall ? static_cast<const fem::ElasticBody&>(*wall) : *base;
+        Eigen::VectorXd v0(start.size() + 1);
+        v0 << start, t.theta;
+        fem::ClipContactParams bp;
+        bp.friction = friction;
+        const fem::ClipBody cb(body, *XB, cand, v0, blades, fem::ClipSpring{1e-3, 0.0}, bp, t.grips.empty() ? nullptr : &t.grips);
+        r = solve_through(cb, fixed, {{static_cast<int>(cb.theta_dof()), theta}}, v0, no, model != Model::LINEAR && proximal, t.prox_steps);
+        const fem::BladeLoads L = cb.loads(r.u);
+        t.force = 0.5 * (L.force_n[0] + L.force_n[1]);
+        t.blade_contacts = L.contacts[0] + L.contacts[1];
+        t.grips = cb.grips(r.u);
+        t.theta = r.u[cb.theta_dof()];
+        if (wall) {
+            t.wall_gap = wall->min_distance(r.u.head(start.size()));
+            t.wall_pairs = wall->active(r.u.head(start.size()));
+        }
+        t.u = model == Model::PATCH ? patch->full_displacement(r.u.head(start.size())) : Eigen::VectorXd(r.u.head(start.size()));
+        t.iterations += r.iterations;
+        t.substeps += r.substeps;
+        t.shifted += r.shifted;
+        t.min_J = r.min_J;
+        ++t.rounds;
+        t.seconds += ts.seconds();
+        if (model != Model::LINEAR && t.seconds > max_seconds)
+            throw NumericalError("time budget of " + std::to_string(static_cast<int>(max_seconds)) + " s for the neo-Hookean solves spent");
+    };
+    auto solve_any = [&](Track& t, Model m) {
+        if (clip_body)
+            solve_clip(t, m);
+        else
+            solve(t, m);
+    };
+    if (clip_body) std::fprintf(stderr, "clip body: %zu candidate nodes, hinge %.0f mm behind the blades, friction %.2f\n", cand_all.size(), HINGE_BACK_MM, friction);
+
     Track lin, nl, pt;
     lin.u = nl.u = pt.u = Eigen::VectorXd::Zero(solid.dofs());
     bool patch_alive = patch != nullptr;
@@ -412,11 +518,11 @@ int main(int argc, char** argv) {
     double prev_c = 0, prev_ef = 0, prev_eu = 0;
     for (double c : closures) {
         clip.gap = gap0 - c * (gap0 - full_gap);
-        solve(lin, Model::LINEAR);
+        solve_any(lin, Model::LINEAR);
         std::string patch_failed;
         if (patch_alive) {
             try {
-                solve(pt, Model::PATCH);
+                solve_any(pt, Model::PATCH);
             } catch (const Error& e) {
                 patch_failed = e.what();
                 patch_alive = false;
@@ -437,7 +543,7 @@ int main(int argc, char** argv) {
         }
         if (reference) {
             try {
-                solve(nl, Model::NONLINEAR);
+                solve_any(nl, Model::NONLINEAR);
             } catch (const Error& e) {
                 reference_failed = e.what();
                 if (!without_reference(e.what())) break;
@@ -468,8 +574,8 @@ int main(int argc, char** argv) {
                             {"force_error", ef},
                             {"u_error", eu},
                             {"u_max_mm", umax},
-                            {"contacts_linear", lin.active.size()},
-                            {"contacts_nonlinear", nl.active.size()},
+                            {"contacts_linear", clip_body ? static_cast<size_t>(lin.blade_contacts) : lin.active.size()},
+                            {"contacts_nonlinear", clip_body ? static_cast<size_t>(nl.blade_contacts) : nl.active.size()},
                             {"min_J", nl.min_J},
                             {"newton_iterations", nl.iterations},
                             {"substeps", nl.substeps},
@@ -489,7 +595,7 @@ int main(int argc, char** argv) {
                 j["force_patch_N"] = pt.force;
                 j["force_error_patch"] = std::abs(pt.force - nl.force) / std::abs(nl.force);
                 j["u_error_patch"] = std::sqrt(num_p / den);
-                j["contacts_patch"] = pt.active.size();
+                j["contacts_patch"] = clip_body ? static_cast<size_t>(pt.blade_contacts) : pt.active.size();
                 j["newton_iterations_patch"] = pt.iterations;
                 j["seconds_patch"] = pt.seconds;
                 j["proximal_steps_patch"] = pt.prox_steps;
@@ -539,6 +645,8 @@ int main(int argc, char** argv) {
                {"seconds_linear", lin.seconds},
                {"seconds_nonlinear", nl.seconds}};
     summary["wall_contact"] = wall_contact;
+    summary["clip_body"] = clip_body;
+    if (clip_body) summary["friction"] = friction;
     if (patch) {
         summary["patch_mm"] = patch_mm;
         summary["patch_nodes"] = patch->nodes().size();

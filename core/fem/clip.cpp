@@ -421,8 +421,16 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
     return b;
 }
 
-LinearBody::LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K) : m_K(std::move(K)) {
+LinearBody::LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K, bool upper_only) : m_K(std::move(K)) {
     if (m_K.rows() != m_K.cols()) throw InputError("linear body: K must be square");
+    if (upper_only) {
+        m_K = RowSparse(m_K.selfadjointView<Eigen::Upper>());
+    } else {
+        // Half a matrix here would give forces K u that are not the energy's gradient (the solve then wanders).
+        const double asym = (m_K - RowSparse(m_K.transpose())).norm();
+        if (!(asym <= 1e-12 * m_K.norm()))
+            throw InputError("linear body: K must be symmetric with both triangles stored (a bundle's upper-triangle K needs upper_only)");
+    }
     m_K.makeCompressed();
 }
 

@@ -380,3 +380,16 @@ TEST(ClipBody, AGrippedNodeHoldsUpToMuLambdaThenSlides) {
         EXPECT_NEAR(L.friction_n[1], 0.0, 1e-9);
     }
 }
+
+TEST(LinearBody, AnUpperTriangleIsMirroredAndHalfAMatrixIsRefused) {
+    // A bundle's K holds its upper triangle: as given it would make forces K u that are not ½ uᵀ K u's gradient.
+    const Block b;
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> full = b.body->tangent(Eigen::VectorXd::Zero(12));
+    const Eigen::SparseMatrix<double, Eigen::RowMajor> upper = full.triangularView<Eigen::Upper>();
+    const fem::LinearBody mirrored(upper, true);
+    Eigen::VectorXd u(12);
+    for (int k = 0; k < 12; ++k) u[k] = 0.01 * (k + 1) * (k % 2 ? 1 : -1);
+    EXPECT_LT((mirrored.internal_force(u) - full * u).norm(), 1e-12 * (full * u).norm());
+    EXPECT_NEAR(mirrored.energy(u), 0.5 * u.dot(full * u), 1e-15);
+    EXPECT_THROW(fem::LinearBody(upper, false), InputError);
+}

@@ -202,7 +202,9 @@ private:
 /// problems as the nonlinear ones, and a known stiffness for tests.
 class LinearBody final : public ElasticBody {
 public:
-    explicit LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K);
+    /// @param upper_only K holds its upper triangle only (a bundle's /fem/K: FemData::K_upper_only): mirrored here.
+    /// @throws InputError K not square, or (both triangles given) not symmetric
+    explicit LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K, bool upper_only = false);
     Eigen::Index dofs() const override { return m_K.rows(); }
     double energy(const Eigen::VectorXd& u) const override { return 0.5 * u.dot(m_K * u); }
     Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override { return m_K * u; }
