@@ -149,10 +149,15 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     const double vr = c.r - std::clamp(c.r, 0.0, tip), va = c.a - std::clamp(c.a, -half, half);
     if (vr == 0 && va == 0) {
         c.u = Eigen::Vector3d(0, 0, 1);
+        c.dist = 0;
         return p;
     }
     const double vd = std::max(p + m_rho, 0.0), dist = std::sqrt(vr * vr + va * va + vd * vd);
     c.u = Eigen::Vector3d(vr, va, vd) / dist;
+    c.dist = dist;
+    c.mr = vr != 0 ? 1.0 : 0.0;
+    c.ma = va != 0 ? 1.0 : 0.0;
+    c.md = p + m_rho > 0 ? 1.0 : 0.0;
     return dist - m_rho;
 }
 
@@ -195,10 +200,20 @@ bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, d
     if (!std::isfinite(e)) return true;  // on or behind the face: infinite energy (a step that got there is rejected)
     grad = pr.f * dP;
     if (H) {
-        // ψ'' ∇P ∇Pᵀ (Gauss–Newton) + ψ' ∇²P from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
-        // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4); dropped for a projected (semidefinite) tangent. The turning of u around
-        // a rounded edge ((I − u uᵀ)/|v|) is left out: the Gauss–Newton part stays positive semidefinite.
+        // ψ'' ∇P ∇Pᵀ (Gauss–Newton) + ψ' ∇²P: from the frame's turning with θ (∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4,
+        // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4) and, round a rounded edge, from the turning of u there: in the blade's
+        // frame y = (r, a, p) the distance |v| − ρ to the core has the Hessian M (I − u uᵀ) M / |v| (M: the
+        // components of v that follow y), carried to (x, θ) by J = ∂y/∂(x, θ). Both are dropped for a projected
+        // (semidefinite) tangent; without the edge's part Newton converges only linearly where nodes press round
+        // an edge (a sac bulging beside a narrow blade).
         *H = pr.k * dP * dP.transpose();
+        if (!project && c.dist > 0) {
+            Eigen::Matrix<double, 3, 4> J;
+            J << c.t.transpose(), -0.5 * c.q, c.w.transpose(), 0.0, c.n.transpose(), 0.5 * c.r;
+            const Eigen::Vector3d m(c.mr, c.ma, c.md);
+            const Eigen::Matrix3d Hy = m.asDiagonal() * (Eigen::Matrix3d::Identity() - c.u * c.u.transpose()) * m.asDiagonal() / c.dist;
+            *H -= pr.f * J.transpose() * Hy * J;
+        }
         if (!project) {
             const double kp = pr.f;
             const Eigen::Vector3d xt = -(c.u[0] * (-0.5) * c.n + c.u[2] * 0.5 * c.t);

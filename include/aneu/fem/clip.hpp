@@ -150,6 +150,8 @@ private:
         double d = 0, r = 0, a = 0, q = 0;  // a: across the blade, along w; q = rel·n
         Eigen::Vector3d t, n, w;
         Eigen::Vector3d u = Eigen::Vector3d(0, 0, 1);  // ∂D/∂(r, a, p): the unit vector from the blade's core
+        double dist = 0;                               // beside the core: |v|, the distance from its edge (0: over it)
+        double mr = 0, ma = 0, md = 0;                 // which of v's components follow r, a, p (1) or are 0
     };
     static constexpr double EDGE_MM = 0.1;  ///< the blades' edge radius ρ (less on blades too thin or narrow for it)
     /// D: how far the point hinge + rel lies in front of the blade whose frame c holds (its face flat over the
