@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "aneu/core/error.hpp"
+#include "ccd.hpp"
 #include "merged_pattern.hpp"
 
 namespace aneu::fem {
@@ -372,7 +373,6 @@ double ClipBody::max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) c
     // l = |Δx| + R |Δθ|/2 (the blade turns by θ/2 about the hinge; R bounds the node's distance from the hinge on
     // the way), so advancing by a fraction of D / l at a time never reaches the face; stop where D is a tenth of
     // its start.
-    constexpr double SHRINK = 0.1;
     double alpha = m_body.max_step(v.head(m_body.dofs()), dv.head(m_body.dofs()));
     const double dth = std::abs(dv[theta_dof()]);
     for (size_t k = 0; k < m_nodes.size(); ++k) {
@@ -390,19 +390,8 @@ double ClipBody::max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) c
                 return blade_distance(x0 + t * dx - m_blades.hinge, c) - m_offset[k][i];
             };
             const double d0 = dist(0);
-            if (!(d0 > 0)) return 0;                       // already on the face: no step is admissible
-            if ((1 - SHRINK) * d0 >= alpha * l) continue;  // cannot come near within the step
-            double t = 0, tl = (1 - SHRINK) * d0 / l;
-            for (int it = 0;; ++it) {
-                if (t + tl >= alpha) break;
-                const double dn = dist(t + tl);
-                if ((it > 0 && dn < SHRINK * d0) || it == 10000) {
-                    alpha = t;
-                    break;
-                }
-                t += tl;
-                tl = 0.9 * dn / l;
-            }
+            if (!(d0 > 0)) return 0;  // already on the face: no step is admissible
+            alpha = detail::additive_ccd(d0, l, alpha, dist);
         }
     }
     return alpha;

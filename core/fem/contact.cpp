@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include "aneu/core/error.hpp"
+#include "ccd.hpp"
 #include "merged_pattern.hpp"
 
 namespace aneu::fem {
@@ -283,7 +284,6 @@ double ContactBody::max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du
     // Additive CCD (Li, Kaufman & Jiang 2021): along the step, a pair's distance falls at most as fast as
     // l = |Δp| + max |Δcorner| (the step's common translation removed), so advancing by a fraction of d / l
     // at a time never passes the face; stop where d is a tenth of its start.
-    constexpr double SHRINK = 0.1;
     double alpha = m_body.max_step(u, du);
     for (const auto& q : m_pairs) {
         const int nodes[4] = {q.v, m_F(q.f, 0), m_F(q.f, 1), m_F(q.f, 2)};
@@ -297,20 +297,7 @@ double ContactBody::max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du
             for (int i = 0; i < 4; ++i) y[i] = x(u, nodes[i]) + t * du.segment<3>(3 * nodes[i]);
             return std::sqrt(point_triangle(y[0], y[1], y[2], y[3], false).D);
         };
-        const double d0 = dist(0);
-        if ((1 - SHRINK) * d0 >= alpha * l) continue;  // cannot come near within the step
-        // The first advance, (1 − SHRINK) d0 / l, cannot bring it below SHRINK · d0.
-        double t = 0, tl = (1 - SHRINK) * d0 / l;
-        for (int it = 0;; ++it) {
-            if (t + tl >= alpha) break;  // reaches α without coming near
-            const double dn = dist(t + tl);
-            if ((it > 0 && dn < SHRINK * d0) || it == 10000) {
-                alpha = t;
-                break;
-            }
-            t += tl;
-            tl = 0.9 * dn / l;
-        }
+        alpha = detail::additive_ccd(dist(0), l, alpha, dist);
     }
     return alpha;
 }
