@@ -22,7 +22,7 @@
 // interface — with its errors against the same reference.
 // Usage: aneu_bench_closure FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2]
 //                           [--region-mm 3] [--closures 0.025,0.05,...] [--label sac] [--max-newton 100] [--max-seconds 900]
-//                           [--patch-mm 0] [--no-reference] [--wall-contact] [--proximal]
+//                           [--patch-mm 0] [--no-reference] [--wall-contact] [--proximal] [--clip-body [--friction 0.3]]
 // --wall-contact: the nonlinear models (reference and patch) also keep the lumen's opposite inner walls apart
 // (fem::ContactBody on the corner nodes of the inner surface, gap 0.01 mm); the linear model cannot.
 // --clip-body: the blades are the simulator's (fem::ClipBody, issue #15) for all three models instead of the

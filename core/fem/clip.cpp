@@ -191,7 +191,7 @@ bool ClipBody::measure(const Eigen::VectorXd& v, size_t k, int s, Touch& c) cons
 bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                           bool project) const {
     if (!measure(v, k, s, c)) return false;
-    // ψ(D) (press(): the barrier); with P = −D, ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
+    // ψ(D) (press(): the barrier), dP = −∇D; ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
     // frame (u: the unit vector from the core's nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2),
     // q = rel·n.
     Eigen::Vector4d dP;
@@ -416,6 +416,10 @@ BladeLoads ClipBody::loads(const Eigen::VectorXd& v) const {
                 if (slid) ++b.sliding[i];
             }
             if (!pair_terms(v, k, s, c, e, g, nullptr, false)) continue;
+            if (!std::isfinite(e)) {  // on or behind the face (a state no solve ends in, e.g. the blades moved on
+                ++b.contacts[i];      // ahead of a solve): it touches, with no finite force to report
+                continue;
+            }
             b.net_force += g.head<3>();  // ∂E/∂x of the node: minus the force the blade applies to it
             const double f = press(c.d).f;
             b.force_n[i] += f;

@@ -89,7 +89,4 @@ inline double max_diagonal(const ElasticBody& body) {
     return dmax;
 }
 
-/// A contact penalty stiff against the body: 100 × its largest diagonal entry at rest [N/mm].
-inline double default_penalty(const ElasticBody& body) { return 100.0 * max_diagonal(body); }
-
 }  // namespace aneu::fem::detail
