@@ -443,6 +443,21 @@ int main(int argc, char** argv) {
             cand_all.push_back(outer[k]);
     }
     const fem::LinearBody linear_body(fem.K, fem.K_upper_only);
+    // The patch's own numbering of the node positions and the candidates (once, not per step).
+    Eigen::MatrixX3d patch_Xc;
+    std::vector<int> cand_patch;
+    if (clip_body && patch) {
+        patch_Xc.resize(static_cast<Eigen::Index>(patch->nodes().size()), 3);
+        for (size_t a = 0; a < patch->nodes().size(); ++a) patch_Xc.row(static_cast<Eigen::Index>(a)) = Xc.row(patch->nodes()[a]);
+        for (int c : cand_all) {
+            const int a = patch->local(c);
+            if (a < 0 || patch->on_interface(a)) {
+                std::fprintf(stderr, "a blade candidate (node %d) lies outside the patch's interior: widen --patch-mm\n", c);
+                return 2;
+            }
+            cand_patch.push_back(a);
+        }
+    }
     // One step of the blades to the opening theta (a sub-step of a closure step: solve_clip below).
     auto clip_step = [&](Track& t, Model model, double theta) {
         fem::NewtonOptions no;
@@ -451,7 +466,6 @@ int main(int argc, char** argv) {
         // The body under the blades, its node positions, candidates and start in its own numbering.
         const fem::ElasticBody* base = &solid;
         const Eigen::MatrixX3d* XB = &Xc;
-        Eigen::MatrixX3d patch_Xc;
         std::vector<int> cand = cand_all;
         Eigen::VectorXd start = t.u;
         Eigen::VectorXi fixed = fem.fixed_dofs;
@@ -460,14 +474,8 @@ int main(int argc, char** argv) {
             base = &linear_body;
         } else if (model == Model::PATCH) {
             base = patch.get();
-            patch_Xc.resize(static_cast<Eigen::Index>(patch->nodes().size()), 3);
-            for (size_t a = 0; a < patch->nodes().size(); ++a) patch_Xc.row(static_cast<Eigen::Index>(a)) = Xc.row(patch->nodes()[a]);
             XB = &patch_Xc;
-            for (int& c : cand) {
-                const int a = patch->local(c);
-                if (a < 0 || patch->on_interface(a)) throw NumericalError("a blade candidate (node " + std::to_string(c) + ") outside the patch's interior: widen --patch-mm");
-                c = a;
-            }
+            cand = cand_patch;
             start = patch->restrict_to_patch(t.u);
             fixed = patch->fixed_dofs();
             faces = &patch_faces;
