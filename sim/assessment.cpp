@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <set>
 #include <vector>
@@ -76,6 +78,7 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
             out.min_gap_mm = std::min(out.min_gap_mm, g[k]);
             if (g[k] < 0) out.max_interpenetration_mm = std::max(out.max_interpenetration_mm, -g[k]);
         }
+        out.gap_mm.push_back(g);
         for (size_t k = 0; k < loop.size(); ++k) {
             const size_t l = (k + 1) % loop.size();
             const double len = (y.row(loop[l]) - y.row(loop[k])).norm();
@@ -119,6 +122,21 @@ Assessment Simulator::Impl::assess() {
     out.neck_length_mm = occ.length_mm;
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
+    out.neck_line.clear();
+    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
+        const auto& loop = lumen.neck_loops[l];
+        for (size_t k = 0; k < loop.size(); ++k) out.neck_line.push_back({y.row(loop[k]).transpose(), occ.gap_mm[l][k], static_cast<int>(l)});
+    }
+    // Debugging: the deformed lumen as a Wavefront OBJ (neck vertices listed after it as comments).
+    if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) {
+        if (std::FILE* fo = std::fopen(obj, "w")) {
+            for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
+            for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) std::fprintf(fo, "f %d %d %d\n", lumen.F(f, 0) + 1, lumen.F(f, 1) + 1, lumen.F(f, 2) + 1);
+            for (size_t l = 0; l < lumen.neck_loops.size(); ++l)
+                for (size_t k = 0; k < lumen.neck_loops[l].size(); ++k) std::fprintf(fo, "# neck %zu %d %.6g\n", l, lumen.neck_loops[l][k] + 1, occ.gap_mm[l][k]);
+            std::fclose(fo);
+        }
+    }
     // The neck line lying between the jaws of a closed clip (where the clip is, not what it achieved).
     double total = 0, closed = 0;
     for (const auto& loop : model.surface.neck_loops) {

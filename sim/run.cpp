@@ -493,6 +493,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
+    // Where along the neck line it stays open: [x, y, z, gap] per neck vertex in loop order (gap null: no opposite
+    // wall within reach).
+    j["neck_line"] = nlohmann::json::array();
+    for (const auto& q : a.neck_line)
+        j["neck_line"].push_back({q.x.x(), q.x.y(), q.x.z(), std::isfinite(q.gap_mm) ? nlohmann::json(q.gap_mm) : nlohmann::json()});
     j["clips"] = nlohmann::json::array();
     for (const auto& c : a.clip_ends) {
         nlohmann::json cj = {{"id", c.id}, {"model", c.model}, {"state", c.deposited ? "deposited" : "held"}, {"opening_deg", c.opening_deg},

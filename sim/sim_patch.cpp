@@ -322,7 +322,25 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const fem::BladeLoads loads = at_rest ? free_loads : cb.loads(r.u);
         std::vector<fem::BladeGrip> grips = cb.grips(r.u);
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
-        const double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
+        double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
+        // The pairs are the frame start's: a vertex that went through a face it was not paired with (or round a
+        // paired face's edge) is behind a face now that no pair sees. The whole inner surface is looked at.
+        if (wall) {
+            const fem::ContactParams cp;
+            const std::vector<fem::SurfaceCrossing> cross = fem::surface_crossings(P.X, P.inner, r.u.head(nb), cp.exclude_rings, 0.25);
+            for (const fem::SurfaceCrossing& q : cross) {
+                wall_min = std::min(wall_min, -q.depth_mm);
+                if (!std::getenv("ANEU_PATCH_TRACE")) continue;
+                auto at = [&](const Eigen::VectorXd& w, int n) { return Eigen::Vector3d(P.X.row(n).transpose() + w.segment<3>(3 * n)); };
+                const Eigen::Vector3d a0 = at(v0, P.inner(q.f, 0)), n0 = (at(v0, P.inner(q.f, 1)) - a0).cross(at(v0, P.inner(q.f, 2)) - a0).normalized();
+                std::fprintf(stderr, "patch crossing: node %d %.4f mm behind face %d (%d %d %d), %s; at the frame start %.4f mm from its plane, moved %.4f mm this frame, face corners moved %.4f mm\n",
+                             q.v, q.depth_mm, q.f, P.inner(q.f, 0), P.inner(q.f, 1), P.inner(q.f, 2), wall->is_pair(q.v, q.f) ? "paired" : "NOT paired",
+                             (at(v0, q.v) - a0).dot(n0), (r.u.segment<3>(3 * q.v) - v0.segment<3>(3 * q.v)).norm(),
+                             std::max({(r.u.segment<3>(3 * P.inner(q.f, 0)) - v0.segment<3>(3 * P.inner(q.f, 0))).norm(),
+                                       (r.u.segment<3>(3 * P.inner(q.f, 1)) - v0.segment<3>(3 * P.inner(q.f, 1))).norm(),
+                                       (r.u.segment<3>(3 * P.inner(q.f, 2)) - v0.segment<3>(3 * P.inner(q.f, 2))).norm()}));
+            }
+        }
         const auto touching = wall ? static_cast<int>(wall->active(r.u.head(nb))) : 0;
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))

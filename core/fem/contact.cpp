@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <unordered_map>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -311,6 +312,12 @@ std::size_t ContactBody::active(const Eigen::VectorXd& u) const {
     return n_active;
 }
 
+bool ContactBody::is_pair(int v, int f) const {
+    // The constructor adds pairs face by face, each face's vertices in ascending order.
+    return std::binary_search(m_pairs.begin(), m_pairs.end(), Pair{v, f},
+                              [](const Pair& a, const Pair& b) { return a.f != b.f ? a.f < b.f : a.v < b.v; });
+}
+
 double ContactBody::min_distance(const Eigen::VectorXd& u) const {
     double m = std::numeric_limits<double>::infinity();
     for (const auto& q : m_pairs) {
@@ -318,6 +325,83 @@ double ContactBody::min_distance(const Eigen::VectorXd& u) const {
         if (d >= -m_p.depth_mm) m = std::min(m, d);
     }
     return m;
+}
+
+std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
+                                               double depth) {
+    if (u.size() != 3 * X.rows()) throw InputError("surface_crossings: the displacement has the wrong size");
+    std::vector<SurfaceCrossing> out;
+    if (faces.rows() == 0 || !(depth > 0)) return out;
+    auto pos = [&](const Eigen::VectorXd* w, int n) {
+        Vec3 p = X.row(n).transpose();
+        if (w) p += w->segment<3>(3 * n);
+        return p;
+    };
+    // Behind f: the closest point inside the face, on its back, less than depth deep (the signed distance).
+    auto behind = [&](const Eigen::VectorXd* w, int v, Eigen::Index f) {
+        const Vec3 p = pos(w, v), a = pos(w, faces(f, 0)), b = pos(w, faces(f, 1)), c = pos(w, faces(f, 2));
+        const PointTriangle pt = point_triangle(p, a, b, c, false);
+        if (!pt.inside || (p - a).dot((b - a).cross(c - a)) >= 0) return 0.0;
+        const double d = std::sqrt(pt.D);
+        return d < depth ? d : 0.0;
+    };
+    std::vector<int> verts;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) verts.push_back(faces(f, k));
+    std::sort(verts.begin(), verts.end());
+    verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+    // Faces into the cells their box (grown by depth) covers; cells as large as the mean edge.
+    double h = 0;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) h += (pos(&u, faces(f, 1)) - pos(&u, faces(f, 0))).norm();
+    h = std::max(h / static_cast<double>(faces.rows()), depth);
+    auto cell = [&](const Vec3& p) { return (p / h).array().floor().cast<std::int64_t>().eval(); };
+    auto key = [](std::int64_t i, std::int64_t j, std::int64_t k) { return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791); };
+    std::unordered_map<std::int64_t, std::vector<int>> grid;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+        Vec3 lo = pos(&u, faces(f, 0)), hi = lo;
+        for (int k = 1; k < 3; ++k) {
+            lo = lo.cwiseMin(pos(&u, faces(f, k)));
+            hi = hi.cwiseMax(pos(&u, faces(f, k)));
+        }
+        const auto a = cell(lo.array() - depth), b = cell(hi.array() + depth);
+        for (auto i = a[0]; i <= b[0]; ++i)
+            for (auto j = a[1]; j <= b[1]; ++j)
+                for (auto k = a[2]; k <= b[2]; ++k) grid[key(i, j, k)].push_back(static_cast<int>(f));
+    }
+    std::vector<std::vector<int>> nb(static_cast<size_t>(X.rows()));
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
+            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
+        }
+    // v within exclude_rings edges of f's corners (breadth first from the corners; only for the rare hits).
+    auto neighbour = [&](int v, Eigen::Index f) {
+        std::vector<int> frontier = {faces(f, 0), faces(f, 1), faces(f, 2)}, seen = frontier, next;
+        for (int r = 0;; ++r) {
+            if (std::find(frontier.begin(), frontier.end(), v) != frontier.end()) return true;
+            if (r == exclude_rings) return false;
+            next.clear();
+            for (int w : frontier)
+                for (int y : nb[static_cast<size_t>(w)])
+                    if (std::find(seen.begin(), seen.end(), y) == seen.end()) {
+                        seen.push_back(y);
+                        next.push_back(y);
+                    }
+            frontier.swap(next);
+        }
+    };
+    for (int v : verts) {
+        const auto c = cell(pos(&u, v));
+        const auto it = grid.find(key(c[0], c[1], c[2]));
+        if (it == grid.end()) continue;
+        for (int f : it->second) {
+            if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
+            const double d = behind(&u, v, f);
+            if (d <= 0 || behind(nullptr, v, f) > 0 || neighbour(v, f)) continue;
+            out.push_back({v, f, d});
+        }
+    }
+    return out;
 }
 
 }  // namespace aneu::fem

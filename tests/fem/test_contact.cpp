@@ -3,6 +3,7 @@
 // pass through each other, and the force through them is that of the two plates in series.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 
@@ -101,6 +102,40 @@ TEST(WallContact, TwoPlatesPressedTogetherTouchAndDoNotPassThrough) {
     std::printf("plates: force %.5f N (two plates in series %.5f N), separation %.4f mm, %zu pairs in contact of %zu, κ %.3g N/mm\n", f,
                 expected, dmin, body.active(r.u), body.candidates(), body.stiffness());
     EXPECT_NEAR(f, expected, 0.05 * expected);
+}
+
+TEST(WallContact, SurfaceCrossingsSeeEveryVertexThroughAFacePairedOrNot) {
+    // Without contact the top plate is carried rigidly 0.08 mm down: its facing vertices end 0.03 mm behind the
+    // bottom plate's faces and the bottom's 0.03 mm behind the top's. A ContactBody made in that state has no pair
+    // that sees it (its pairs are those in front where it starts); surface_crossings sees every one.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.0}});
+    const Eigen::VectorXd u0 = Eigen::VectorXd::Zero(solid.dofs());
+    const fem::NewtonResult free = fem::solve_neo_hookean(solid, p.fixed, p.push(0.08), u0);
+    const fem::ContactParams cp;
+    EXPECT_TRUE(fem::surface_crossings(p.V, p.faces, u0, cp.exclude_rings, 0.25).empty());
+    const std::vector<fem::SurfaceCrossing> cross = fem::surface_crossings(p.V, p.faces, free.u, cp.exclude_rings, 0.25);
+    std::vector<int> through;
+    for (const auto& q : cross) {
+        EXPECT_NEAR(q.depth_mm, 0.03, 1e-9);
+        // A vertex of one plate behind a face of the other, never of its own.
+        EXPECT_NE(p.V(q.v, 2) > Plates::H + 1e-9, p.V(p.faces(q.f, 0), 2) > Plates::H + 1e-9);
+        through.push_back(q.v);
+    }
+    std::sort(through.begin(), through.end());
+    through.erase(std::unique(through.begin(), through.end()), through.end());
+    // Every facing vertex of both plates off the plates' rim (on the rim a vertex lies on the other plate's edge).
+    const auto inner = std::count_if(through.begin(), through.end(), [&](int v) {
+        return std::min({p.V(v, 0), p.V(v, 1), 1 - p.V(v, 0), 1 - p.V(v, 1)}) > 1e-9;
+    });
+    EXPECT_EQ(inner, 3 * 3 + 4 * 4);
+    EXPECT_TRUE(fem::surface_crossings(p.V, p.faces, free.u, cp.exclude_rings, 0.029).empty());  // deeper than depth: another part
+    const fem::ContactBody late(solid, p.V, p.faces, free.u, cp);
+    EXPECT_GT(late.min_distance(free.u), 0.0);  // what the frame's own pairs report
+    const fem::ContactBody early(solid, p.V, p.faces, u0, cp);
+    EXPECT_TRUE(early.is_pair(cross.front().v, cross.front().f));
+    EXPECT_FALSE(late.is_pair(cross.front().v, cross.front().f));
+    EXPECT_THROW(fem::surface_crossings(p.V, p.faces, u0.head(3), 2, 0.25), InputError);
 }
 
 TEST(WallContact, NeighboursAreNotPairs) {

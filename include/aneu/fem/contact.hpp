@@ -65,6 +65,8 @@ public:
     std::size_t active(const Eigen::VectorXd& u) const;
     double min_distance(const Eigen::VectorXd& u) const;
     double stiffness() const { return m_kappa; }
+    /// Whether (vertex v, face f) is one of the candidate pairs.
+    bool is_pair(int v, int f) const;
     /// The largest α ≤ 1 such that no candidate vertex comes nearer to its face than a tenth of its distance at u
     /// along u + α du (additive CCD).
     double max_step(const Eigen::VectorXd& u, const Eigen::VectorXd& du) const override;
@@ -97,5 +99,20 @@ private:
     /// The pairs' terms at u, added into values at where[slot] (where null: the slots themselves).
     void add_pair_tangents(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const;
 };
+
+/// A surface vertex lying behind a face of the same surface (its closest point inside the face, on the face's
+/// back, less than `depth` deep) that did not lie behind it in the reference shape: the surface passed through
+/// itself there.
+struct SurfaceCrossing {
+    int v = -1, f = -1;
+    double depth_mm = 0;  ///< how far behind the face (> 0)
+};
+/// Every crossing of the surface `faces` (reference X, displacement u) by its own vertices, independent of any
+/// candidate pairs (a ContactBody's pairs are fixed where its solve starts; this looks at all of them): vertices
+/// within `exclude_rings` edges of a face's corners are its neighbours and never count; `depth` bounds how far
+/// behind a face a vertex still counts as through it (beyond lies another part of the body). A uniform grid
+/// keeps it near linear in the surface's size.
+std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
+                                               double depth);
 
 }  // namespace aneu::fem

@@ -2,6 +2,8 @@
 #pragma once
 /// @file
 /// Measures of a clipping's result on the deformed vessel (sim/assessment.cpp).
+#include <vector>
+
 #include <Eigen/Core>
 
 #include "aneu/sim/model.hpp"
@@ -15,6 +17,9 @@ struct NeckOcclusion {
     double fraction = 0.0;             ///< closed_mm / length_mm (0 when there is no neck)
     double min_gap_mm = 0.0;           ///< smallest lumen gap found across the neck line (negative: interpenetration)
     double max_interpenetration_mm = 0.0;  ///< largest depth of one inner wall through the opposite one (0: none)
+    /// Per neck loop, per vertex in loop order: the lumen gap there (+inf: no opposite wall within reach), so a
+    /// report can say where along the neck line it stays open.
+    std::vector<std::vector<double>> gap_mm;
 };
 
 /// Neck occlusion on the deformed lumen `y` (#L×3, SimLumen::deformed). The neck line is the sac's border on

@@ -76,6 +76,13 @@ struct Assessment {
     double neck_min_gap_mm = 0.0;             ///< smallest lumen gap across the neck line (negative: walls pass through)
     double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
+    /// The neck line on the deformed lumen, vertex by vertex: where it stays open after the clipping.
+    struct NeckPoint {
+        Eigen::Vector3d x = Eigen::Vector3d::Zero();
+        double gap_mm = 0;  ///< the lumen gap there (+inf: no opposite wall within reach; < 0: walls through)
+        int loop = 0;
+    };
+    std::vector<NeckPoint> neck_line;
     int skipped_inputs = 0;         ///< live lines refused
     /// Each clip at the end: its opening and, with a spring, the spring's torque against the tissue's moment.
     struct ClipEnd {
