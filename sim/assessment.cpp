@@ -15,6 +15,72 @@
 
 namespace aneu::sim {
 
+namespace {
+
+/// The closest point of triangle (a, b, c) to p, as barycentric weights of a, b, c (Ericson, Real-Time Collision
+/// Detection, 5.1.5).
+Eigen::Vector3d closest_barycentric(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+    if (d1 <= 0 && d2 <= 0) return {1, 0, 0};
+    const Eigen::Vector3d bp = p - b;
+    const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+    if (d3 >= 0 && d4 <= d3) return {0, 1, 0};
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+        const double v = d1 / (d1 - d3);
+        return {1 - v, v, 0};
+    }
+    const Eigen::Vector3d cp = p - c;
+    const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+    if (d6 >= 0 && d5 <= d6) return {0, 0, 1};
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+        const double w = d2 / (d2 - d6);
+        return {1 - w, 0, w};
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return {0, 1 - w, w};
+    }
+    const double den = 1 / (va + vb + vc), v = vb * den, w = vc * den;
+    return {1 - v - w, v, w};
+}
+
+}  // namespace
+
+std::vector<NeckPointOnLumen> smoothed_neck_line(const SimLumen& lumen, const std::vector<int>& loop) {
+    std::vector<NeckPointOnLumen> out;
+    const size_t n = loop.size();
+    if (n < 3) return out;
+    std::vector<Eigen::Vector3d> p(n), q(n);
+    for (size_t k = 0; k < n; ++k) p[k] = lumen.X.row(loop[k]).transpose();
+    for (int it = 0; it < NECK_SMOOTHING_PASSES; ++it) {
+        for (size_t k = 0; k < n; ++k) q[k] = 0.25 * p[(k + n - 1) % n] + 0.5 * p[k] + 0.25 * p[(k + 1) % n];
+        p.swap(q);
+    }
+    // Back onto the lumen: the closest point of the faces (each smoothed point lies within an element or two of
+    // the staircase it came from).
+    for (size_t k = 0; k < n; ++k) {
+        NeckPointOnLumen best;
+        double dbest = std::numeric_limits<double>::infinity();
+        for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) {
+            const Eigen::Vector3d a = lumen.X.row(lumen.F(f, 0)), b = lumen.X.row(lumen.F(f, 1)), c = lumen.X.row(lumen.F(f, 2));
+            if ((a - p[k]).norm() > dbest + (b - a).norm() + (c - a).norm()) continue;
+            const Eigen::Vector3d w = closest_barycentric(p[k], a, b, c);
+            const double d = (w[0] * a + w[1] * b + w[2] * c - p[k]).norm();
+            if (d < dbest) {
+                dbest = d;
+                best.face = static_cast<int>(f);
+                best.weights = w;
+            }
+        }
+        out.push_back(best);
+    }
+    return out;
+}
+
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm) {
     NeckOcclusion out;
     if (lumen.neck_loops.empty()) return out;
@@ -39,17 +105,27 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
     }
     constexpr double SEARCH_MM = 12.0;  // across the widest neck
     const double inf = std::numeric_limits<double>::infinity();
-    // The gap at a neck vertex: along the ray from it across the lumen (against its normal), the nearest crossing
-    // of an opposite face (facing it: normals more than 120° apart), in front (the gap) or behind (the walls pass
-    // through each other, looked for no deeper than the vertex's own wall: beyond it lies another vessel or the
-    // sac overhanging the parent, not an interpenetration). Its own faces and its one ring's are not "opposite".
-    auto gap_at = [&](int v) {
-        const double behind = v < wall_mm.size() ? wall_mm[v] : 0.0;
-        const Eigen::Vector3d yv = y.row(v).transpose(), dir = -vn.row(v).transpose();
+    // The gap at a point of the neck line (on face `face` at barycentric `w`): along the ray from it across the
+    // lumen (against its interpolated normal), the nearest crossing of an opposite face (facing it: normals more
+    // than 120° apart), in front (the gap) or behind (the walls pass through each other, looked for no deeper
+    // than the point's own wall: beyond it lies another vessel or the sac overhanging the parent, not an
+    // interpenetration). The faces round its face's corners and their one ring are not "opposite".
+    auto gap_at = [&](int face, const Eigen::Vector3d& w, Eigen::Vector3d& where) {
+        double behind = 0;
+        Eigen::Vector3d yv = Eigen::Vector3d::Zero(), nrm = Eigen::Vector3d::Zero();
         std::set<int> own;
-        for (int f : faces_of[static_cast<size_t>(v)])
-            for (int k = 0; k < 3; ++k)
-                for (int g : faces_of[static_cast<size_t>(F(f, k))]) own.insert(g);
+        for (int k = 0; k < 3; ++k) {
+            const int c = F(face, k);
+            yv += w[k] * y.row(c).transpose();
+            nrm += w[k] * vn.row(c).transpose();
+            if (c < wall_mm.size()) behind += w[k] * wall_mm[c];
+            for (int f : faces_of[static_cast<size_t>(c)])
+                for (int j = 0; j < 3; ++j)
+                    for (int g : faces_of[static_cast<size_t>(F(f, j))]) own.insert(g);
+        }
+        where = yv;
+        if (!(nrm.norm() > 0)) nrm = fn.row(face).transpose();
+        const Eigen::Vector3d dir = -nrm.normalized();
         double gap = inf;
         for (Eigen::Index f = 0; f < NF; ++f) {
             if (fn.row(f).dot(dir) < 0.5 || own.count(static_cast<int>(f))) continue;
@@ -63,28 +139,32 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
             const double u = tv.dot(pv) / det;
             if (u < 0 || u > 1) continue;
             const Eigen::Vector3d qv = tv.cross(e1);
-            const double w = dir.dot(qv) / det;
-            if (w < 0 || u + w > 1) continue;
+            const double v = dir.dot(qv) / det;
+            if (v < 0 || u + v > 1) continue;
             const double hit = e2.dot(qv) / det;
             if (hit <= SEARCH_MM && hit >= -behind && std::abs(hit) < std::abs(gap)) gap = hit;
         }
         return gap;
     };
     out.min_gap_mm = inf;
-    for (const auto& loop : lumen.neck_loops) {
-        std::vector<double> g(loop.size());
-        for (size_t k = 0; k < loop.size(); ++k) {
-            g[k] = gap_at(loop[k]);
+    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
+        const std::vector<NeckPointOnLumen> line = l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
+        if (line.empty()) continue;
+        std::vector<double> g(line.size());
+        std::vector<Eigen::Vector3d> at(line.size());
+        for (size_t k = 0; k < line.size(); ++k) {
+            g[k] = gap_at(line[k].face, line[k].weights, at[k]);
             out.min_gap_mm = std::min(out.min_gap_mm, g[k]);
             if (g[k] < 0) out.max_interpenetration_mm = std::max(out.max_interpenetration_mm, -g[k]);
         }
-        out.gap_mm.push_back(g);
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const size_t l = (k + 1) % loop.size();
-            const double len = (y.row(loop[l]) - y.row(loop[k])).norm();
+        for (size_t k = 0; k < line.size(); ++k) {
+            const size_t m = (k + 1) % line.size();
+            const double len = (at[m] - at[k]).norm();
             out.length_mm += len;
-            if (g[k] <= gap_tol_mm && g[l] <= gap_tol_mm) out.closed_mm += len;
+            if (g[k] <= gap_tol_mm && g[m] <= gap_tol_mm) out.closed_mm += len;
         }
+        out.gap_mm.push_back(g);
+        out.points.push_back(at);
     }
     out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
     return out;
@@ -123,17 +203,16 @@ Assessment Simulator::Impl::assess() {
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
     out.neck_line.clear();
-    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
-        const auto& loop = lumen.neck_loops[l];
-        for (size_t k = 0; k < loop.size(); ++k) out.neck_line.push_back({y.row(loop[k]).transpose(), occ.gap_mm[l][k], static_cast<int>(l)});
-    }
+    for (size_t l = 0; l < occ.points.size(); ++l)
+        for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
     // Debugging: the deformed lumen as a Wavefront OBJ (neck vertices listed after it as comments).
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) {
         if (std::FILE* fo = std::fopen(obj, "w")) {
             for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
             for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) std::fprintf(fo, "f %d %d %d\n", lumen.F(f, 0) + 1, lumen.F(f, 1) + 1, lumen.F(f, 2) + 1);
-            for (size_t l = 0; l < lumen.neck_loops.size(); ++l)
-                for (size_t k = 0; k < lumen.neck_loops[l].size(); ++k) std::fprintf(fo, "# neck %zu %d %.6g\n", l, lumen.neck_loops[l][k] + 1, occ.gap_mm[l][k]);
+            for (size_t l = 0; l < occ.points.size(); ++l)
+                for (size_t k = 0; k < occ.points[l].size(); ++k)
+                    std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
             std::fclose(fo);
         }
     }

@@ -148,6 +148,7 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
         L.face_region[static_cast<Eigen::Index>(f)] = reg[f];
     }
     L.neck_loops = neck_loops_of(L.F, L.X, L.face_region, s.region_names);
+    for (const auto& loop : L.neck_loops) L.neck_line.push_back(smoothed_neck_line(L, loop));
     return L;
 }
 

@@ -124,3 +124,39 @@ TEST(NeckOcclusion, ClipBesideTheNeckClosesNone) {
     EXPECT_EQ(o.fraction, 0.0);
     EXPECT_NEAR(o.min_gap_mm, 2 * (R_OUT - T), 0.01);
 }
+
+TEST(NeckOcclusion, AStaircaseNeckLineIsMeasuredOnTheBorderItFollows) {
+    // The labels' border as a mesh gives it: a staircase between the rings at z = 0 and z = 0.2 mm (two edges on
+    // one ring, up, two on the other, down), 7.54 + 48 × 0.2 = 17.1 mm of edges for a border 2π R = 7.54 mm long
+    // at z ≈ 0.1 mm. The occlusion is measured on the border: its length, its height, and the pinch closing it.
+    SimLumen s = tube();
+    const int k0 = NZ / 2, k1 = k0 + 1;
+    auto ring_of = [&](int i) { return (i / 2) % 2 == 0 ? k0 : k1; };
+    std::vector<int> loop;
+    double stairs = 0;
+    for (int i = 0; i < NT; ++i) {
+        loop.push_back(ring_of(i) * NT + i);
+        const int next = ring_of((i + 1) % NT);
+        if (next != ring_of(i)) loop.push_back(next * NT + i);  // the step up or down at column i
+    }
+    for (size_t k = 0; k < loop.size(); ++k) stairs += (s.X.row(loop[(k + 1) % loop.size()]) - s.X.row(loop[k])).norm();
+    ASSERT_NEAR(stairs, 2 * NT * R_IN * std::sin(PI / NT) + NT / 2 * (Z1 - Z0) / (NZ - 1), 1e-9);
+    s.neck_loops = {loop};
+    const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T);
+    const NeckOcclusion open = neck_occlusion(s, s.X, 0.05, wall);
+    EXPECT_NEAR(open.length_mm, 2 * PI * R_IN, 0.02 * 2 * PI * R_IN) << "the staircase is " << stairs << " mm";
+    ASSERT_EQ(open.points.size(), 1u);
+    for (const Eigen::Vector3d& p : open.points[0]) {
+        EXPECT_NEAR(p.z(), 0.1, 0.05);                           // between the two rings: the border
+        EXPECT_NEAR(std::hypot(p.x(), p.y()), R_IN, 0.01);       // on the lumen
+    }
+    EXPECT_EQ(open.fraction, 0.0);
+    const NeckOcclusion closed = neck_occlusion(s, pinched(s, 0.0, 0.0), 0.05, wall);
+    EXPECT_GE(closed.fraction, 0.97) << closed.closed_mm << " of " << closed.length_mm;
+    // The model keeps the smoothed line (SimLumen::neck_line); given, it is what is measured.
+    s.neck_line = {smoothed_neck_line(s, loop)};
+    EXPECT_DOUBLE_EQ(neck_occlusion(s, pinched(s, 0.0, 0.0), 0.05, wall).fraction, closed.fraction);
+    s.neck_line[0].resize(2);  // a line of two points: one segment there and back
+    EXPECT_NEAR(neck_occlusion(s, s.X, 0.05, wall).length_mm,
+                2 * (open.points[0][1] - open.points[0][0]).norm(), 1e-9);
+}
