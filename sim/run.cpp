@@ -519,7 +519,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                                     {"mean_newton_iterations", p.mean_iterations}, {"mean_solve_ms", p.mean_solve_ms},
                                     {"max_solve_ms", p.max_solve_ms}, {"peak_blade_force_n", p.peak_blade_force_n},
                                     {"min_wall_distance_mm", std::isfinite(p.min_wall_distance_mm) ? nlohmann::json(p.min_wall_distance_mm) : nlohmann::json()},
-                                    {"wall_pairs_touching", p.wall_pairs_touching}});
+                                    {"wall_pairs_touching", p.wall_pairs_touching}, {"wall_resolves", p.wall_resolves}});
     }
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;

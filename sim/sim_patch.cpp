@@ -262,26 +262,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         if (fr.mx) fr.lock.unlock();
         const Stopwatch sw;
         const Eigen::VectorXd v0 = P.v;
-        std::unique_ptr<fem::ContactBody> wall;
-        if (scene.patch.wall_contact && P.inner.rows() > 0) {
-            fem::ContactParams cp;
-            cp.stiffness = P.kappa_wall;
-            // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
-            // walls between them close by up to the jaws' own motion), or walls would pass each other unseen.
-            const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
-            cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
-            wall = std::make_unique<fem::ContactBody>(pm, P.X, P.inner, v0.head(nb), cp);
-            P.kappa_wall = wall->stiffness();
-        }
-        const fem::ElasticBody& body = wall ? static_cast<const fem::ElasticBody&>(*wall) : pm;
         fem::ClipContactParams bp;
         bp.stiffness = P.kappa_blade;
         bp.friction = scene.patch.blade_friction;
-        const double t_wall = sw.seconds();
-        // The grips of the last solve (in the blades' frame, so the clip's rigid motion carries them).
-        const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp, P.gripped ? &P.grips : nullptr);
-        const double t_clip = sw.seconds();
-        P.kappa_blade = cb.stiffness();
         fem::NewtonOptions o;
         o.tolerance = scene.patch.tolerance;
         o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
@@ -292,23 +275,74 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // Newton crawl); the solve's reaction on it is R = τ(θ) − M(θ), the spring's torque less the tissue's
         // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
         // frame), as the applier lets it close or once it is released.
-        const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
-        // A patch at rest whose blades, at the new opening, touch nothing stays at rest: no solve (the jaws closing
-        // through the air before they reach the wall).
+        double t_wall = 0, t_clip = 0;
+        bool at_rest = false;
+        fem::BladeLoads loads;
+        std::vector<fem::BladeGrip> grips;
+        double wall_min = std::numeric_limits<double>::infinity();
+        int touching = 0;
+        // One solve of the frame with the blades on `body` (the patch, or the patch with its inner walls' contact).
+        auto solve_with = [&](const fem::ElasticBody& body, const fem::ContactBody* wall) {
+            t_wall = sw.seconds();
+            // The grips of the last solve (in the blades' frame, so the clip's rigid motion carries them).
+            const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp, P.gripped ? &P.grips : nullptr);
+            t_clip = sw.seconds();
+            P.kappa_blade = cb.stiffness();
+            const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
+            // A patch at rest whose blades, at the new opening, touch nothing stays at rest: no solve (the jaws
+            // closing through the air before they reach the wall).
+            fem::NewtonResult res;
+            Eigen::VectorXd moved = v0;
+            moved[cb.theta_dof()] = theta_kept;
+            const fem::BladeLoads free_loads = cb.loads(moved);
+            at_rest = v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0;
+            if (at_rest) {
+                res.u = moved;
+                res.reaction = Eigen::VectorXd::Constant(1, spring.torque(theta_kept));
+                res.converged = true;
+            } else {
+                res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+            }
+            loads = at_rest ? free_loads : cb.loads(res.u);
+            grips = cb.grips(res.u);
+            if (wall) {
+                wall_min = wall->min_distance(res.u.head(nb));
+                touching = static_cast<int>(wall->active(res.u.head(nb)));
+            }
+            return res;
+        };
         fem::NewtonResult r;
-        Eigen::VectorXd moved = v0;
-        moved[cb.theta_dof()] = theta_kept;
-        const fem::BladeLoads free_loads = cb.loads(moved);
-        const bool at_rest = v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0;
-        if (at_rest) {
-            r.u = moved;
-            r.reaction = Eigen::VectorXd::Constant(1, spring.torque(theta_kept));
+        if (scene.patch.wall_contact && P.inner.rows() > 0) {
+            fem::ContactParams cp;
+            cp.stiffness = P.kappa_wall;
+            // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
+            // walls between them close by up to the jaws' own motion). A vertex the solve still takes through a
+            // face its pairs left out is caught after it, and the frame solved again with it paired with every
+            // face near its path (fem::solve_without_crossings).
+            const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
+            cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
+            const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v0, cp, [&](const fem::ContactBody& wall) {
+                P.kappa_wall = wall.stiffness();
+                return solve_with(wall, &wall);
+            });
+            r = cs.result;
+            P.stats.wall_resolves += cs.rounds;
+            // Whatever is through a face at the end counts as interpenetration (a vertex behind a face where the
+            // frame started has no pair to push it out).
+            if (cs.deepest_mm > 0) wall_min = std::min(wall_min, -cs.deepest_mm);
+            if (std::getenv("ANEU_PATCH_TRACE"))
+                for (const fem::SurfaceCrossing& q : cs.left)
+                    std::fprintf(stderr, "patch crossing left: node %d %.4f mm behind face %d (%d %d %d)\n", q.v, q.depth_mm, q.f, P.inner(q.f, 0), P.inner(q.f, 1),
+                                 P.inner(q.f, 2));
+            if (cs.rounds > 0 && std::getenv("ANEU_PATCH_TRACE"))
+                std::fprintf(stderr, "patch t=%.4f: solved %d more time(s) with vertices that went through unpaired faces paired (%zu pairs)\n", fr.t, cs.rounds,
+                             cs.pairs);
         } else {
-            r = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+            r = solve_with(pm, nullptr);
         }
         const int its = r.iterations;
         if (cm.spring && r.reaction.size()) {
-            const double R = r.reaction[0], th = r.u[cb.theta_dof()];
+            const double R = r.reaction[0], th = r.u[nb];
             double k = P.tissue_k;
             if (P.prev_theta >= 0 && std::abs(th - P.prev_theta) > 1e-7) k = (R - P.prev_R) / (th - P.prev_theta);
             k = std::max(k, spring.k_nmm_per_rad);  // R grows with θ: the spring alone gives at least its k
@@ -319,29 +353,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.theta_bal = std::max(0.0, th - std::clamp(R / k, -1.0 * DEG, held ? 1e9 : 1.0 * DEG));
         }
         const double t_solve = sw.seconds();
-        const fem::BladeLoads loads = at_rest ? free_loads : cb.loads(r.u);
-        std::vector<fem::BladeGrip> grips = cb.grips(r.u);
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
-        double wall_min = wall ? wall->min_distance(r.u.head(nb)) : std::numeric_limits<double>::infinity();
-        // The pairs are the frame start's: a vertex that went through a face it was not paired with (or round a
-        // paired face's edge) is behind a face now that no pair sees. The whole inner surface is looked at.
-        if (wall) {
-            const fem::ContactParams cp;
-            const std::vector<fem::SurfaceCrossing> cross = fem::surface_crossings(P.X, P.inner, r.u.head(nb), cp.exclude_rings, 0.25);
-            for (const fem::SurfaceCrossing& q : cross) {
-                wall_min = std::min(wall_min, -q.depth_mm);
-                if (!std::getenv("ANEU_PATCH_TRACE")) continue;
-                auto at = [&](const Eigen::VectorXd& w, int n) { return Eigen::Vector3d(P.X.row(n).transpose() + w.segment<3>(3 * n)); };
-                const Eigen::Vector3d a0 = at(v0, P.inner(q.f, 0)), n0 = (at(v0, P.inner(q.f, 1)) - a0).cross(at(v0, P.inner(q.f, 2)) - a0).normalized();
-                std::fprintf(stderr, "patch crossing: node %d %.4f mm behind face %d (%d %d %d), %s; at the frame start %.4f mm from its plane, moved %.4f mm this frame, face corners moved %.4f mm\n",
-                             q.v, q.depth_mm, q.f, P.inner(q.f, 0), P.inner(q.f, 1), P.inner(q.f, 2), wall->is_pair(q.v, q.f) ? "paired" : "NOT paired",
-                             (at(v0, q.v) - a0).dot(n0), (r.u.segment<3>(3 * q.v) - v0.segment<3>(3 * q.v)).norm(),
-                             std::max({(r.u.segment<3>(3 * P.inner(q.f, 0)) - v0.segment<3>(3 * P.inner(q.f, 0))).norm(),
-                                       (r.u.segment<3>(3 * P.inner(q.f, 1)) - v0.segment<3>(3 * P.inner(q.f, 1))).norm(),
-                                       (r.u.segment<3>(3 * P.inner(q.f, 2)) - v0.segment<3>(3 * P.inner(q.f, 2))).norm()}));
-            }
-        }
-        const auto touching = wall ? static_cast<int>(wall->active(r.u.head(nb))) : 0;
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))
             std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
@@ -354,7 +366,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         P.grips = std::move(grips);
         P.gripped = true;
         P.hinge_prev = blades.hinge;
-        const double theta = r.u[cb.theta_dof()];
+        const double theta = r.u[nb];
         c.opening_deg = theta / DEG;
         if (held && cm.spring) c.spring_deg = P.theta_bal / DEG;
         c.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);

@@ -86,6 +86,24 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             m_pairs.push_back({v, static_cast<int>(f)});
         }
     }
+    // Vertices a trial took through an unpaired face: every face near them but their own.
+    if (!p.close_vertices.empty()) {
+        for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+            const Eigen::Vector3d a = x(u0, faces(f, 0)), b = x(u0, faces(f, 1)), c = x(u0, faces(f, 2));
+            const Eigen::Vector3d centre = (a + b + c) / 3.0;
+            const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
+            for (int v : p.close_vertices) {
+                if (v < 0 || v >= X.rows()) throw InputError("contact: close vertex " + std::to_string(v) + " outside the body");
+                if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
+                if ((x(u0, v) - centre).norm() > r + std::max(p.close_search_mm, p.search_mm)) continue;
+                if (signed_distance(u0, {v, static_cast<int>(f)}) <= 0) continue;
+                m_pairs.push_back({v, static_cast<int>(f)});
+            }
+        }
+        const auto order = [](const Pair& a, const Pair& b) { return a.f != b.f ? a.f < b.f : a.v < b.v; };
+        std::sort(m_pairs.begin(), m_pairs.end(), order);
+        m_pairs.erase(std::unique(m_pairs.begin(), m_pairs.end(), [](const Pair& a, const Pair& b) { return a.f == b.f && a.v == b.v; }), m_pairs.end());
+    }
 }
 
 void ContactBody::build_pattern() const {
@@ -325,6 +343,48 @@ double ContactBody::min_distance(const Eigen::VectorXd& u) const {
         if (d >= -m_p.depth_mm) m = std::min(m, d);
     }
     return m;
+}
+
+CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0,
+                                          ContactParams cp, const std::function<NewtonResult(const ContactBody&)>& solve, double depth, int max_rounds) {
+    const Eigen::Index n = body.dofs();
+    // What is behind a face where the solve starts stays out of the count (a crease, an earlier crossing).
+    std::vector<std::pair<int, int>> before;
+    for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth)) before.emplace_back(q.v, q.f);
+    std::sort(before.begin(), before.end());
+    std::vector<std::vector<int>> nb(static_cast<size_t>(X.rows()));
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
+            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
+        }
+    CrossingFreeSolve out;
+    for (int round = 0;; ++round) {
+        const ContactBody contact(body, X, faces, u0.head(n), cp);
+        out.result = solve(contact);
+        out.pairs = contact.candidates();
+        out.left.clear();
+        out.deepest_mm = 0;
+        for (const SurfaceCrossing& q : surface_crossings(X, faces, out.result.u.head(n), cp.exclude_rings, depth)) {
+            out.deepest_mm = std::max(out.deepest_mm, q.depth_mm);
+            if (!std::binary_search(before.begin(), before.end(), std::make_pair(q.v, q.f))) out.left.push_back(q);
+        }
+        if (out.left.empty() || round == max_rounds) return out;
+        ++out.rounds;
+        // Each crossing vertex and its ring, paired with every face within reach of its path: as far as it and
+        // the face's corners moved, and the wall's reach beyond.
+        double reach = cp.search_mm;
+        for (const SurfaceCrossing& q : out.left) {
+            double moved = (out.result.u.segment<3>(3 * q.v) - u0.segment<3>(3 * q.v)).norm();
+            for (int k = 0; k < 3; ++k) moved += (out.result.u.segment<3>(3 * faces(q.f, k)) - u0.segment<3>(3 * faces(q.f, k))).norm() / 3.0;
+            reach = std::max(reach, 2.0 * moved + cp.search_mm);
+            cp.close_vertices.push_back(q.v);
+            for (int w : nb[static_cast<size_t>(q.v)]) cp.close_vertices.push_back(w);
+        }
+        std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
+        cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
+        cp.close_search_mm = std::max(cp.close_search_mm, reach);
+    }
 }
 
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,

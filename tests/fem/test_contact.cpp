@@ -138,6 +138,46 @@ TEST(WallContact, SurfaceCrossingsSeeEveryVertexThroughAFacePairedOrNot) {
     EXPECT_THROW(fem::surface_crossings(p.V, p.faces, u0.head(3), 2, 0.25), InputError);
 }
 
+TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated) {
+    // The top plate starts lifted 0.5 mm (0.55 mm apart) and is pushed to 0.08 mm down in one solve; pairs are
+    // searched 0.02 mm round each face where it starts: none at all, and the top plate sinks through the bottom
+    // one. solve_without_crossings sees the vertices behind faces (surface_crossings), pairs them with every face
+    // near their path and solves again: no vertex through, and the force of the two plates pressed together, as
+    // with pairs found the ordinary way from the plates' rest.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.0}});
+    constexpr double PUSH = 0.08, LIFT = 0.5;
+    const auto pres = p.push(PUSH);
+    Eigen::VectorXd lifted = Eigen::VectorXd::Zero(solid.dofs());
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
+        if (p.V(i, 2) > Plates::H + 1e-9) lifted[3 * i + 2] = LIFT;
+    fem::ContactParams cp;
+    cp.search_mm = 0.02;
+    ASSERT_EQ(fem::ContactBody(solid, p.V, p.faces, lifted, cp).candidates(), 0u);
+    int solves = 0;
+    const fem::CrossingFreeSolve cs = fem::solve_without_crossings(solid, p.V, p.faces, lifted, cp, [&](const fem::ContactBody& body) {
+        ++solves;
+        return fem::solve_neo_hookean(body, p.fixed, pres, lifted);
+    });
+    EXPECT_GE(cs.rounds, 1);
+    EXPECT_EQ(solves, cs.rounds + 1);
+    EXPECT_TRUE(cs.left.empty());
+    EXPECT_GT(cs.pairs, 0u);
+    EXPECT_LT(cs.result.residual, 1e-9);
+    EXPECT_TRUE(fem::surface_crossings(p.V, p.faces, cs.result.u, cp.exclude_rings, 0.25).empty());
+    const fem::ContactBody ordinary(solid, p.V, p.faces, Eigen::VectorXd::Zero(solid.dofs()), fem::ContactParams{});
+    const fem::NewtonResult r = fem::solve_neo_hookean(ordinary, p.fixed, pres, Eigen::VectorXd::Zero(solid.dofs()));
+    EXPECT_NEAR(pushing_force(cs.result), pushing_force(r), 0.02 * pushing_force(r));
+    // No rounds allowed: the crossings are handed back, 0.03 mm deep.
+    const fem::CrossingFreeSolve once = fem::solve_without_crossings(
+        solid, p.V, p.faces, lifted, cp, [&](const fem::ContactBody& body) { return fem::solve_neo_hookean(body, p.fixed, pres, lifted); }, 0.25, 0);
+    EXPECT_EQ(once.rounds, 0);
+    ASSERT_FALSE(once.left.empty());
+    EXPECT_NEAR(once.left.front().depth_mm, PUSH - Plates::GAP, 1e-9);
+    EXPECT_NEAR(once.deepest_mm, PUSH - Plates::GAP, 1e-9);
+    EXPECT_EQ(cs.deepest_mm, 0.0);
+}
+
 TEST(WallContact, NeighboursAreNotPairs) {
     // A flat face never pushes on itself. With the whole 4 × 4 grid in reach, a ring count wider than the grid
     // leaves no pair; with two rings, or none, the far vertices of the same wall are not pairs either: their

@@ -16,6 +16,7 @@
 /// the far side of a fold), which fixes the tangent's pattern for one solve; make a new one for the next step.
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <mutex>
@@ -37,6 +38,11 @@ struct ContactParams {
     /// barrier's curvature across a face edge or corner is negative. false: the exact Hessian (tangent(u, true)
     /// projects it anyway).
     bool project_pairs = false;
+    /// Vertices paired with every face whose centre lies within the face's radius + `close_search_mm` of them
+    /// where the solve starts, whatever the normals or rings (but the faces round the vertex itself): a vertex
+    /// that a trial solve took through a face its ordinary pairs left out (solve_without_crossings).
+    std::vector<int> close_vertices;
+    double close_search_mm = 0;
 };
 
 class ContactBody final : public ElasticBody {
@@ -114,5 +120,23 @@ struct SurfaceCrossing {
 /// keeps it near linear in the surface's size.
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
                                                double depth);
+
+/// A solve with wall contact that no vertex passes through. `solve` is run with a ContactBody made at `u0` (the
+/// body's DOFs; the solve's own state may append more, e.g. a clip's opening). Where its end state has a vertex
+/// behind a face it was not behind at u0 (surface_crossings, `depth`), the vertex went through a face its pairs
+/// left out (beyond the frame start's search, or an opposite face the normals or rings excluded, round the edge
+/// of the face it was paired with): the solve is run again from u0 with each such vertex, and its one ring,
+/// paired with every face within reach of where it went (ContactParams::close_vertices), up to `max_rounds`
+/// more times. `left`: the crossings of the last round (empty: none).
+struct CrossingFreeSolve {
+    NewtonResult result;
+    int rounds = 0;                      ///< solves run again
+    std::vector<SurfaceCrossing> left;   ///< crossings after the last one that were not there at u0
+    double deepest_mm = 0;               ///< the deepest vertex behind a face at the end, at u0's too (0: none)
+    std::size_t pairs = 0;               ///< candidate pairs of the last solve
+};
+CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0,
+                                          ContactParams cp, const std::function<NewtonResult(const ContactBody&)>& solve, double depth = 0.25,
+                                          int max_rounds = 3);
 
 }  // namespace aneu::fem

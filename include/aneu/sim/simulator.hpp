@@ -106,6 +106,7 @@ struct Assessment {
         double min_wall_distance_mm = 0;     ///< smallest signed distance between opposite inner walls (< 0: through;
                                              ///< +inf: none came within reach)
         int wall_pairs_touching = 0;         ///< at the end
+        long wall_resolves = 0;              ///< frames solved again: a vertex went through a face its pairs left out
     };
     std::vector<PatchEnd> patches;
     long frames = 0, haptic_ticks = 0;
