@@ -276,6 +276,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
         // frame), as the applier lets it close or once it is released.
         double t_wall = 0, t_clip = 0;
+        int its = 0;  // Newton iterations over the frame's solves
         bool at_rest = false;
         fem::BladeLoads loads;
         std::vector<fem::BladeGrip> grips;
@@ -303,6 +304,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             } else {
                 res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
             }
+            its += res.iterations;
             loads = at_rest ? free_loads : cb.loads(res.u);
             grips = cb.grips(res.u);
             if (wall) {
@@ -340,7 +342,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         } else {
             r = solve_with(pm, nullptr);
         }
-        const int its = r.iterations;
         if (cm.spring && r.reaction.size()) {
             const double R = r.reaction[0], th = r.u[nb];
             double k = P.tissue_k;
