@@ -25,6 +25,24 @@ nlohmann::json vec(const Eigen::Vector3d& x) {
 }
 }  // namespace
 
+std::vector<std::vector<Eigen::Vector3d>> neck_border(const SimLumen& L) {
+    std::vector<std::vector<Eigen::Vector3d>> out;
+    for (size_t l = 0; l < L.neck_loops.size(); ++l) {
+        std::vector<Eigen::Vector3d> line;
+        if (l < L.neck_line.size() && !L.neck_line[l].empty()) {
+            for (const NeckPointOnLumen& q : L.neck_line[l]) {
+                Eigen::Vector3d x = Eigen::Vector3d::Zero();
+                for (int k = 0; k < 3; ++k) x += q.weights[k] * L.X.row(L.F(q.face, k)).transpose();
+                line.push_back(x);
+            }
+        } else {
+            for (int v : L.neck_loops[l]) line.push_back(L.X.row(v).transpose());
+        }
+        out.push_back(std::move(line));
+    }
+    return out;
+}
+
 NeckFrame neck_frame(const SimModel& m) {
     const SimLumen& L = m.surface.lumen;
     if (L.neck_loops.empty()) {
@@ -32,27 +50,33 @@ NeckFrame neck_frame(const SimModel& m) {
                                      "the condensed surface); label the sac (aneuprep surface) and condense around it");
     }
     NeckFrame nf;
-    // Centre and covariance by length along the neck line (edge midpoints weighted by edge length).
+    // Centre and covariance by length along the border (the smoothed neck line: the label loop's staircase of
+    // mesh edges is half as long again and leans its axes towards its zig-zag), edge midpoints weighted by length.
+    const std::vector<std::vector<Eigen::Vector3d>> border = neck_border(L);
     double total = 0;
     Eigen::Vector3d c = Eigen::Vector3d::Zero();
-    for (const auto& loop : L.neck_loops)
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const Eigen::Vector3d a = L.X.row(loop[k]), b = L.X.row(loop[(k + 1) % loop.size()]);
+    for (const auto& line : border)
+        for (size_t k = 0; k < line.size(); ++k) {
+            const Eigen::Vector3d& a = line[k];
+            const Eigen::Vector3d& b = line[(k + 1) % line.size()];
             const double len = (b - a).norm();
             c += 0.5 * len * (a + b);
             total += len;
         }
     c /= total;
     Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
-    for (const auto& loop : L.neck_loops)
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const Eigen::Vector3d a = L.X.row(loop[k]), b = L.X.row(loop[(k + 1) % loop.size()]);
+    for (const auto& line : border)
+        for (size_t k = 0; k < line.size(); ++k) {
+            const Eigen::Vector3d& a = line[k];
+            const Eigen::Vector3d& b = line[(k + 1) % line.size()];
             const Eigen::Vector3d q = 0.5 * (a + b) - c;
             C += (b - a).norm() * q * q.transpose();
         }
+    nf.line_mm = total;
+    for (const auto& loop : L.neck_loops)
+        for (size_t k = 0; k < loop.size(); ++k) nf.label_line_mm += (L.X.row(loop[(k + 1) % loop.size()]) - L.X.row(loop[k])).norm();
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);  // ascending
     nf.centre = c;
-    nf.line_mm = total;
     nf.normal = es.eigenvectors().col(0);
     nf.short_axis = es.eigenvectors().col(1);
     nf.long_axis = es.eigenvectors().col(2);
@@ -68,6 +92,7 @@ NeckFrame neck_frame(const SimModel& m) {
         }
     if (ns > 0 && nf.normal.dot(sc / ns - c) < 0) nf.normal = -nf.normal;
     nf.short_axis = nf.normal.cross(nf.long_axis).normalized();  // right-handed: long × short = normal
+    // The extents from the label loop's vertices (the clip must span every labelled neck vertex).
     double lo = 1e300, hi = -1e300, wlo = 1e300, whi = -1e300;
     for (const auto& loop : L.neck_loops)
         for (int v : loop) {
@@ -90,12 +115,14 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
     constexpr double JAW_W = 1.0, JAW_T = 0.5, CLEAR = 0.2;
     const Eigen::Vector3d n = nf.normal;
-    // The neck line's edges: midpoint (from the centre) and length.
+    // The border's edges (the smoothed neck line, which the occlusion is measured on): midpoint (from the centre)
+    // and length. The jaws' width is placed to cover it, not the label loop's staircase around it.
     std::vector<std::pair<Eigen::Vector3d, double>> seg;
     double h_lo = 1e300, h_hi = -1e300;
-    for (const auto& loop : s.lumen.neck_loops)
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const Eigen::Vector3d a = s.lumen.X.row(loop[k]), b = s.lumen.X.row(loop[(k + 1) % loop.size()]);
+    for (const auto& line : neck_border(s.lumen))
+        for (size_t k = 0; k < line.size(); ++k) {
+            const Eigen::Vector3d& a = line[k];
+            const Eigen::Vector3d& b = line[(k + 1) % line.size()];
             seg.emplace_back(0.5 * (a + b) - nf.centre, (b - a).norm());
             h_lo = std::min(h_lo, seg.back().first.dot(n));
             h_hi = std::max(h_hi, seg.back().first.dot(n));
@@ -237,7 +264,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // The first clear one; if none of the best-covering 6000 that a standard blade spans is clear, the one that
     // touches the fewest vertices.
     const Candidate* chosen = nullptr;
-    int fewest = std::numeric_limits<int>::max(), checked = 0;
+    const Candidate* widest = nullptr;  // the best-covering pose a standard blade spans, clear or not
+    int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0;
     Eigen::Vector3d axis, hinge;
     double blade = 0;
     for (const Candidate& k : cands) {
@@ -245,6 +273,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         double l = 0;
         if (!pose_of(k, ax, hi, l)) continue;
         const int h = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        if (!widest) {
+            widest = &k;
+            widest_hits = h;
+        }
         if (h < fewest) {
             fewest = h;
             chosen = &k;
@@ -257,6 +289,24 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
                          " mm; the longest straight clip planned (15 mm, open up to " + std::to_string(o.max_opening_deg) + " deg) does not span it");
+    }
+    // A pose whose jaws cover less than min_cover of the border is not across the neck (on a wide neck at a
+    // bifurcation the only clear way may lie over the dome or the parents): refused, with what the best-covering
+    // pose would touch, rather than a scene that clips beside the neck.
+    if (chosen->covered < o.min_cover) {
+        char best[200];
+        if (fewest == 0)
+            std::snprintf(best, sizeof best, "the clear poses cover at most %.0f %%", 100.0 * chosen->covered);
+        else
+            std::snprintf(best, sizeof best, "no pose is clear, the one with the fewest vertices in the way (%d) covers %.0f %%", fewest, 100.0 * chosen->covered);
+        char why[768];
+        std::snprintf(why, sizeof why,
+                      "%s: no straight clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
+                      "without cutting into the vessel on the way in: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
+                      "of its open blades. Plan this neck by hand (docs/scene_format.md) or lower --min-cover",
+                      m.case_id.c_str(), o.max_opening_deg, 100.0 * o.min_cover, nf.line_mm, nf.length_mm, nf.width_mm, best,
+                      widest ? 100.0 * widest->covered : 0.0, widest_hits, CLEAR);
+        throw InputError(why);
     }
     const Way& way = ways[static_cast<size_t>(chosen->way)];
     const Eigen::Vector3d w = way.w;
@@ -302,13 +352,13 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     j["instruments"] = nlohmann::ordered_json::array({ap, su});
     char head[1024];
     std::snprintf(head, sizeof head,
-                  "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (line %.1f mm), normal towards\n"
-                  "// the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
+                  "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (border %.1f mm, label edges %.1f mm),\n"
+                  "// normal towards the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
-                  "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line;\n"
+                  "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line (its border);\n"
                   "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach. The suction tube is parked\n"
                   "// 3 mm clear. Format: docs/scene_format.md.\n",
-                  m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, n.x(), n.y(), n.z(),
+                  m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, hits, CLEAR);
     return std::string(head) + j.dump(2) + "\n";
 }

@@ -64,6 +64,10 @@ int main(int argc, char** argv) {
     plan->add_option("bundle", plan_bundle, "case bundle (.h5) made by `aneuprep condense`")->required();
     plan->add_option("-o,--output", plan_out, "scene file to write (JSON); its outputs are named after it")->required();
     bool plan_flow = false;
+    double plan_min_cover = aneu::sim::PlanOptions{}.min_cover;
+    plan->add_option("--min-cover", plan_min_cover, "least share of the neck's border the jaws must cover (0-1); a case whose only clear way is beside the neck is refused below it")
+        ->check(CLI::Range(0.0, 1.0))
+        ->capture_default_str();
     plan->add_flag("--flow", plan_flow, "the scene's outputs include the residual blood flow after the session (aneuprep flow, OpenFOAM: about a minute for the sample)");
 
     // aneusim serve SCENE: the simulator behind an OpenIGTLink server.
@@ -116,6 +120,7 @@ int main(int argc, char** argv) {
             const std::string ref = fs::relative(fs::absolute(plan_bundle), out.parent_path()).string();
             aneu::sim::PlanOptions po;
             po.flow = plan_flow;
+            po.min_cover = plan_min_cover;
             const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include "aneu/core/error.hpp"
 #include "aneu/sim/plan.hpp"
 #include "aneu/sim/scene.hpp"
 #include "aneu/sim/simulator.hpp"
@@ -48,6 +49,12 @@ TEST(Plan, NeckFrameOfAKnownNeck) {
     EXPECT_NEAR(nf.centre.z(), 4.0, 0.05);
     EXPECT_NEAR(nf.centre.y(), 0.0, 0.25);  // about one cell's arc (0.2 mm)
     EXPECT_NEAR(nf.short_axis.dot(nf.long_axis), 0.0, 1e-9);
+    // The border (the smoothed neck line) is shorter than the label loop's staircase (11.5 mm here) and no longer
+    // than the rectangle it follows (3 mm by the arcs of ±22.5° … ±30°); ten binomial passes on a loop of ~0.5 mm
+    // edges round its corners over about ±1 mm (7.44 mm measured).
+    EXPECT_LT(nf.line_mm, 0.8 * nf.label_line_mm);
+    EXPECT_LE(nf.line_mm, 2 * 3.0 + 2 * 1.5 * 30.0 * M_PI / 180);
+    EXPECT_GE(nf.line_mm, 0.8 * (2 * 3.0 + 2 * 2 * 1.5 * std::sin(22.5 * M_PI / 180)));
 }
 
 TEST(Plan, SceneClosesAClipAcrossTheNeck) {
@@ -74,18 +81,21 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     EXPECT_GT(std::abs(closed.up.y()), 0.99);
     const double margin = std::abs(closed.position.z() - nf.centre.z()) - 0.5 * nf.length_mm;
     EXPECT_GE(margin, 1.0);
-    // The jaws' width (along the normal, x) covers the whole neck line, its lower edge at the line's lowest point
-    // (the highest of the heights that cover it all: the sac's side). Heights of the edges' midpoints.
-    double x_lo = 1e9, x_hi = -1e9;
-    const auto& LX = m.surface.lumen.X;
-    for (const auto& loop : m.surface.lumen.neck_loops)
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const double x = 0.5 * (LX(loop[k], 0) + LX(loop[(k + 1) % loop.size()], 0));
-            x_lo = std::min(x_lo, x);
-            x_hi = std::max(x_hi, x);
+    // The jaws' width (along the neck's normal, about x) covers the whole neck line, its lower edge at the line's
+    // lowest point (the highest of the heights that cover it all: the sac's side). Heights along the normal of the
+    // midpoints of the border's edges (the smoothed neck line the occlusion is measured on, not the label loop's
+    // staircase); the heights are tried on a 0.05 mm grid that starts at the lowest.
+    double h_lo = 1e9, h_hi = -1e9;
+    const auto border = sim::neck_border(m.surface.lumen);
+    ASSERT_EQ(border.size(), m.surface.lumen.neck_loops.size());
+    for (const auto& line : border)
+        for (size_t k = 0; k < line.size(); ++k) {
+            const double h = (0.5 * (line[k] + line[(k + 1) % line.size()]) - nf.centre).dot(nf.normal);
+            h_lo = std::min(h_lo, h);
+            h_hi = std::max(h_hi, h);
         }
-    ASSERT_LT(x_hi - x_lo, cm.jaw_width_mm);
-    EXPECT_NEAR(closed.position.x() - 0.5 * cm.jaw_width_mm, x_lo, 0.02) << x_lo << " … " << x_hi;
+    ASSERT_LT(h_hi - h_lo, cm.jaw_width_mm);
+    EXPECT_NEAR((closed.position - nf.centre).dot(nf.normal) - 0.5 * cm.jaw_width_mm, h_lo, 1e-3) << h_lo << " … " << h_hi;
     EXPECT_NE(text.find("they cover 100 % of the neck line"), std::string::npos) << text.substr(0, 600);
     // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
     const double half = 0.5 * keys[0].opening_deg * M_PI / 180;
@@ -139,4 +149,35 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     const sim::Scene with_flow = sim::read_scene((t.dir / "planned_flow.json").string());
     EXPECT_EQ(fs::path(with_flow.flow).filename(), "planned_flow_flow.h5");
     EXPECT_EQ(fs::path(with_flow.series).filename(), "planned_flow_series");
+}
+
+// A sac spanning ±80° of the tube: its border's heights along the normal span more than the jaws' 1 mm width, so
+// no pose covers all of it. The planner takes the best; asked for more than any clear pose covers (--min-cover), it
+// refuses with an input error that says how much the clear poses and the best-covering pose cover.
+TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAskedFor) {
+    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_wide_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const fs::path bundle = dir / "tube.h5";
+    write_bundle(bundle.string(), test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.5, 5.5, 80.0).bundle);
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(bundle.string(), lo);
+    fs::remove_all(dir);
+    const std::string text = sim::plan_scene(m, "tube.h5", "planned");
+    const auto at = text.find("they cover ");
+    ASSERT_NE(at, std::string::npos) << text.substr(0, 600);
+    const int cover = std::stoi(text.substr(at + 11));
+    EXPECT_LT(cover, 100) << text.substr(0, 600);
+    EXPECT_GE(cover, 25) << text.substr(0, 600);
+    EXPECT_NE(text.find("// 0 outer-surface vertices lie within 0.2 mm"), std::string::npos) << text.substr(0, 800);
+    sim::PlanOptions po;
+    po.min_cover = 1.0;
+    try {
+        (void)sim::plan_scene(m, "tube.h5", "planned", po);
+        ADD_FAILURE() << "a pose covering all of the border was planned";
+    } catch (const InputError& e) {
+        const std::string w = e.what();
+        EXPECT_NE(w.find("covers 100 % of the neck's border"), std::string::npos) << w;
+        EXPECT_NE(w.find("the clear poses cover at most " + std::to_string(cover) + " %"), std::string::npos) << w;
+    }
 }

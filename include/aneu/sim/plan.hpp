@@ -20,8 +20,12 @@ struct NeckFrame {
     Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  ///< towards the sac
     double length_mm = 0.0;  ///< extent along the long axis
     double width_mm = 0.0;   ///< extent along the short axis
-    double line_mm = 0.0;    ///< length of the neck line
+    double line_mm = 0.0;    ///< length of the neck line's border (the smoothed line the occlusion is measured on)
+    double label_line_mm = 0.0;  ///< length of the label loops' mesh edges (a staircase around the border)
 };
+/// The neck line's border, loop by loop, at rest: the smoothed neck line's points (SimLumen::neck_line), or the
+/// label loop's vertices where a loop has none.
+std::vector<std::vector<Eigen::Vector3d>> neck_border(const SimLumen& lumen);
 /// @throws InputError when the bundle has no neck (no "aneurysm" region on the lumen under the condensed surface)
 NeckFrame neck_frame(const SimModel& m);
 
@@ -29,13 +33,18 @@ struct PlanOptions {
     double approach_mm = 12.0;    ///< the applier starts this far back along the long axis
     double max_opening_deg = 60.0;
     bool flow = false;            ///< outputs.flow = STEM_flow.h5: the residual sac inflow after the session (aneuprep flow)
+    /// The least share of the neck's border the jaws' width must cover: a pose below it (the only clear way over
+    /// the dome or the parents) is refused. A quarter: the corpus's planned poses cover 52-100 % where a clear
+    /// way across the neck exists; one that covers less is beside the neck, not across it.
+    double min_cover = 0.25;
 };
 
 /// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the
 /// outputs are named after `stem` beside the scene. The clip opens to 80 % of `max_opening_deg`; its hinge stands
 /// far enough before the neck that every neck point passes between the open jaws with its wall and 0.5 mm to
 /// spare (at least 1 mm); the blades are the shortest of 3, 5, …, 15 mm that reach 0.5 mm past the neck.
-/// @throws InputError no neck, or a neck longer than the longest clip
+/// @throws InputError no neck, a neck longer than the longest clip, or no pose that covers min_cover of the neck's
+///         border (clear of the vessel, or the fewest vertices in the way when no pose is clear)
 std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const std::string& stem, const PlanOptions& o = {});
 
 }  // namespace aneu::sim
