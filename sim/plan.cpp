@@ -193,8 +193,9 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // that the blades pinch the line itself. A neck line is seldom flat (a saddle between the sac and the parent's
     // curve), the parent artery runs on under the hinge (a blade lying on the neck plane cuts into it there) and a
     // dome wider than the neck overhangs it. So the candidates are: the way in (the side to come from along the
-    // long axis, turned by a yaw ψ of 0, ±15° or ±30°, open to 80 % of the clip's largest or to all of it), the
-    // blades' tilt α about w (the hinge raised, the tips down to the neck), the mid-plane's height c at the neck's
+    // long axis, turned by a yaw ψ of 0, ±15°, … ±75° or 90° — a round neck has no long axis worth keeping to, and
+    // a wide one is spanned across its short axis —, open to 80 % of the clip's largest or to all of it), the
+    // blades' tilt α about w (0–45°: the hinge raised, the tips down to the neck), the mid-plane's height c at the neck's
     // centre, and how much further back the hinge stands (the open jaws wider at the neck). Kept: the one whose open
     // blades touch no vessel along the approach and whose width covers the most neck line (in steps of 5 %); of
     // equals the smaller tilt, the hinge nearer, the smaller yaw and opening, the side with fewer vertices in the
@@ -216,7 +217,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     };
     std::vector<Way> ways;
     for (double opening : {0.8 * o.max_opening_deg, o.max_opening_deg})
-        for (double yaw_deg : {0.0, 15.0, -15.0, 30.0, -30.0}) {
+        for (double yaw_deg : {0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0, 60.0, -60.0, 75.0, -75.0, 90.0}) {
             Way a = way_of(yaw_deg * PI / 180.0, opening, 1.0), b = way_of(yaw_deg * PI / 180.0, opening, -1.0);
             if (corridor(b) < corridor(a)) std::swap(a, b);
             ways.push_back(a);
@@ -224,7 +225,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         }
     std::vector<Candidate> cands;
     for (size_t wi = 0; wi < ways.size(); ++wi)
-        for (int ia = 0; ia <= 10; ++ia) {
+        for (int ia = 0; ia <= 15; ++ia) {
             const double alpha = ia * 3.0 * PI / 180.0;
             const Way& f = ways[wi];
             const Eigen::Vector3d nprime = std::sin(alpha) * f.side * f.u + std::cos(alpha) * n;  // the tilted mid-plane's normal
@@ -261,8 +262,9 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             }
         return blade > 0;
     };
-    // The first clear one; if none of the best-covering 6000 that a standard blade spans is clear, the one that
-    // touches the fewest vertices.
+    // The first clear one; if none of the best-covering 60000 that a standard blade spans is clear, the one that
+    // touches the fewest vertices. (6000 and yaws to ±30° left C0043's basilar sidewall with 9-26 vertices in the
+    // way; its first clear pose is the 10^4th or so, tilted 27°: 12 s of planning.)
     const Candidate* chosen = nullptr;
     const Candidate* widest = nullptr;  // the best-covering pose a standard blade spans, clear or not
     int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0;
@@ -284,7 +286,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             hinge = hi;
             blade = l;
         }
-        if (h == 0 || ++checked >= 6000) break;
+        if (h == 0 || ++checked >= 60000) break;
     }
     if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
