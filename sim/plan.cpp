@@ -189,6 +189,52 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         }
         return hits;
     };
+    // The parent's lumen the closing jaws would cut into: lumen vertices of the vessel (none of their faces the
+    // sac's) more than PARENT_MM from the neck's border that lie between the open jaws, within their length, in the
+    // half of their width band towards the sac — the band then reaches at least half a jaw width (0.5 mm) into the
+    // parent's lumen. A tilted clip whose tips dive past the neck into the parent (C0043's first clear pose before
+    // this check: tilted 27°) would occlude it; a band that grazes the top of a straight parent beyond a sidewall
+    // neck (the tube's: 0.03-0.14 mm deep) pinches a sliver of its wall and is allowed, as is the neck's own vessel
+    // side next to the border.
+    constexpr double PARENT_MM = 1.0;
+    std::vector<Eigen::Vector3d> parent;
+    {
+        const SimLumen& L = s.lumen;
+        const auto it = std::find(s.region_names.begin(), s.region_names.end(), "aneurysm");
+        const int sac = it == s.region_names.end() ? -1 : static_cast<int>(it - s.region_names.begin());
+        std::vector<char> on_sac(static_cast<size_t>(L.X.rows()), 0);
+        for (Eigen::Index f = 0; f < L.F.rows(); ++f)
+            if (L.face_region[f] == sac)
+                for (int k = 0; k < 3; ++k) on_sac[static_cast<size_t>(L.F(f, k))] = 1;
+        std::vector<Eigen::Vector3d> near;
+        for (const auto& line : neck_border(L)) near.insert(near.end(), line.begin(), line.end());
+        for (const auto& loop : L.neck_loops)
+            for (int v : loop) near.push_back(L.X.row(v).transpose());
+        for (Eigen::Index v = 0; v < L.X.rows(); ++v) {
+            if (on_sac[static_cast<size_t>(v)]) continue;
+            const Eigen::Vector3d x = L.X.row(v).transpose();
+            bool close = false;
+            for (const Eigen::Vector3d& q : near)
+                if ((x - q).squaredNorm() <= PARENT_MM * PARENT_MM) {
+                    close = true;
+                    break;
+                }
+            if (!close) parent.push_back(x);
+        }
+    }
+    auto parent_pinched = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+        Eigen::Vector3d side = axis.cross(f.w).normalized();
+        if (side.dot(n) < 0) side = -side;  // towards the sac
+        const double tan_half = std::tan(0.5 * f.opening * PI / 180.0);
+        int n_in = 0;
+        for (const Eigen::Vector3d& x : parent) {
+            const Eigen::Vector3d r = x - hinge;
+            const double along = r.dot(axis);
+            const double h = r.dot(side);
+            if (along >= 0 && along <= length && h >= 0 && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= along * tan_half) ++n_in;
+        }
+        return n_in;
+    };
     // Where the jaws go: their width spans the normal direction and their mid-plane should hold the neck line, so
     // that the blades pinch the line itself. A neck line is seldom flat (a saddle between the sac and the parent's
     // curve), the parent artery runs on under the hinge (a blade lying on the neck plane cuts into it there) and a
@@ -267,14 +313,16 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // way; its first clear pose is the 10^4th or so, tilted 27°: 12 s of planning.)
     const Candidate* chosen = nullptr;
     const Candidate* widest = nullptr;  // the best-covering pose a standard blade spans, clear or not
-    int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0;
+    int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0, chosen_in_way = 0, chosen_pinched = 0;
     Eigen::Vector3d axis, hinge;
     double blade = 0;
     for (const Candidate& k : cands) {
         Eigen::Vector3d ax, hi;
         double l = 0;
         if (!pose_of(k, ax, hi, l)) continue;
-        const int h = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        const int h = in_way + pinched;
         if (!widest) {
             widest = &k;
             widest_hits = h;
@@ -285,6 +333,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             axis = ax;
             hinge = hi;
             blade = l;
+            chosen_in_way = in_way;
+            chosen_pinched = pinched;
         }
         if (h == 0 || ++checked >= 60000) break;
     }
@@ -300,12 +350,12 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         if (fewest == 0)
             std::snprintf(best, sizeof best, "the clear poses cover at most %.0f %%", 100.0 * chosen->covered);
         else
-            std::snprintf(best, sizeof best, "no pose is clear, the one with the fewest vertices in the way (%d) covers %.0f %%", fewest, 100.0 * chosen->covered);
+            std::snprintf(best, sizeof best, "no pose is clear, the one with the fewest vertices in the way or between the jaws (%d) covers %.0f %%", fewest, 100.0 * chosen->covered);
         char why[768];
         std::snprintf(why, sizeof why,
                       "%s: no straight clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
                       "without cutting into the vessel on the way in: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
-                      "of its open blades. Plan this neck by hand (docs/scene_format.md) or lower --min-cover",
+                      "of its open blades or parent lumen vertices between its jaws. Plan this neck by hand (docs/scene_format.md) or lower --min-cover",
                       m.case_id.c_str(), o.max_opening_deg, 100.0 * o.min_cover, nf.line_mm, nf.length_mm, nf.width_mm, best,
                       widest ? 100.0 * widest->covered : 0.0, widest_hits, CLEAR);
         throw InputError(why);
@@ -314,7 +364,6 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     const Eigen::Vector3d w = way.w;
     const double opening = way.opening, yaw_deg = way.yaw * 180.0 / PI;
     const double lift = chosen->c, covered = chosen->covered, tilt_deg = chosen->alpha * 180.0 / PI;
-    const int hits = fewest;
     const Eigen::Vector3d start = hinge - o.approach_mm * axis;
     // The suction tube parked beside the neck, 3 mm clear of the vessel, pointing at it.
     Eigen::Vector3d park = nf.centre - (0.5 * nf.width_mm + 4.0) * w + 2.0 * n;
@@ -358,10 +407,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   "// normal towards the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
                   "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line (its border);\n"
-                  "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach. The suction tube is parked\n"
-                  "// 3 mm clear. Format: docs/scene_format.md.\n",
+                  "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach; %d lumen vertices of the parent\n"
+                  "// (over %.0f mm from the neck) lie half the jaws' width or more between them. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, hits, CLEAR);
+                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM);
     return std::string(head) + j.dump(2) + "\n";
 }
 

@@ -95,7 +95,7 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
             h_hi = std::max(h_hi, h);
         }
     ASSERT_LT(h_hi - h_lo, cm.jaw_width_mm);
-    EXPECT_NEAR((closed.position - nf.centre).dot(nf.normal) - 0.5 * cm.jaw_width_mm, h_lo, 1e-3) << h_lo << " … " << h_hi;
+    EXPECT_NEAR((closed.position - nf.centre).dot(nf.normal) - 0.5 * cm.jaw_width_mm, h_lo, 1e-3) << h_lo << " … " << h_hi << "\n" << text.substr(0, 900);
     EXPECT_NE(text.find("they cover 100 % of the neck line"), std::string::npos) << text.substr(0, 600);
     // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
     const double half = 0.5 * keys[0].opening_deg * M_PI / 180;
