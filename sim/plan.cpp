@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <utility>
 #include <vector>
@@ -354,7 +355,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         char why[768];
         std::snprintf(why, sizeof why,
                       "%s: no straight clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
-                      "without cutting into the vessel on the way in: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
+                      "without cutting into the vessel on the way in or between its closing jaws: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
                       "of its open blades or parent lumen vertices between its jaws. Plan this neck by hand (docs/scene_format.md) or lower --min-cover",
                       m.case_id.c_str(), o.max_opening_deg, 100.0 * o.min_cover, nf.line_mm, nf.length_mm, nf.width_mm, best,
                       widest ? 100.0 * widest->covered : 0.0, widest_hits, CLEAR);
