@@ -277,6 +277,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // frame), as the applier lets it close or once it is released.
         double t_wall = 0, t_clip = 0;
         int its = 0;  // Newton iterations over the frame's solves
+        int factorisations = 0;
+        double t_setup = 0, t_tangent = 0, t_factor = 0, t_back = 0;  // over the frame's solves (NewtonResult)
         bool at_rest = false;
         fem::BladeLoads loads;
         std::vector<fem::BladeGrip> grips;
@@ -305,6 +307,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
             }
             its += res.iterations;
+            factorisations += res.factorisations;
+            t_setup += res.setup_s;
+            t_tangent += res.tangent_s;
+            t_factor += res.factorise_s;
+            t_back += res.back_solve_s;
             loads = at_rest ? free_loads : cb.loads(res.u);
             grips = cb.grips(res.u);
             if (wall) {
@@ -357,11 +364,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f, tangent %.1f, %d factorisations %.1f, back %.1f)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
                          loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
-                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip));
+                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back);
         if (fr.mx) fr.lock.lock();
         P.v = r.u;
         P.grips = std::move(grips);

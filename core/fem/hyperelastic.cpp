@@ -12,6 +12,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/fem/element.hpp"
@@ -336,50 +337,64 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         return std::sqrt(s);
     };
     // The free block of the tangent: its pattern (upper triangle) and where each tangent entry goes, built once,
-    // so that CHOLMOD orders and analyses it once per call and only refactorises in the iterations.
+    // so that CHOLMOD orders and analyses it once per call and only refactorises in the iterations. Built at the
+    // first linearised solve: a call that starts converged (a simulator frame where nothing moved) needs none of it
+    // (on the sample's patch, its dense interface block makes it 3.6 s).
     std::vector<int> free_index(static_cast<size_t>(n), -1);
     Eigen::Index m = 0;
     for (Eigen::Index i = 0; i < n; ++i)
         if (!constrained[static_cast<size_t>(i)]) free_index[static_cast<size_t>(i)] = static_cast<int>(m++);
-    Eigen::SparseMatrix<double, Eigen::RowMajor> K = solid.pattern();
+    Eigen::SparseMatrix<double, Eigen::RowMajor> K;
     Eigen::SparseMatrix<double> Kff(m, m);
-    std::vector<std::int64_t> to_ff(static_cast<size_t>(K.nonZeros()), -1);
-    std::vector<Eigen::Index> diag_pos(static_cast<size_t>(m), 0);
-    {
-        std::vector<Eigen::Triplet<double>> trip;
+    std::vector<std::int64_t> to_ff;
+    std::vector<Eigen::Index> diag_pos;
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    llt.cholmod().print = 0;  // a tangent that is not positive definite is expected (buckling) and handled below
+    NewtonResult out;
+    bool analysed = false;
+    auto analyse = [&] {
+        const Stopwatch sw;
+        const Eigen::SparseMatrix<double, Eigen::RowMajor>& P = solid.pattern();
+        // Kff's upper triangle from the rows' entries right of the diagonal (as they are assembled; the tangent's
+        // two triangles need not agree to the last bit), scattered into columns: a count, then a fill row by row
+        // (ascending rows: each column's row indices come out sorted). Two linear passes, no sort.
+        to_ff.assign(static_cast<size_t>(P.nonZeros()), -1);
+        diag_pos.assign(static_cast<size_t>(m), 0);
+        std::vector<std::int64_t> next(static_cast<size_t>(m) + 1, 0);
         for (Eigen::Index r = 0; r < n; ++r) {
             const int a = free_index[static_cast<size_t>(r)];
             if (a < 0) continue;
-            for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, r); it; ++it) {
-                const int b = free_index[static_cast<size_t>(it.col())];
-                if (b >= a) trip.emplace_back(a, b, 1.0);
+            for (std::int64_t p = P.outerIndexPtr()[r]; p < P.outerIndexPtr()[r + 1]; ++p) {
+                const int b = free_index[static_cast<size_t>(P.innerIndexPtr()[p])];
+                if (b >= a) ++next[static_cast<size_t>(b) + 1];
             }
         }
-        Kff.setFromTriplets(trip.begin(), trip.end());
-        Kff.makeCompressed();
+        for (Eigen::Index b = 0; b < m; ++b) next[static_cast<size_t>(b) + 1] += next[static_cast<size_t>(b)];
+        Kff.resize(m, m);
+        Kff.resizeNonZeros(static_cast<Eigen::Index>(next.back()));
+        for (Eigen::Index b = 0; b <= m; ++b) Kff.outerIndexPtr()[b] = static_cast<int>(next[static_cast<size_t>(b)]);
         for (Eigen::Index r = 0; r < n; ++r) {
             const int a = free_index[static_cast<size_t>(r)];
             if (a < 0) continue;
-            for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
-                const int b = free_index[static_cast<size_t>(K.innerIndexPtr()[p])];
+            for (std::int64_t p = P.outerIndexPtr()[r]; p < P.outerIndexPtr()[r + 1]; ++p) {
+                const int b = free_index[static_cast<size_t>(P.innerIndexPtr()[p])];
                 if (b < a) continue;
-                const int* rows = Kff.innerIndexPtr() + Kff.outerIndexPtr()[b];
-                const int* rend = Kff.innerIndexPtr() + Kff.outerIndexPtr()[b + 1];
-                const Eigen::Index pos = Kff.outerIndexPtr()[b] + (std::lower_bound(rows, rend, a) - rows);
+                const std::int64_t pos = next[static_cast<size_t>(b)]++;
+                Kff.innerIndexPtr()[pos] = a;
+                Kff.valuePtr()[pos] = 1.0;
                 to_ff[static_cast<size_t>(p)] = pos;
                 if (a == b) diag_pos[static_cast<size_t>(a)] = pos;
             }
         }
-    }
-    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
-    llt.cholmod().print = 0;  // a tangent that is not positive definite is expected (buckling) and handled below
-    if (m > 0) llt.analyzePattern(Kff);
-    NewtonResult out;
-    // One linearised solve: K_ff du_f = −g_f − K_fp dp (dp: the prescribed increments, zero in the corrector
-    // iterations). A tangent that is not positive definite is replaced by the projected one (each element's
-    // tangent without its negative eigenvalues), shifted by τ·diag if CHOLMOD still refuses it (singular).
+        if (m > 0) llt.analyzePattern(Kff);
+        analysed = true;
+        out.setup_s += sw.seconds();
+    };
     auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const Eigen::VectorXd* dp) {
+        if (!analysed) analyse();
+        Stopwatch sw;
         K = solid.tangent(u);
+        out.tangent_s += sw.lap();
         Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
         auto fill_free = [&] {
             std::fill(Kff.valuePtr(), Kff.valuePtr() + Kff.nonZeros(), 0.0);
@@ -399,28 +414,35 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         }
         if (m == 0) return du;
         fill_free();
+        out.tangent_s += sw.lap();
         llt.factorize(Kff);
+        ++out.factorisations;
         bool factored = llt.info() == Eigen::Success;
         if (!factored) {
             // Not positive definite (buckling, strong compression): project the element tangents instead.
             // The predictor keeps the true tangent's K_fp in its right-hand side, computed above.
             ++out.shifted;
+            out.factorise_s += sw.lap();
             K = solid.tangent(u, true);
             fill_free();
+            out.tangent_s += sw.lap();
         }
         Eigen::VectorXd diag(m);
         for (Eigen::Index a = 0; a < m; ++a) diag[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
         for (double tau = 0; !factored;) {
             llt.factorize(Kff);
+            ++out.factorisations;
             if (llt.info() == Eigen::Success) break;
             if (tau > 1e4) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a shift of 1e4 times its diagonal");
             const double next = tau == 0 ? 1e-8 : 10 * tau;
             for (Eigen::Index a = 0; a < m; ++a) Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]] += (next - tau) * diag[a];
             tau = next;
         }
+        out.factorise_s += sw.lap();
         const Eigen::VectorXd x = llt.solve(rhs);
         for (Eigen::Index r = 0; r < n; ++r)
             if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+        out.back_solve_s += sw.lap();
         return du;
     };
     Eigen::VectorXd u = u0;

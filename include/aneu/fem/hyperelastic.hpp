@@ -119,6 +119,11 @@ struct NewtonResult {
     double min_J = 1;           ///< smallest det F at the end
     bool converged = true;      ///< false only with NewtonOptions::keep_going
     double load_fraction = 1;   ///< of the prescribed increment reached (< 1 only when not converged)
+    int factorisations = 0;     ///< numeric Cholesky factorisations (predictors, iterations, shifted retries)
+    /// Wall-clock seconds of the call's parts: the free tangent's pattern and CHOLMOD's ordering and analysis (once,
+    /// at the first linearised solve; none when the call starts converged), tangent assembly, numeric
+    /// factorisation, back substitution. The rest is residuals and energies (line searches, convergence checks).
+    double setup_s = 0, tangent_s = 0, factorise_s = 0, back_solve_s = 0;
 };
 
 /// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed
