@@ -330,11 +330,16 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // face near its path (fem::solve_without_crossings).
             const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
             cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
+            // Vertices an earlier frame found going through a face its ordinary pairs left out stay paired with
+            // every face within this frame's reach: else each frame would take them through again and repeat its
+            // solve (the sample's 13 mm clip held at 1.89°: two solves in every held frame, 27 s each).
+            cp.close_vertices = P.close_vertices;
             const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v0, cp, [&](const fem::ContactBody& wall) {
                 P.kappa_wall = wall.stiffness();
                 return solve_with(wall, &wall);
             });
             r = cs.result;
+            P.close_vertices = cs.close_vertices;
             P.stats.wall_resolves += cs.rounds;
             // Whatever is through a face at the end counts as interpenetration (a vertex behind a face where the
             // frame started has no pair to push it out).

@@ -118,6 +118,9 @@ struct Simulator::Impl {
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
         Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
         double kappa_wall = 0, kappa_blade = 0;
+        /// Inner-wall vertices paired with every face near them (a frame's solve took them through a face their
+        /// ordinary pairs left out): carried to the following frames (fem::CrossingFreeSolve::close_vertices).
+        std::vector<int> close_vertices;
         Eigen::Vector3d hinge_prev = Eigen::Vector3d::Zero();  // the clip's hinge at the last solve
         double t_map = -1;                    // when the map vertices were last updated
         Eigen::Vector3d force = Eigen::Vector3d::Zero();  // the tissue's net force on the clip [N]

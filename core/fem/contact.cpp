@@ -363,6 +363,7 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
         const ContactBody contact(body, X, faces, u0.head(n), cp);
         out.result = solve(contact);
         out.pairs = contact.candidates();
+        out.close_vertices = cp.close_vertices;
         out.left.clear();
         out.deepest_mm = 0;
         for (const SurfaceCrossing& q : surface_crossings(X, faces, out.result.u.head(n), cp.exclude_rings, depth)) {

@@ -176,6 +176,26 @@ TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated)
     EXPECT_NEAR(once.left.front().depth_mm, PUSH - Plates::GAP, 1e-9);
     EXPECT_NEAR(once.deepest_mm, PUSH - Plates::GAP, 1e-9);
     EXPECT_EQ(cs.deepest_mm, 0.0);
+    // The close vertices it paired are handed back (every vertex that went through, with its ring); a solve that
+    // starts with them paired within reach of their path (the simulator's next frame: its own reach covers a held
+    // vertex's) needs no repeat and ends where the repeat did.
+    ASSERT_FALSE(cs.close_vertices.empty());
+    EXPECT_TRUE(std::is_sorted(cs.close_vertices.begin(), cs.close_vertices.end()));
+    for (const fem::SurfaceCrossing& q : once.left)
+        EXPECT_TRUE(std::binary_search(cs.close_vertices.begin(), cs.close_vertices.end(), q.v)) << "vertex " << q.v;
+    fem::ContactParams seeded = cp;
+    seeded.close_vertices = cs.close_vertices;
+    seeded.close_search_mm = 2 * (LIFT + PUSH);
+    int seeded_solves = 0;
+    const fem::CrossingFreeSolve next = fem::solve_without_crossings(solid, p.V, p.faces, lifted, seeded, [&](const fem::ContactBody& body) {
+        ++seeded_solves;
+        return fem::solve_neo_hookean(body, p.fixed, pres, lifted);
+    });
+    EXPECT_EQ(next.rounds, 0);
+    EXPECT_EQ(seeded_solves, 1);
+    EXPECT_TRUE(next.left.empty());
+    EXPECT_EQ(next.close_vertices, cs.close_vertices);
+    EXPECT_NEAR(pushing_force(next.result), pushing_force(cs.result), 1e-6 * pushing_force(cs.result));
 }
 
 TEST(WallContact, NeighboursAreNotPairs) {

@@ -134,6 +134,11 @@ struct CrossingFreeSolve {
     std::vector<SurfaceCrossing> left;   ///< crossings after the last one that were not there at u0
     double deepest_mm = 0;               ///< the deepest vertex behind a face at the end, at u0's too (0: none)
     std::size_t pairs = 0;               ///< candidate pairs of the last solve
+    /// The close vertices (ContactParams::close_vertices) the last solve paired with every face near them: the
+    /// given ones and the crossings' rings. A caller solving step after step passes them on to the next step: a
+    /// vertex the barrier holds off a face its ordinary pairs leave out would otherwise go through it again there,
+    /// and cost a repeat every step.
+    std::vector<int> close_vertices;
 };
 CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0,
                                           ContactParams cp, const std::function<NewtonResult(const ContactBody&)>& solve, double depth = 0.25,
