@@ -1,0 +1,376 @@
+// SPDX-License-Identifier: MIT
+// Contact on a precomputed compliance (compliance.hpp): the linearisation (tangent, factor, free step, the
+// candidates' compliance) and the clip frame (a linear complementarity problem on the Delassus matrix, projected
+// Gauss–Seidel).
+#include "aneu/fem/compliance.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <string>
+
+#include <Eigen/Cholesky>
+#include <Eigen/CholmodSupport>
+#include <Eigen/SparseCore>
+
+#include "aneu/core/common.hpp"
+#include "aneu/core/error.hpp"
+
+namespace aneu::fem {
+
+struct Linearisation::Impl {
+    Eigen::VectorXd u0, r0, free_u;
+    Eigen::MatrixX3d free_x;
+    std::vector<int> cand;
+    std::vector<int> free_index;  // per body DOF: its index among the free ones, −1 fixed
+    Eigen::Index nfree = 0;
+    Eigen::MatrixXd W;
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+};
+
+namespace {
+
+/// The free block's upper triangle of a row-major tangent, from the entries right of the diagonal of each row.
+Eigen::SparseMatrix<double> free_upper(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const std::vector<int>& fi, Eigen::Index m) {
+    std::vector<std::int64_t> next(static_cast<size_t>(m) + 1, 0);
+    for (Eigen::Index r = 0; r < K.rows(); ++r) {
+        const int a = fi[static_cast<size_t>(r)];
+        if (a < 0) continue;
+        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
+            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
+            if (b >= a) ++next[static_cast<size_t>(b) + 1];
+        }
+    }
+    for (Eigen::Index b = 0; b < m; ++b) next[static_cast<size_t>(b) + 1] += next[static_cast<size_t>(b)];
+    Eigen::SparseMatrix<double> U(m, m);
+    U.resizeNonZeros(static_cast<Eigen::Index>(next.back()));
+    for (Eigen::Index b = 0; b <= m; ++b) U.outerIndexPtr()[b] = static_cast<int>(next[static_cast<size_t>(b)]);
+    for (Eigen::Index r = 0; r < K.rows(); ++r) {
+        const int a = fi[static_cast<size_t>(r)];
+        if (a < 0) continue;
+        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
+            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
+            if (b < a) continue;
+            const std::int64_t pos = next[static_cast<size_t>(b)]++;
+            U.innerIndexPtr()[pos] = a;
+            U.valuePtr()[pos] = K.valuePtr()[p];
+        }
+    }
+    return U;
+}
+
+}  // namespace
+
+Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                             const std::vector<int>& candidates)
+    : m(std::make_unique<Impl>()) {
+    const Eigen::Index n = body.dofs();
+    if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
+    if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
+    m->free_index.assign(static_cast<size_t>(n), 0);
+    for (Eigen::Index k = 0; k < fixed_dofs.size(); ++k) {
+        const int d = fixed_dofs[k];
+        if (d < 0 || d >= n) throw InputError("linearisation: fixed DOF " + std::to_string(d) + " outside the body");
+        m->free_index[static_cast<size_t>(d)] = -1;
+    }
+    for (Eigen::Index i = 0; i < n; ++i)
+        if (m->free_index[static_cast<size_t>(i)] >= 0) m->free_index[static_cast<size_t>(i)] = static_cast<int>(m->nfree++);
+    std::vector<char> seen(static_cast<size_t>(X.rows()), 0);
+    for (int c : candidates) {
+        if (c < 0 || c >= X.rows()) throw InputError("linearisation: candidate node " + std::to_string(c) + " outside the body");
+        if (seen[static_cast<size_t>(c)]++) throw InputError("linearisation: candidate node " + std::to_string(c) + " given twice");
+    }
+    m->u0 = u0;
+    m->cand = candidates;
+    const Eigen::Index mf = m->nfree;
+
+    Stopwatch sw;
+    const Eigen::VectorXd g = body.internal_force(u0);
+    m->r0 = Eigen::VectorXd::Zero(mf);
+    for (Eigen::Index i = 0; i < n; ++i)
+        if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->r0[a] = -g[i];
+    Eigen::SparseMatrix<double> U = free_upper(body.tangent(u0), m->free_index, mf);
+    tangent_s = sw.lap();
+    m->llt.cholmod().print = 0;
+    if (mf > 0) {
+        m->llt.compute(U);
+        if (m->llt.info() != Eigen::Success) {  // buckling: the element tangents projected onto PSD ones
+            sw.lap();
+            U = free_upper(body.tangent(u0, true), m->free_index, mf);
+            tangent_s += sw.lap();
+            m->llt.compute(U);
+            if (m->llt.info() != Eigen::Success)
+                throw NumericalError("linearisation: the tangent is not positive definite, even projected (" + std::to_string(mf) + " free DOFs)");
+        }
+    }
+    factorise_s = sw.lap();
+
+    const Eigen::VectorXd du = mf > 0 ? Eigen::VectorXd(m->llt.solve(m->r0)) : Eigen::VectorXd();
+    m->free_x.resize(static_cast<Eigen::Index>(candidates.size()), 3);
+    m->free_u.resize(3 * static_cast<Eigen::Index>(candidates.size()));
+    for (size_t k = 0; k < candidates.size(); ++k) {
+        const int c = candidates[k];
+        for (int ax = 0; ax < 3; ++ax) {
+            const Eigen::Index dof = 3 * c + ax;
+            const int a = m->free_index[static_cast<size_t>(dof)];
+            m->free_u[static_cast<Eigen::Index>(3 * k) + ax] = u0[dof] + (a >= 0 ? du[a] : 0.0);
+            m->free_x(static_cast<Eigen::Index>(k), ax) = X(c, ax) + m->free_u[static_cast<Eigen::Index>(3 * k) + ax];
+        }
+    }
+    // W, in blocks of columns (a dense right-hand side of all free DOFs per column; only the candidates' rows kept).
+    const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size());
+    m->W = Eigen::MatrixXd::Zero(nc, nc);
+    constexpr Eigen::Index BLOCK = 96;
+    for (Eigen::Index j0 = 0; j0 < nc && mf > 0; j0 += BLOCK) {
+        const Eigen::Index nb = std::min(BLOCK, nc - j0);
+        Eigen::MatrixXd B = Eigen::MatrixXd::Zero(mf, nb);
+        for (Eigen::Index j = 0; j < nb; ++j) {
+            const int a = m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>((j0 + j) / 3)] + (j0 + j) % 3)];
+            if (a >= 0) B(a, j) = 1.0;
+        }
+        const Eigen::MatrixXd S = m->llt.solve(B);
+        for (Eigen::Index i = 0; i < nc; ++i) {
+            const int a = m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(i / 3)] + i % 3)];
+            if (a >= 0) m->W.block(i, j0, 1, nb) = S.row(a);
+        }
+    }
+    compliance_s = sw.lap();
+}
+
+Linearisation::~Linearisation() = default;
+
+const Eigen::VectorXd& Linearisation::u0() const { return m->u0; }
+const Eigen::MatrixX3d& Linearisation::free_positions() const { return m->free_x; }
+const Eigen::VectorXd& Linearisation::free_candidate_u() const { return m->free_u; }
+const std::vector<int>& Linearisation::candidates() const { return m->cand; }
+const Eigen::MatrixXd& Linearisation::compliance() const { return m->W; }
+
+Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
+    if (f.size() != 3 * static_cast<Eigen::Index>(m->cand.size()))
+        throw InputError("linearisation: " + std::to_string(f.size()) + " candidate forces, expected " + std::to_string(3 * m->cand.size()));
+    Eigen::VectorXd rhs = m->r0;
+    for (size_t k = 0; k < m->cand.size(); ++k)
+        for (int ax = 0; ax < 3; ++ax)
+            if (const int a = m->free_index[static_cast<size_t>(3 * m->cand[k] + ax)]; a >= 0) rhs[a] += f[static_cast<Eigen::Index>(3 * k) + ax];
+    Eigen::VectorXd u = m->u0;
+    if (m->nfree == 0) return u;
+    const Eigen::VectorXd du = m->llt.solve(rhs);
+    for (Eigen::Index i = 0; i < u.size(); ++i)
+        if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) u[i] += du[a];
+    return u;
+}
+
+namespace {
+
+/// blade_distance with its derivatives: on the point (grad) and on the opening θ (dtheta).
+double blade_distance_d(const ClipBlades& b, int s, double theta, const Eigen::Vector3d& x, Eigen::Vector3d* grad, double* dtheta) {
+    // ClipBody::blade_distance's geometry: the blade is the set within ρ of its core, the rectangle r ∈ [0, L − ρ],
+    // |a| ≤ W/2 − ρ at ρ behind the face; over the core the plane's distance, beside it the distance to the core's
+    // edge (the height above the core's plane counted only in front of it). As θ grows the blade turns by θ/2:
+    // ∂n/∂θ = t/2, ∂t/∂θ = −n/2.
+    const double rho = std::min({0.1, 0.5 * b.thickness_mm, 0.25 * b.width_mm, 0.25 * b.length_mm});
+    Eigen::Vector3d t, n, w;
+    b.frame(s, theta, t, n, w);
+    const Eigen::Vector3d rel = x - b.hinge;
+    const double r = rel.dot(t), a = rel.dot(w), qn = rel.dot(n), p = 0.5 * b.closed_gap_mm + qn;
+    const double half = 0.5 * b.width_mm - rho, tip = b.length_mm - rho;
+    const double vr = r - std::clamp(r, 0.0, tip), va = a - std::clamp(a, -half, half);
+    if (vr == 0 && va == 0) {
+        if (grad) *grad = n;
+        if (dtheta) *dtheta = 0.5 * r;
+        return p;
+    }
+    const double vd = std::max(p + rho, 0.0), dist = std::sqrt(vr * vr + va * va + vd * vd);
+    if (grad) *grad = (vr * t + va * w + vd * n) / dist;  // vd = 0 where p + ρ ≤ 0: no term
+    if (dtheta) *dtheta = (vr * (-0.5 * qn) + vd * 0.5 * r) / dist;
+    return dist - rho;
+}
+
+}  // namespace
+
+double blade_distance(const ClipBlades& b, int s, double theta, const Eigen::Vector3d& x) {
+    return blade_distance_d(b, s, theta, x, nullptr, nullptr);
+}
+
+CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
+                                    std::optional<double> theta_held, double theta_start, const CompliantFrame* warm,
+                                    const CompliantOptions& opt) {
+    const Stopwatch sw;
+    if (!(spring.k_nmm_per_rad > 0) || !(spring.preload_rad >= 0)) throw InputError("compliant clip: the spring needs k > 0 and a preload >= 0");
+    if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
+    const double theta_ref = theta_held ? *theta_held : std::max(theta_start, 0.0);
+    const Eigen::MatrixX3d& Xf = lin.free_positions();
+    const Eigen::MatrixXd& W = lin.compliance();
+    const Eigen::Index nc = Xf.rows();
+
+    // The constraints: every candidate within reach of a blade at the free state (and not behind it: tissue
+    // beside or behind a blade stays there), linearised there: gap d, gradient g on its position, b on θ.
+    struct Row {
+        int k = 0, s = 1;
+        double d = 0, b = 0;
+        Eigen::Vector3d g;
+    };
+    std::vector<Row> rows;
+    constexpr double BEHIND = 0.02;
+    const bool free_theta = !theta_held;
+    // A released clip closes at most max_closing_rad in one frame (θ ≥ θ_lo): the frames approach the balance
+    // of spring and tissue, each linearising the blades where the last one left them.
+    const double theta_lo = free_theta ? std::max(0.0, theta_ref - opt.max_closing_rad) : theta_ref;
+    // The blades' gaps are linearised where the candidates are: where the last frame left them (on this
+    // linearisation or an older one), else at the free state. A candidate's position for forces f is
+    // free + W f, so its gap is d(x_last) + g · (free + W f − x_last).
+    const bool from_last = warm && warm->candidate_u.size() == 3 * nc;
+    const Eigen::VectorXd& fu = lin.free_candidate_u();
+    for (Eigen::Index k = 0; k < nc; ++k) {
+        const Eigen::Vector3d xf = Xf.row(k).transpose();
+        const Eigen::Vector3d x = from_last ? Eigen::Vector3d(xf - fu.segment<3>(3 * k) + warm->candidate_u.segment<3>(3 * k)) : xf;
+        for (int s : {1, -1}) {
+            if (blade_distance(blades, s, std::max(theta_start, 0.0), x) < -BEHIND) continue;  // behind where the blade was
+            Row r;
+            const double d = blade_distance_d(blades, s, theta_ref, x, &r.g, &r.b);
+            const double d_lo = free_theta ? d - r.b * (theta_ref - theta_lo) : d;
+            if (std::min(d, d_lo) >= opt.reach_mm) continue;
+            r.k = static_cast<int>(k);
+            r.s = s;
+            r.d = d + r.g.dot(xf - x);
+            if (r.g.squaredNorm() < 0.25) continue;  // no direction to push (a point on the core's edge line)
+            rows.push_back(r);
+        }
+    }
+    const Eigen::Index m = static_cast<Eigen::Index>(rows.size()), mz = m + (free_theta ? 1 : 0);
+    const double k = spring.k_nmm_per_rad, th0 = spring.preload_rad;
+    // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
+    Eigen::MatrixXd A(mz, mz);
+    Eigen::VectorXd q(mz);
+    for (Eigen::Index i = 0; i < m; ++i) {
+        const Row& ri = rows[static_cast<size_t>(i)];
+        for (Eigen::Index j = 0; j <= i; ++j) {
+            const Row& rj = rows[static_cast<size_t>(j)];
+            double a = ri.g.dot(W.block<3, 3>(3 * ri.k, 3 * rj.k) * rj.g);
+            if (free_theta) a += ri.b * rj.b / k;
+            A(i, j) = A(j, i) = a;
+        }
+        q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
+    }
+    // A node that cannot move (held DOFs) has no compliance: its row binds θ only, and rows that differ only there
+    // (the same place on both blades) would share their force in any proportion. A compliance of 10⁻⁹ of the
+    // largest on every row (constraint force mixing) makes the forces unique at a gap error of 10⁻⁹ of a typical
+    // node's give.
+    double amax = 0;
+    for (Eigen::Index i = 0; i < m; ++i) amax = std::max(amax, A(i, i) - (free_theta ? rows[static_cast<size_t>(i)].b * rows[static_cast<size_t>(i)].b / k : 0.0));
+    for (Eigen::Index i = 0; i < m; ++i) A(i, i) += 1e-9 * amax + 1e-15;
+    if (free_theta) {
+        for (Eigen::Index i = 0; i < m; ++i) A(m, i) = A(i, m) = rows[static_cast<size_t>(i)].b / k;
+        A(m, m) = 1.0 / k;
+        q[m] = -th0 - theta_lo;
+    }
+    // Warm start: the last frame's forces where the same candidate meets the same blade.
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(mz);
+    if (warm) {
+        std::map<std::pair<int, int>, double> last;
+        for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i) last[warm->constraint[i]] = warm->lambda[i];
+        for (Eigen::Index i = 0; i < m; ++i)
+            if (auto it = last.find({rows[static_cast<size_t>(i)].k, rows[static_cast<size_t>(i)].s}); it != last.end()) z[i] = it->second;
+    }
+    // Projected Gauss–Seidel, keeping w = q + A z up to date.
+    Eigen::VectorXd w = q + A * z;
+    CompliantFrame out;
+    auto violation = [&] {
+        double v = 0;
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // the stop's row: θ [rad]
+        }
+        return v;
+    };
+    int sweep = 0;
+    double viol = violation();
+    while (sweep < opt.max_sweeps && viol > opt.tolerance_mm) {
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            if (!(A(i, i) > 0)) continue;
+            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
+            if (dz != 0) {
+                w.noalias() += dz * A.col(i);
+                z[i] = zi;
+            }
+        }
+        ++sweep;
+        viol = violation();
+    }
+    out.sweeps = sweep;
+    // The sweeps converge slowly where θ couples every row (a released clip); finish by block principal pivoting
+    // (Júdice & Pires 1994) from the sweeps' active set: solve the active rows exactly, move every row whose force
+    // came out negative or whose gap is negative across, repeat. Kept only where it does better.
+    if (viol > opt.tolerance_mm && mz > 0) {
+        std::vector<char> act(static_cast<size_t>(mz));
+        for (Eigen::Index i = 0; i < mz; ++i) act[static_cast<size_t>(i)] = z[i] > 0 || w[i] < 0;
+        for (int it = 0; it < 30; ++it) {
+            std::vector<Eigen::Index> S;
+            for (Eigen::Index i = 0; i < mz; ++i)
+                if (act[static_cast<size_t>(i)]) S.push_back(i);
+            Eigen::VectorXd zt = Eigen::VectorXd::Zero(mz);
+            if (!S.empty()) {
+                const Eigen::Index ns = static_cast<Eigen::Index>(S.size());
+                Eigen::MatrixXd As(ns, ns);
+                Eigen::VectorXd qs(ns);
+                for (Eigen::Index a = 0; a < ns; ++a) {
+                    qs[a] = -q[S[static_cast<size_t>(a)]];
+                    for (Eigen::Index c = 0; c < ns; ++c) As(a, c) = A(S[static_cast<size_t>(a)], S[static_cast<size_t>(c)]);
+                }
+                const Eigen::VectorXd zs = As.ldlt().solve(qs);
+                for (Eigen::Index a = 0; a < ns; ++a) zt[S[static_cast<size_t>(a)]] = zs[a];
+            }
+            const Eigen::VectorXd wt = q + A * zt;
+            bool changed = false;
+            for (Eigen::Index i = 0; i < mz; ++i) {
+                const bool in = act[static_cast<size_t>(i)];
+                if (in && zt[i] < -opt.tolerance_mm * 1e-3) { act[static_cast<size_t>(i)] = 0; changed = true; }
+                if (!in && wt[i] < -opt.tolerance_mm) { act[static_cast<size_t>(i)] = 1; changed = true; }
+            }
+            if (!changed) {
+                const Eigen::VectorXd zc = zt.cwiseMax(0.0), wc = q + A * zc;
+                double v = 0;
+                for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, zc[i] > 0 ? std::abs(wc[i]) : std::max(0.0, -wc[i]));
+                if (v < viol) {
+                    z = zc;
+                    w = wc;
+                    viol = v;
+                }
+                out.pivots = it + 1;
+                break;
+            }
+        }
+    }
+    out.complementarity_mm = viol;
+
+    // The frame's state: forces on the candidates, their displacement, θ, the blades' loads.
+    out.candidate_forces = Eigen::VectorXd::Zero(3 * nc);
+    for (Eigen::Index i = 0; i < m; ++i) {
+        const Row& r = rows[static_cast<size_t>(i)];
+        out.candidate_forces.segment<3>(3 * r.k) += z[i] * r.g;
+    }
+    out.theta = theta_held ? *theta_held : theta_ref;
+    if (free_theta) {
+        double bl = 0;
+        for (Eigen::Index i = 0; i < m; ++i) bl += rows[static_cast<size_t>(i)].b * z[i];
+        out.theta = std::max(theta_lo, (bl + z[m]) / k - th0);
+    }
+    out.candidate_u = lin.free_candidate_u() + W * out.candidate_forces;
+    out.loads.opening_rad = out.theta;
+    out.loads.spring_torque_nmm = spring.torque(out.theta);
+    for (Eigen::Index i = 0; i < m; ++i) {
+        const Row& r = rows[static_cast<size_t>(i)];
+        out.lambda.push_back(z[i]);
+        out.constraint.emplace_back(r.k, r.s);
+        if (z[i] <= 0) continue;
+        const int side = r.s > 0 ? 0 : 1;
+        out.loads.force_n[side] += z[i];
+        out.loads.moment_nmm[side] += 2 * r.b * z[i];
+        ++out.loads.contacts[side];
+        out.loads.net_force -= z[i] * r.g;
+    }
+    out.seconds = sw.seconds();
+    return out;
+}
+
+}  // namespace aneu::fem

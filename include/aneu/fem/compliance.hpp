@@ -1,0 +1,104 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// @file
+/// Contact on a precomputed compliance (issue #15, item 2 and the rate acceptance): the contact loop that can run
+/// at haptic rates while the nonlinear patch is re-linearised on the other core (Courtecuisse et al. 2015: the
+/// factorisation of the tangent refreshed asynchronously, the contact forces solved every step on the compliance
+/// of the contact DOFs only).
+///
+/// A Linearisation freezes a body at a state u0: its tangent K0 (factorised once), the free step
+/// Δu_free = K0⁻¹ r0 (r0 = −f_int(u0) on the free DOFs: what Newton would do next with no contact) and the
+/// compliance of the candidate nodes, W = (K0⁻¹)_CC (3|C| × 3|C|, dense: 3|C| back substitutions). Then a clip
+/// frame is a small problem on the candidates only:
+///
+///     minimise over Δu, θ:  ½ Δuᵀ K0 Δu − r0ᵀ Δu + k (θ²/2 + θ₀ θ)
+///     subject to            D_i(x_i, θ) ≥ 0 for every candidate i and blade it faces (linearised at the free state)
+///                           θ ≥ 0 (the closed stop; a released clip) or θ = the forceps' (a held one)
+///
+/// whose dual is a linear complementarity problem on the Delassus matrix A = J W Jᵀ (+ b bᵀ / k for a free θ),
+/// solved by projected Gauss–Seidel warm-started from the last frame's forces, finished where it converges
+/// slowly (θ couples every row) by block principal pivoting. The contact is hard (D = 0 where a
+/// node presses; ClipBody's barrier leaves pressed nodes between 0 and d̂) and frictionless. Repeating
+/// linearise → frame from the state a frame ends at is a sequential-quadratic Newton method: it converges to the
+/// same equilibrium as solve_neo_hookean on ClipBody (less the barrier's d̂); run asynchronously, the frames use
+/// the newest linearisation the other core has finished, and how far they lag is the trade the benchmark measures.
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "aneu/fem/clip.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+
+namespace aneu::fem {
+
+class Linearisation {
+public:
+    /// @param fixed_dofs DOFs held at zero displacement change (their u0 values stay)
+    /// @param candidates body nodes that can touch (their compliance is kept); distinct
+    /// @throws InputError bad sizes or indices; NumericalError a tangent that is not positive definite even
+    ///         projected onto positive semidefinite element tangents
+    Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                  const std::vector<int>& candidates);
+    ~Linearisation();
+    Linearisation(const Linearisation&) = delete;
+    Linearisation& operator=(const Linearisation&) = delete;
+
+    const Eigen::VectorXd& u0() const;
+    /// The candidates' positions at the free state: X + u0 + Δu_free, one row per candidate.
+    const Eigen::MatrixX3d& free_positions() const;
+    /// The candidates' displacement at the free state, u0 + Δu_free (3|C|).
+    const Eigen::VectorXd& free_candidate_u() const;
+    const std::vector<int>& candidates() const;
+    /// W: the displacement of candidate DOF i per unit force on candidate DOF j (3 per candidate, in order).
+    const Eigen::MatrixXd& compliance() const;
+    /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
+    /// back substitution.
+    Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
+    /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance's back
+    /// substitutions.
+    double tangent_s = 0, factorise_s = 0, compliance_s = 0;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> m;
+};
+
+struct CompliantOptions {
+    double reach_mm = 0.2;       ///< candidates nearer a blade than this at the free state are constraints
+    int max_sweeps = 50;         ///< projected Gauss–Seidel sweeps before block pivoting finishes the solve
+    double tolerance_mm = 1e-10; ///< stop when no constraint's gap or complementarity is off by more than this
+    /// A released clip closes at most this much in one frame (θ ≥ θ_start − it): the frames approach the balance of
+    /// spring and tissue, each linearising the blades' rotation where the last frame left them.
+    double max_closing_rad = 0.02;
+};
+
+/// One clip frame on a linearisation.
+struct CompliantFrame {
+    double theta = 0;                  ///< the blades' opening [rad]
+    Eigen::VectorXd candidate_forces;  ///< the blades' forces on the candidates (3|C|) [N]
+    Eigen::VectorXd candidate_u;       ///< the candidates' displacement (3|C|) [mm]
+    BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
+    std::vector<double> lambda;        ///< per constraint: its normal force (warm start of the next frame)
+    std::vector<std::pair<int, int>> constraint;  ///< per constraint: (candidate, blade ±1)
+    int sweeps = 0;
+    int pivots = 0;                    ///< block-pivoting solves that finished the sweeps (0: the sweeps converged)
+    double complementarity_mm = 0;     ///< the largest |min(λ_i, D_i)|-type violation left, in mm
+    double seconds = 0;                ///< the frame's wall-clock time (constraints, Delassus matrix, sweeps)
+};
+
+/// The clip's blades (at their pose; `theta_held` the forceps' opening, or none: released, θ free on its spring
+/// with the closed stop) against the candidates of a linearisation.
+/// @param theta_start the last frame's opening: a candidate more than 0.02 mm behind a blade there is not pushed
+///                    by it (tissue beside or behind a blade stays there); a released clip is linearised there
+/// @param warm        the last frame, whose forces start the sweeps where its constraints recur (may be null)
+CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
+                                    std::optional<double> theta_held, double theta_start, const CompliantFrame* warm = nullptr,
+                                    const CompliantOptions& opt = {});
+
+/// How far in front of blade s (±1) at opening θ the point x lies, the blade a solid whose sides and tip are rounded
+/// (ClipBody's geometry and edge radius): negative behind its face.
+double blade_distance(const ClipBlades& blades, int s, double theta, const Eigen::Vector3d& x);
+
+}  // namespace aneu::fem

@@ -1,0 +1,204 @@
+// SPDX-License-Identifier: MIT
+// Contact on a precomputed compliance (fem::Linearisation, fem::solve_compliant_clip; issue #15's haptic-rate
+// contact): on a block of known stiffness the frames reach the hard-contact moment balance solved here by
+// bisection; held open, one frame gives the block's force exactly; on a neo-Hookean block, frames each on a
+// linearisation at the last frame's state (sequential quadratic programming) reach the equilibrium that the
+// barrier Newton solve of ClipBody finds, within the barrier's distance.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "aneu/core/common.hpp"
+#include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
+#include "aneu/fem/compliance.hpp"
+#include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/structured_mesh.hpp"
+
+using namespace aneu;
+
+namespace {
+
+/// Two nodes at (A, ±H, 0), each tied to a fixed ground node at the same place by an isotropic spring K.
+struct Block {
+    static constexpr double A = 4.0, H = 0.5, K = 20.0;
+    Eigen::MatrixX3d X{4, 3};
+    Eigen::VectorXi fixed{6};
+    std::unique_ptr<fem::LinearBody> body;
+    Block() {
+        X << A, H, 0, A, -H, 0, A, H, 0, A, -H, 0;
+        for (int k = 0; k < 6; ++k) fixed[k] = k;
+        std::vector<Eigen::Triplet<double>> t;
+        for (int pair = 0; pair < 2; ++pair)
+            for (int ax = 0; ax < 3; ++ax) {
+                const int g = 3 * pair + ax, b = 3 * (pair + 2) + ax;
+                t.emplace_back(g, g, K);
+                t.emplace_back(b, b, K);
+                t.emplace_back(g, b, -K);
+                t.emplace_back(b, g, -K);
+            }
+        Eigen::SparseMatrix<double, Eigen::RowMajor> Km(12, 12);
+        Km.setFromTriplets(t.begin(), t.end());
+        body = std::make_unique<fem::LinearBody>(Km);
+    }
+};
+
+fem::ClipSpring test_spring() {
+    const double r = 7.0 * 2.0 / 3.0;
+    return fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, 0.0), 1.5, 40 * DEG, 2.5);
+}
+
+/// Hard contact on the block: at opening θ the node on blade +1 starts d₀ in front of its face; pressed (d₀ < 0) it
+/// moves −d₀ along the face's normal against its ground spring, F = −K d₀, at r from the hinge.
+double block_force(double theta) {
+    const double phi = 0.5 * theta, d0 = Block::A * std::sin(phi) - Block::H * std::cos(phi);
+    return d0 < 0 ? -Block::K * d0 : 0.0;
+}
+double block_lever(double theta) { return Block::A * std::cos(0.5 * theta) + Block::H * std::sin(0.5 * theta); }
+
+}  // namespace
+
+TEST(CompliantClip, BladeDistanceIsTheFacesOverTheBladeAndTheRoundedEdgesBeside) {
+    fem::ClipBlades b;  // hinge at the origin, axis x, up y, 7 × 1 mm, closed gap 0
+    // Closed (θ = 0): blade +1's face is the plane y = 0 seen from below (its normal −y), blade −1's from above.
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {3.0, -0.25, 0.1}), 0.25, 1e-12);
+    EXPECT_NEAR(fem::blade_distance(b, -1, 0.0, {3.0, 0.25, 0.1}), 0.25, 1e-12);
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {3.0, 0.05, 0.0}), -0.05, 1e-12);  // behind the face
+    // Beside the blade (1 mm wide, edges rounded 0.1 mm): 0.3 mm out from the side, level with the face.
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {3.0, -1e-9, 0.8}), std::hypot(0.4, 0.1) - 0.1, 1e-6);
+    // Opened by θ: a point on blade +1's direction at r is r sin(θ/2)·… in front of blade −1, on blade +1's face.
+    const double th = 0.4;
+    Eigen::Vector3d t, n, w;
+    b.frame(1, th, t, n, w);
+    EXPECT_NEAR(fem::blade_distance(b, 1, th, 4.0 * t + 0.3 * n), 0.3, 1e-12);
+}
+
+TEST(CompliantClip, HeldOpenOnABlockOneFrameGivesItsHardContactForce) {
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    const fem::ClipBlades blades;
+    const fem::Linearisation lin(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 3});
+    // The compliance of a node on its ground spring: 1/K along each axis, nothing between the two nodes.
+    EXPECT_NEAR(lin.compliance()(0, 0), 1.0 / Block::K, 1e-12);
+    EXPECT_NEAR(lin.compliance()(1, 4), 0.0, 1e-12);
+    const double touch = 2 * std::atan(Block::H / Block::A);
+    for (const double held : {touch + 0.01, touch - 0.01, touch - 0.03}) {  // clear; pressing 0.02 and 0.06 mm
+        const fem::CompliantFrame f = fem::solve_compliant_clip(lin, blades, spring, held, touch + 0.01);
+        EXPECT_DOUBLE_EQ(f.theta, held);
+        // Exact but for the rows' 10⁻⁹ constraint force mixing.
+        EXPECT_NEAR(f.loads.force_n[0], block_force(held), 1e-8 * (1 + block_force(held))) << "held at " << held;
+        EXPECT_NEAR(f.loads.force_n[1], block_force(held), 1e-8 * (1 + block_force(held)));
+        EXPECT_NEAR(f.loads.moment_nmm[0], block_force(held) * block_lever(held), 1e-8 * (1 + block_force(held) * block_lever(held)));
+        EXPECT_LE(f.complementarity_mm, 1e-10);
+        // The pressed node ends on the face, no further.
+        if (block_force(held) > 0) {
+            const Eigen::Vector3d x = b.X.row(2).transpose() + f.candidate_u.segment<3>(0);
+            EXPECT_NEAR(fem::blade_distance(blades, 1, held, x), 0.0, 1e-9);
+            EXPECT_EQ(f.loads.contacts[0], 1);
+        }
+    }
+    EXPECT_THROW(fem::solve_compliant_clip(lin, blades, spring, -0.1, 0.0), InputError);
+    EXPECT_THROW(fem::Linearisation(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 2}), InputError);
+    EXPECT_THROW(fem::Linearisation(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(11), {2}), InputError);
+}
+
+TEST(CompliantClip, ReleasedOnABlockTheFramesStopAtTheAnalyticAngle) {
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    const fem::ClipBlades blades;
+    const fem::Linearisation lin(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 3});
+    // The balance τ(θ) = F(θ) r(θ), by bisection between closed and touching.
+    double lo = 0, hi = 2 * std::atan(Block::H / Block::A);
+    auto residual = [&](double th) { return spring.torque(th) - block_force(th) * block_lever(th); };
+    ASSERT_LT(residual(lo), 0);
+    ASSERT_GT(residual(hi), 0);
+    for (int it = 0; it < 200; ++it) (residual(0.5 * (lo + hi)) < 0 ? lo : hi) = 0.5 * (lo + hi);
+    const double expected = 0.5 * (lo + hi);
+    // Released at 40°: each frame closes at most 0.02 rad and linearises the blades where the last one stopped.
+    fem::CompliantFrame f;
+    f.theta = 40 * DEG;
+    int frames = 0;
+    double last = 1e9;
+    while (frames < 200 && std::abs(f.theta - last) > 1e-13) {
+        last = f.theta;
+        f = fem::solve_compliant_clip(lin, blades, spring, std::nullopt, f.theta, &f);
+        ++frames;
+        EXPECT_GE(last - f.theta, -1e-12);          // it only closes
+        EXPECT_LE(last - f.theta, 0.02 + 1e-12);    // by at most a frame's step
+    }
+    EXPECT_NEAR(f.theta, expected, 1e-9) << "after " << frames << " frames";
+    EXPECT_GT(frames, 30);  // 40° is 0.70 rad: no frame jumped
+    EXPECT_NEAR(f.loads.moment_nmm[0], f.loads.spring_torque_nmm, 1e-8 * f.loads.spring_torque_nmm);
+    EXPECT_NEAR(f.loads.moment_nmm[1], f.loads.spring_torque_nmm, 1e-8 * f.loads.spring_torque_nmm);
+    // Without the block the clip closes onto its stop and stays there.
+    const fem::Linearisation none(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {});
+    fem::CompliantFrame g;
+    g.theta = 0.05;
+    for (int k = 0; k < 5; ++k) g = fem::solve_compliant_clip(none, blades, spring, std::nullopt, g.theta, &g);
+    EXPECT_EQ(g.theta, 0.0);
+}
+
+TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalance) {
+    // ClipBody's test block: 2 × 1 × 1 mm, 1 MPa, 3 … 5 mm from the hinge, its far face held; blades 2 mm wide.
+    const fem::StructuredMesh m = fem::box_mesh(2.0, 1.0, 1.0, 8, 4, 4);
+    Eigen::MatrixX3d X = m.V;
+    X.col(0).array() += 3.0;
+    X.col(1).array() -= 0.5;
+    X.col(2).array() -= 0.5;
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(m.T.rows());
+    const fem::NeoHookeanSolid solid(X, m.T, region, {Material{"wall", 1.0, 0.45}});
+    std::vector<int> fd, surface;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+        if (X(i, 0) > 5.0 - 1e-9)
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        if (std::abs(std::abs(X(i, 1)) - 0.5) < 1e-9) surface.push_back(static_cast<int>(i));
+    }
+    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    fem::ClipBlades blades;
+    blades.width_mm = 2.0;
+    const fem::ClipSpring spring = test_spring();
+
+    // The reference: ClipBody's barrier (d̂ = 0.01 mm) in one Newton solve, released at 40°.
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(solid.dofs() + 1);
+    v0[solid.dofs()] = 40 * DEG;
+    const fem::ClipContactParams cp;
+    const fem::ClipBody clip(solid, X, surface, v0, blades, spring, cp);
+    const fem::NewtonResult ref = fem::solve_neo_hookean(clip, fixed, {}, v0);
+    const double theta_ref = ref.u[clip.theta_dof()];
+    const fem::BladeLoads Lref = clip.loads(ref.u);
+
+    // The frames: each on a linearisation at the state the last one ended at (its displacement: one back
+    // substitution of the frame's forces).
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    fem::CompliantFrame f;
+    f.theta = 40 * DEG;
+    int frames = 0;
+    double step = 1e9;
+    while (frames < 150 && step > 1e-10) {
+        const fem::Linearisation lin(solid, X, fixed, u, surface);
+        const double before = f.theta;
+        f = fem::solve_compliant_clip(lin, blades, spring, std::nullopt, f.theta, &f);
+        const Eigen::VectorXd next = lin.displacement(f.candidate_forces);
+        step = std::max((next - u).lpNorm<Eigen::Infinity>(), std::abs(f.theta - before));
+        u = next;
+        ++frames;
+    }
+    ASSERT_LE(step, 1e-10) << "not converged in " << frames << " frames";
+    EXPECT_LE(f.complementarity_mm, 1e-9);
+    // The same balance: the angle within what the barrier's d̂ moves a blade 3–5 mm out (2 d̂ / 3 mm), the grip
+    // within 1 %, the mean moment equal to the spring's torque.
+    EXPECT_NEAR(f.theta, theta_ref, 2 * cp.gap_mm / 3.0) << "compliant " << f.theta / DEG << "°, barrier " << theta_ref / DEG << "°";
+    EXPECT_NEAR(f.loads.force_n[0], Lref.force_n[0], 0.01 * Lref.force_n[0]);
+    EXPECT_NEAR(f.loads.force_n[1], Lref.force_n[1], 0.01 * Lref.force_n[1]);
+    EXPECT_NEAR(0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]), f.loads.spring_torque_nmm, 1e-6 * f.loads.spring_torque_nmm);
+    EXPECT_GT(f.loads.contacts[0], 3);
+    // The displacement: within 2 d̂ of the barrier's everywhere; no node through a blade by more than the sweeps' tolerance.
+    EXPECT_LE((u - ref.u.head(solid.dofs())).lpNorm<Eigen::Infinity>(), 2 * cp.gap_mm + 2 * std::abs(f.theta - theta_ref) * 5.0);
+    for (int node : surface) {
+        const Eigen::Vector3d x = X.row(node).transpose() + u.segment<3>(3 * node);
+        for (int s : {1, -1}) {
+            const double d = fem::blade_distance(blades, s, f.theta, x);
+            EXPECT_GT(d, -1e-6) << "node " << node << ", blade " << s;
+        }
+    }
+}
