@@ -5,17 +5,22 @@
 #include "aneu/fem/compliance.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <map>
 #include <string>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Geometry>
 #include <Eigen/CholmodSupport>
 #include <Eigen/SparseCore>
 
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/contact.hpp"
 
 namespace aneu::fem {
 
@@ -193,9 +198,13 @@ double blade_distance(const ClipBlades& b, int s, double theta, const Eigen::Vec
     return blade_distance_d(b, s, theta, x, nullptr, nullptr);
 }
 
-CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
-                                    std::optional<double> theta_held, double theta_start, const CompliantFrame* warm,
-                                    const CompliantOptions& opt) {
+namespace {
+
+/// One pass of a frame: the constraints linearised where `warm` left the candidates (else at the free state), those
+/// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
+CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
+                          double theta_start, const CompliantFrame* warm, const CompliantOptions& opt, const CompliantWalls* walls,
+                          const Eigen::VectorXd& start) {
     const Stopwatch sw;
     if (!(spring.k_nmm_per_rad > 0) || !(spring.preload_rad >= 0)) throw InputError("compliant clip: the spring needs k > 0 and a preload >= 0");
     if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
@@ -204,12 +213,15 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     const Eigen::MatrixXd& W = lin.compliance();
     const Eigen::Index nc = Xf.rows();
 
-    // The constraints: every candidate within reach of a blade at the free state (and not behind it: tissue
-    // beside or behind a blade stays there), linearised there: gap d, gradient g on its position, b on θ.
+    // The constraints: every candidate within reach of a blade (and not behind it: tissue beside or behind a blade
+    // stays there), and every wall pair within reach, linearised where the candidates are: gap d, gradient g on the
+    // positions of its candidates (one for a blade, the vertex and the face's three for a wall pair), b on θ.
     struct Row {
-        int k = 0, s = 1;
+        int n = 1;                         // candidates in the row
+        std::array<int, 4> k{0, 0, 0, 0};  // which
+        int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face
         double d = 0, b = 0;
-        Eigen::Vector3d g;
+        std::array<Eigen::Vector3d, 4> g;
     };
     std::vector<Row> rows;
     constexpr double BEHIND = 0.02;
@@ -217,25 +229,72 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // A released clip closes at most max_closing_rad in one frame (θ ≥ θ_lo): the frames approach the balance
     // of spring and tissue, each linearising the blades where the last one left them.
     const double theta_lo = free_theta ? std::max(0.0, theta_ref - opt.max_closing_rad) : theta_ref;
-    // The blades' gaps are linearised where the candidates are: where the last frame left them (on this
-    // linearisation or an older one), else at the free state. A candidate's position for forces f is
-    // free + W f, so its gap is d(x_last) + g · (free + W f − x_last).
+    // The gaps are linearised where the candidates are: where the last frame left them (on this linearisation or
+    // an older one), else at the free state. A candidate's position for forces f is free + W f, so a gap is
+    // d(x_last) + Σ g · (free + W f − x_last).
     const bool from_last = warm && warm->candidate_u.size() == 3 * nc;
     const Eigen::VectorXd& fu = lin.free_candidate_u();
+    Eigen::MatrixX3d Xl = Xf;  // where the gaps are linearised
+    if (from_last)
+        for (Eigen::Index k = 0; k < nc; ++k) Xl.row(k) += (warm->candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
+    Eigen::MatrixX3d Xs = Xf;  // where the frame started
+    for (Eigen::Index k = 0; k < nc; ++k) Xs.row(k) += (start.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
     for (Eigen::Index k = 0; k < nc; ++k) {
-        const Eigen::Vector3d xf = Xf.row(k).transpose();
-        const Eigen::Vector3d x = from_last ? Eigen::Vector3d(xf - fu.segment<3>(3 * k) + warm->candidate_u.segment<3>(3 * k)) : xf;
+        const Eigen::Vector3d x = Xl.row(k).transpose();
         for (int s : {1, -1}) {
-            if (blade_distance(blades, s, std::max(theta_start, 0.0), x) < -BEHIND) continue;  // behind where the blade was
+            if (blade_distance(blades, s, std::max(theta_start, 0.0), Xs.row(k).transpose()) < -BEHIND) continue;  // behind where the blade was
             Row r;
-            const double d = blade_distance_d(blades, s, theta_ref, x, &r.g, &r.b);
+            const double d = blade_distance_d(blades, s, theta_ref, x, &r.g[0], &r.b);
             const double d_lo = free_theta ? d - r.b * (theta_ref - theta_lo) : d;
             if (std::min(d, d_lo) >= opt.reach_mm) continue;
-            r.k = static_cast<int>(k);
+            if (r.g[0].squaredNorm() < 0.25) continue;  // no direction to push (a point on the core's edge line)
+            r.k[0] = static_cast<int>(k);
             r.s = s;
-            r.d = d + r.g.dot(xf - x);
-            if (r.g.squaredNorm() < 0.25) continue;  // no direction to push (a point on the core's edge line)
+            r.d = d + r.g[0].dot(Xf.row(k).transpose() - x);
             rows.push_back(r);
+        }
+    }
+    int wall_rows = 0;
+    double wall_min = std::numeric_limits<double>::infinity();
+    if (walls) {
+        for (const auto& [v, f] : walls->pairs) {
+            if (v < 0 || v >= nc || f < 0 || f >= walls->faces.rows())
+                throw InputError("compliant clip: wall pair (" + std::to_string(v) + ", " + std::to_string(f) + ") outside the candidates or faces");
+            Row r;
+            r.n = 4;
+            r.k = {v, walls->faces(f, 0), walls->faces(f, 1), walls->faces(f, 2)};
+            for (int a = 1; a < 4; ++a)
+                if (r.k[static_cast<size_t>(a)] < 0 || r.k[static_cast<size_t>(a)] >= nc) throw InputError("compliant clip: wall face " + std::to_string(f) + " names a node outside the candidates");
+            // Hard contact on the face's plane where the vertex lies over the face (its projection inside it, or
+            // within a tenth of the face beyond an edge): the distance to the closed triangle, ≥ 0 beside it, would
+            // let a vertex pressed to an edge slide round it and under the face; beyond that its neighbour's pair holds it.
+            const Eigen::Vector3d xa = Xl.row(r.k[1]).transpose(), xb = Xl.row(r.k[2]).transpose(), xc = Xl.row(r.k[3]).transpose();
+            const Eigen::Vector3d xv = Xl.row(r.k[0]).transpose();
+            const Eigen::Vector3d e1 = xb - xa, e2 = xc - xa, nn = e1.cross(e2);
+            const double area2 = nn.norm();
+            if (!(area2 > 0)) continue;
+            const Eigen::Vector3d nh = nn / area2, w = xv - xa;
+            const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2), den = d11 * d22 - d12 * d12;
+            const double b1 = (d22 * w1 - d12 * w2) / den, b2 = (d11 * w2 - d12 * w1) / den, b0 = 1 - b1 - b2;
+            constexpr double OVER = -0.1;
+            const double d = nh.dot(w);
+            if (b0 < OVER || b1 < OVER || b2 < OVER) continue;
+            wall_min = std::min(wall_min, d);
+            // Within reach, and not far behind where the frame started (a crease, the far side of a fold).
+            if (d >= opt.wall_reach_mm) continue;
+            if (signed_vertex_face_distance(Xs.row(r.k[0]).transpose(), Xs.row(r.k[1]).transpose(), Xs.row(r.k[2]).transpose(), Xs.row(r.k[3]).transpose()) <
+                -opt.wall_behind_mm)
+                continue;
+            Eigen::Matrix<double, 12, 1> g;
+            g << nh, -b0 * nh, -b1 * nh, -b2 * nh;
+            r.s = 2 + f;
+            r.d = d;
+            for (int a = 0; a < 4; ++a) {
+                r.g[static_cast<size_t>(a)] = g.segment<3>(3 * a);
+                r.d += r.g[static_cast<size_t>(a)].dot(Xf.row(r.k[static_cast<size_t>(a)]).transpose() - Xl.row(r.k[static_cast<size_t>(a)]).transpose());
+            }
+            rows.push_back(r);
+            ++wall_rows;
         }
     }
     const Eigen::Index m = static_cast<Eigen::Index>(rows.size()), mz = m + (free_theta ? 1 : 0);
@@ -243,15 +302,35 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
     Eigen::MatrixXd A(mz, mz);
     Eigen::VectorXd q(mz);
-    for (Eigen::Index i = 0; i < m; ++i) {
-        const Row& ri = rows[static_cast<size_t>(i)];
-        for (Eigen::Index j = 0; j <= i; ++j) {
-            const Row& rj = rows[static_cast<size_t>(j)];
-            double a = ri.g.dot(W.block<3, 3>(3 * ri.k, 3 * rj.k) * rj.g);
-            if (free_theta) a += ri.b * rj.b / k;
-            A(i, j) = A(j, i) = a;
+    {
+        // Through the compliance of the candidates in the rows only, gathered once (contiguous): per row its
+        // column of W Jᵀ on them, then the rows' gradients on it.
+        std::vector<int> slot(static_cast<size_t>(nc), -1), used;
+        for (const Row& r : rows)
+            for (int a = 0; a < r.n; ++a)
+                if (slot[static_cast<size_t>(r.k[static_cast<size_t>(a)])] < 0) {
+                    slot[static_cast<size_t>(r.k[static_cast<size_t>(a)])] = static_cast<int>(used.size());
+                    used.push_back(r.k[static_cast<size_t>(a)]);
+                }
+        const Eigen::Index p = static_cast<Eigen::Index>(used.size());
+        Eigen::MatrixXd Wa(3 * p, 3 * p);
+        for (Eigen::Index b = 0; b < p; ++b)
+            for (Eigen::Index a = 0; a < p; ++a) Wa.block<3, 3>(3 * a, 3 * b) = W.block<3, 3>(3 * used[static_cast<size_t>(a)], 3 * used[static_cast<size_t>(b)]);
+        Eigen::VectorXd y(3 * p);
+        for (Eigen::Index i = 0; i < m; ++i) {
+            const Row& ri = rows[static_cast<size_t>(i)];
+            y.noalias() = Wa.middleCols<3>(3 * slot[static_cast<size_t>(ri.k[0])]) * ri.g[0];
+            for (int a = 1; a < ri.n; ++a)
+                y.noalias() += Wa.middleCols<3>(3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])]) * ri.g[static_cast<size_t>(a)];
+            for (Eigen::Index j = 0; j <= i; ++j) {
+                const Row& rj = rows[static_cast<size_t>(j)];
+                double a = 0;
+                for (int c = 0; c < rj.n; ++c) a += rj.g[static_cast<size_t>(c)].dot(y.segment<3>(3 * slot[static_cast<size_t>(rj.k[static_cast<size_t>(c)])]));
+                if (free_theta) a += ri.b * rj.b / k;
+                A(i, j) = A(j, i) = a;
+            }
+            q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
         }
-        q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
     }
     // A node that cannot move (held DOFs) has no compliance: its row binds θ only, and rows that differ only there
     // (the same place on both blades) would share their force in any proportion. A compliance of 10⁻⁹ of the
@@ -271,7 +350,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         std::map<std::pair<int, int>, double> last;
         for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i) last[warm->constraint[i]] = warm->lambda[i];
         for (Eigen::Index i = 0; i < m; ++i)
-            if (auto it = last.find({rows[static_cast<size_t>(i)].k, rows[static_cast<size_t>(i)].s}); it != last.end()) z[i] = it->second;
+            if (auto it = last.find({rows[static_cast<size_t>(i)].k[0], rows[static_cast<size_t>(i)].s}); it != last.end()) z[i] = it->second;
     }
     // Projected Gauss–Seidel, keeping w = q + A z up to date.
     Eigen::VectorXd w = q + A * z;
@@ -317,7 +396,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
                     qs[a] = -q[S[static_cast<size_t>(a)]];
                     for (Eigen::Index c = 0; c < ns; ++c) As(a, c) = A(S[static_cast<size_t>(a)], S[static_cast<size_t>(c)]);
                 }
-                const Eigen::VectorXd zs = As.ldlt().solve(qs);
+                const Eigen::VectorXd zs = As.llt().solve(qs);  // SPD: the compliance is, and every row has its mixing
                 for (Eigen::Index a = 0; a < ns; ++a) zt[S[static_cast<size_t>(a)]] = zs[a];
             }
             const Eigen::VectorXd wt = q + A * zt;
@@ -341,13 +420,27 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
             }
         }
     }
+    // Pivoting that cycled or stalled (redundant rows: a vertex pressed on two faces of an edge): more sweeps from
+    // the best so far, until the gaps are off by no more than accept_mm.
+    for (int extra = 0; viol > opt.accept_mm && extra < 100; ++extra) {
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            if (!(A(i, i) > 0)) continue;
+            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
+            if (dz != 0) {
+                w.noalias() += dz * A.col(i);
+                z[i] = zi;
+            }
+        }
+        ++out.sweeps;
+        viol = violation();
+    }
     out.complementarity_mm = viol;
 
     // The frame's state: forces on the candidates, their displacement, θ, the blades' loads.
     out.candidate_forces = Eigen::VectorXd::Zero(3 * nc);
     for (Eigen::Index i = 0; i < m; ++i) {
         const Row& r = rows[static_cast<size_t>(i)];
-        out.candidate_forces.segment<3>(3 * r.k) += z[i] * r.g;
+        for (int a = 0; a < r.n; ++a) out.candidate_forces.segment<3>(3 * r.k[static_cast<size_t>(a)]) += z[i] * r.g[static_cast<size_t>(a)];
     }
     out.theta = theta_held ? *theta_held : theta_ref;
     if (free_theta) {
@@ -355,22 +448,130 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         for (Eigen::Index i = 0; i < m; ++i) bl += rows[static_cast<size_t>(i)].b * z[i];
         out.theta = std::max(theta_lo, (bl + z[m]) / k - th0);
     }
-    out.candidate_u = lin.free_candidate_u() + W * out.candidate_forces;
+    // The candidates' displacement: the free state's plus the compliance's columns of the pressed candidates only.
+    out.candidate_u = lin.free_candidate_u();
+    {
+        std::vector<char> done(static_cast<size_t>(nc), 0);
+        for (const Row& r : rows)
+            for (int a = 0; a < r.n; ++a) {
+                const int c = r.k[static_cast<size_t>(a)];
+                if (done[static_cast<size_t>(c)]++) continue;
+                const Eigen::Vector3d fk = out.candidate_forces.segment<3>(3 * c);
+                if (fk.squaredNorm() > 0) out.candidate_u.noalias() += W.middleCols<3>(3 * c) * fk;
+            }
+    }
     out.loads.opening_rad = out.theta;
     out.loads.spring_torque_nmm = spring.torque(out.theta);
     for (Eigen::Index i = 0; i < m; ++i) {
         const Row& r = rows[static_cast<size_t>(i)];
         out.lambda.push_back(z[i]);
-        out.constraint.emplace_back(r.k, r.s);
+        out.constraint.emplace_back(r.k[0], r.s);
         if (z[i] <= 0) continue;
+        if (r.s >= 2) {
+            ++out.wall_contacts;
+            out.wall_force_n += z[i];
+            continue;
+        }
         const int side = r.s > 0 ? 0 : 1;
         out.loads.force_n[side] += z[i];
         out.loads.moment_nmm[side] += 2 * r.b * z[i];
         ++out.loads.contacts[side];
-        out.loads.net_force -= z[i] * r.g;
+        out.loads.net_force -= z[i] * r.g[0];
     }
+    out.wall_rows = wall_rows;
+    out.wall_min_distance_mm = wall_min;
     out.seconds = sw.seconds();
     return out;
+}
+
+}  // namespace
+
+CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
+                                    std::optional<double> theta_held, double theta_start, const CompliantFrame* warm,
+                                    const CompliantOptions& opt, const CompliantWalls* walls) {
+    const Stopwatch sw;
+    const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
+    const Eigen::VectorXd start = warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
+    // The gaps are linear in the candidates' motion only to first order (a blade's or a face's normal turns as it
+    // moves): passes re-linearise them where the last pass ended, on the same compliance, until the candidates
+    // move less than the sweeps' tolerance.
+    CompliantFrame f = solve_pass(lin, blades, spring, theta_held, theta_start, warm, opt, walls, start);
+    int passes = 1;
+    for (; passes < opt.geometry_passes; ++passes) {
+        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+        const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
+        f = std::move(g);
+        if (moved <= 1e3 * opt.tolerance_mm) {
+            ++passes;
+            break;
+        }
+    }
+    f.passes = passes;
+    f.seconds = sw.seconds();
+    return f;
+}
+
+}  // namespace aneu::fem
+
+namespace aneu::fem {
+
+CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, ContactParams& cp,
+                                          const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
+                                          const CompliantFrame* warm, const CompliantOptions& opt, int* repeats) {
+    const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
+    if (Xc.rows() != nc) throw InputError("compliant clip: " + std::to_string(Xc.rows()) + " candidate positions for " + std::to_string(nc) + " candidates");
+    const Eigen::VectorXd u0 = warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
+    const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
+    // What is behind a face where the frame starts stays out of the count (a crease, an earlier crossing).
+    constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // a pressed vertex's linearisation error, well under the 0.02 mm limit
+    std::vector<std::pair<int, int>> before;
+    for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u0, cp.exclude_rings, depth))
+        if (q.depth_mm > CONTACT_ROUNDOFF_MM) before.emplace_back(q.v, q.f);
+    std::sort(before.begin(), before.end());
+    std::vector<std::vector<int>> nb(static_cast<size_t>(nc));
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
+            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
+        }
+    CompliantWalls walls;
+    walls.faces = faces;
+    if (repeats) *repeats = 0;
+    for (int round = 0;; ++round) {
+        walls.pairs = contact_pairs(Xc, faces, u0, cp, opt.wall_behind_mm);
+        CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls);
+        std::vector<SurfaceCrossing> left;
+        // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is not a
+        // crossing; the next frame's row pushes it back.)
+        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, f.candidate_u, cp.exclude_rings, depth))
+            if (q.depth_mm > CONTACT_ROUNDOFF_MM && !std::binary_search(before.begin(), before.end(), std::make_pair(q.v, q.f))) left.push_back(q);
+        f.wall_crossings = static_cast<int>(left.size());
+        if (std::getenv("ANEU_COMPLIANT_DEBUG"))
+            for (const SurfaceCrossing& q : left) {
+                const bool paired = std::find(walls.pairs.begin(), walls.pairs.end(), std::array<int, 2>{q.v, q.f}) != walls.pairs.end();
+                auto pos = [&](const Eigen::VectorXd& u, int c) { return Eigen::Vector3d(Xc.row(c).transpose() + u.segment<3>(3 * c)); };
+                const double d0 = signed_vertex_face_distance(pos(u0, q.v), pos(u0, faces(q.f, 0)), pos(u0, faces(q.f, 1)), pos(u0, faces(q.f, 2)));
+                double lam = -1;
+                for (size_t i = 0; i < f.constraint.size(); ++i)
+                    if (f.constraint[i] == std::make_pair(q.v, 2 + q.f)) lam = f.lambda[i];
+                std::fprintf(stderr, "round %d: v %d f %d depth %.4f paired %d d0 %.4f row λ %.4g\n", round, q.v, q.f, q.depth_mm, paired, d0, lam);
+            }
+        if (left.empty() || round == 3) return f;
+        if (repeats) ++*repeats;
+        // Each crossing vertex and its ring, paired with every face within reach of its path (as far as it and the
+        // face's corners moved, and the walls' reach beyond) in the frame solved again, and in the frames after.
+        double reach = cp.search_mm;
+        for (const SurfaceCrossing& q : left) {
+            double moved = (f.candidate_u.segment<3>(3 * q.v) - u0.segment<3>(3 * q.v)).norm();
+            for (int k = 0; k < 3; ++k) moved += (f.candidate_u.segment<3>(3 * faces(q.f, k)) - u0.segment<3>(3 * faces(q.f, k))).norm() / 3.0;
+            reach = std::max(reach, 2.0 * moved + cp.search_mm);
+            cp.close_vertices.push_back(q.v);
+            for (int w : nb[static_cast<size_t>(q.v)]) cp.close_vertices.push_back(w);
+        }
+        std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
+        cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
+        cp.close_search_mm = std::max(cp.close_search_mm, reach);
+    }
 }
 
 }  // namespace aneu::fem

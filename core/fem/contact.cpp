@@ -34,76 +34,7 @@ ContactBody::ContactBody(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     if (p.exclude_rings < 0) throw InputError("contact: exclude_rings must be >= 0");
     if (m_p.depth_mm <= 0) m_p.depth_mm = 0.25;
 
-    // Candidates: a surface vertex and a face without it, apart in the reference shape (opposite walls), near in
-    // the starting state.
-    std::vector<int> verts;
-    for (Eigen::Index f = 0; f < faces.rows(); ++f)
-        for (int k = 0; k < 3; ++k) verts.push_back(faces(f, k));
-    std::sort(verts.begin(), verts.end());
-    verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
-    // The surface's vertex graph, for the neighbourhood (rings of edges) of each face.
-    std::vector<std::vector<int>> nb(static_cast<size_t>(X.rows()));
-    for (Eigen::Index f = 0; f < faces.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
-            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
-        }
-    // Vertex normals at u0 (area-weighted, towards the opposite wall): a pair is a vertex and a face of the
-    // opposite wall, facing each other (normals more than 90° apart). Same-wall vertices beyond the excluded
-    // rings lie nearly in a face's plane (a flat or flattened wall) and are not pairs.
-    std::vector<Eigen::Vector3d> vn(static_cast<size_t>(X.rows()), Eigen::Vector3d::Zero());
-    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-        const Eigen::Vector3d a = x(u0, faces(f, 0)), n = (x(u0, faces(f, 1)) - a).cross(x(u0, faces(f, 2)) - a);
-        for (int k = 0; k < 3; ++k) vn[static_cast<size_t>(faces(f, k))] += n;
-    }
-    std::vector<int> ring(static_cast<size_t>(X.rows()), -1);  // face index that last marked the vertex as near
-    std::vector<int> frontier, next;
-    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-        const Eigen::Vector3d a = x(u0, faces(f, 0)), b = x(u0, faces(f, 1)), c = x(u0, faces(f, 2));
-        const Eigen::Vector3d centre = (a + b + c) / 3.0;
-        const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
-        frontier.assign({faces(f, 0), faces(f, 1), faces(f, 2)});
-        for (int w : frontier) ring[static_cast<size_t>(w)] = static_cast<int>(f);
-        for (int k = 0; k < p.exclude_rings; ++k) {
-            next.clear();
-            for (int w : frontier)
-                for (int y : nb[static_cast<size_t>(w)])
-                    if (ring[static_cast<size_t>(y)] != f) {
-                        ring[static_cast<size_t>(y)] = static_cast<int>(f);
-                        next.push_back(y);
-                    }
-            frontier.swap(next);
-        }
-        const Eigen::Vector3d fn = (b - a).cross(c - a);
-        for (int v : verts) {
-            if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
-            if ((x(u0, v) - centre).norm() > r + p.search_mm) continue;
-            if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
-            // A vertex behind the face (over it) where the solve starts did not come through it — the barrier lets
-            // none through — but lies there: a crease of the wall, the other side of a fold. Not a pair: its
-            // barrier would hold it on that side.
-            if (signed_distance(u0, {v, static_cast<int>(f)}) <= 0) continue;
-            m_pairs.push_back({v, static_cast<int>(f)});
-        }
-    }
-    // Vertices a trial took through an unpaired face: every face near them but their own.
-    if (!p.close_vertices.empty()) {
-        for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-            const Eigen::Vector3d a = x(u0, faces(f, 0)), b = x(u0, faces(f, 1)), c = x(u0, faces(f, 2));
-            const Eigen::Vector3d centre = (a + b + c) / 3.0;
-            const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
-            for (int v : p.close_vertices) {
-                if (v < 0 || v >= X.rows()) throw InputError("contact: close vertex " + std::to_string(v) + " outside the body");
-                if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
-                if ((x(u0, v) - centre).norm() > r + std::max(p.close_search_mm, p.search_mm)) continue;
-                if (signed_distance(u0, {v, static_cast<int>(f)}) <= 0) continue;
-                m_pairs.push_back({v, static_cast<int>(f)});
-            }
-        }
-        const auto order = [](const Pair& a, const Pair& b) { return a.f != b.f ? a.f < b.f : a.v < b.v; };
-        std::sort(m_pairs.begin(), m_pairs.end(), order);
-        m_pairs.erase(std::unique(m_pairs.begin(), m_pairs.end(), [](const Pair& a, const Pair& b) { return a.f == b.f && a.v == b.v; }), m_pairs.end());
-    }
+    for (const auto& q : contact_pairs(X, faces, u0, m_p)) m_pairs.push_back({q[0], q[1]});
 }
 
 void ContactBody::build_pattern() const {
@@ -227,12 +158,98 @@ Mat12 psd(const Mat12& H) {
 
 }  // namespace
 
-double ContactBody::signed_distance(const Eigen::VectorXd& u, const Pair& q) const {
-    const Vec3 p = x(u, q.v), a = x(u, m_F(q.f, 0)), b = x(u, m_F(q.f, 1)), c = x(u, m_F(q.f, 2));
+double signed_vertex_face_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                                   Eigen::Matrix<double, 12, 1>* grad) {
     const PointTriangle pt = point_triangle(p, a, b, c, false);
     const double d = std::sqrt(pt.D);
-    if (pt.inside && (p - a).dot((b - a).cross(c - a)) < 0) return -d;
-    return d;
+    const double sign = pt.inside && (p - a).dot((b - a).cross(c - a)) < 0 ? -1.0 : 1.0;
+    if (grad) *grad = d > 0 ? Vec12(sign * pt.g / (2 * d)) : Vec12::Zero();
+    return sign * d;
+}
+
+std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p,
+                                              double behind_mm) {
+    if (u.size() != 3 * X.rows()) throw InputError("contact: the state has " + std::to_string(u.size()) + " entries for " + std::to_string(X.rows()) + " nodes");
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k)
+            if (faces(f, k) < 0 || faces(f, k) >= X.rows()) throw InputError("contact: face " + std::to_string(f) + " names a node outside the body");
+    const auto xat = [&](int node) -> Eigen::Vector3d { return X.row(node).transpose() + u.segment<3>(3 * node); };
+    std::vector<std::array<int, 2>> pairs;
+    // Candidates: a surface vertex and a face without it, apart in the reference shape (opposite walls), near in
+    // the starting state.
+    std::vector<int> verts;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) verts.push_back(faces(f, k));
+    std::sort(verts.begin(), verts.end());
+    verts.erase(std::unique(verts.begin(), verts.end()), verts.end());
+    // The surface's vertex graph, for the neighbourhood (rings of edges) of each face.
+    std::vector<std::vector<int>> nb(static_cast<size_t>(X.rows()));
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
+            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
+        }
+    // Vertex normals at u0 (area-weighted, towards the opposite wall): a pair is a vertex and a face of the
+    // opposite wall, facing each other (normals more than 90° apart). Same-wall vertices beyond the excluded
+    // rings lie nearly in a face's plane (a flat or flattened wall) and are not pairs.
+    std::vector<Eigen::Vector3d> vn(static_cast<size_t>(X.rows()), Eigen::Vector3d::Zero());
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+        const Eigen::Vector3d a = xat(faces(f, 0)), n = (xat(faces(f, 1)) - a).cross(xat(faces(f, 2)) - a);
+        for (int k = 0; k < 3; ++k) vn[static_cast<size_t>(faces(f, k))] += n;
+    }
+    std::vector<int> ring(static_cast<size_t>(X.rows()), -1);  // face index that last marked the vertex as near
+    std::vector<int> frontier, next;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+        const Eigen::Vector3d a = xat(faces(f, 0)), b = xat(faces(f, 1)), c = xat(faces(f, 2));
+        const Eigen::Vector3d centre = (a + b + c) / 3.0;
+        const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
+        frontier.assign({faces(f, 0), faces(f, 1), faces(f, 2)});
+        for (int w : frontier) ring[static_cast<size_t>(w)] = static_cast<int>(f);
+        for (int k = 0; k < p.exclude_rings; ++k) {
+            next.clear();
+            for (int w : frontier)
+                for (int y : nb[static_cast<size_t>(w)])
+                    if (ring[static_cast<size_t>(y)] != f) {
+                        ring[static_cast<size_t>(y)] = static_cast<int>(f);
+                        next.push_back(y);
+                    }
+            frontier.swap(next);
+        }
+        const Eigen::Vector3d fn = (b - a).cross(c - a);
+        for (int v : verts) {
+            if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
+            if ((xat(v) - centre).norm() > r + p.search_mm) continue;
+            if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
+            // A vertex behind the face (over it) where the solve starts did not come through it — the barrier lets
+            // none through — but lies there: a crease of the wall, the other side of a fold. Not a pair: its
+            // barrier would hold it on that side.
+            if (signed_vertex_face_distance(xat(v), xat(faces(f, 0)), xat(faces(f, 1)), xat(faces(f, 2))) <= -behind_mm) continue;
+            pairs.push_back({v, static_cast<int>(f)});
+        }
+    }
+    // Vertices a trial took through an unpaired face: every face near them but their own.
+    if (!p.close_vertices.empty()) {
+        for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+            const Eigen::Vector3d a = xat(faces(f, 0)), b = xat(faces(f, 1)), c = xat(faces(f, 2));
+            const Eigen::Vector3d centre = (a + b + c) / 3.0;
+            const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
+            for (int v : p.close_vertices) {
+                if (v < 0 || v >= X.rows()) throw InputError("contact: close vertex " + std::to_string(v) + " outside the body");
+                if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
+                if ((xat(v) - centre).norm() > r + std::max(p.close_search_mm, p.search_mm)) continue;
+                if (signed_vertex_face_distance(xat(v), xat(faces(f, 0)), xat(faces(f, 1)), xat(faces(f, 2))) <= -behind_mm) continue;
+                pairs.push_back({v, static_cast<int>(f)});
+            }
+        }
+        const auto order = [](const std::array<int, 2>& a, const std::array<int, 2>& b) { return a[1] != b[1] ? a[1] < b[1] : a[0] < b[0]; };
+        std::sort(pairs.begin(), pairs.end(), order);
+        pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+    }
+    return pairs;
+}
+
+double ContactBody::signed_distance(const Eigen::VectorXd& u, const Pair& q) const {
+    return signed_vertex_face_distance(x(u, q.v), x(u, m_F(q.f, 0)), x(u, m_F(q.f, 1)), x(u, m_F(q.f, 2)));
 }
 
 double ContactBody::energy(const Eigen::VectorXd& u) const {

@@ -17,11 +17,15 @@
 ///
 /// whose dual is a linear complementarity problem on the Delassus matrix A = J W Jᵀ (+ b bᵀ / k for a free θ),
 /// solved by projected Gauss–Seidel warm-started from the last frame's forces, finished where it converges
-/// slowly (θ couples every row) by block principal pivoting. The contact is hard (D = 0 where a
-/// node presses; ClipBody's barrier leaves pressed nodes between 0 and d̂) and frictionless. Repeating
-/// linearise → frame from the state a frame ends at is a sequential-quadratic Newton method: it converges to the
-/// same equilibrium as solve_neo_hookean on ClipBody (less the barrier's d̂); run asynchronously, the frames use
-/// the newest linearisation the other core has finished, and how far they lag is the trade the benchmark measures.
+/// slowly (θ couples every row) by block principal pivoting. The inner walls' contact (CompliantWalls: vertex–face
+/// pairs of the lumen, whose corners are candidates too) adds rows on the face's plane, in the same problem. The
+/// gaps are linear in the motion only to first order: a frame takes a few passes, each re-linearising them where
+/// the last ended, on the same compliance. The contact is hard (D = 0 where a node presses; ClipBody's barrier
+/// leaves pressed nodes between 0 and d̂) and frictionless. Repeating linearise → frame from the state a frame
+/// ends at is a sequential-quadratic Newton method: it converges to the same equilibrium as solve_neo_hookean on
+/// ClipBody (less the barrier's d̂); run asynchronously, the frames use the newest linearisation the other core has
+/// finished, and how far they lag is the trade the benchmark (bench/bench_compliance.cpp) measures.
+#include <array>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -29,6 +33,7 @@
 #include <Eigen/Core>
 
 #include "aneu/fem/clip.hpp"
+#include "aneu/fem/contact.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 
 namespace aneu::fem {
@@ -66,12 +71,33 @@ private:
 };
 
 struct CompliantOptions {
-    double reach_mm = 0.2;       ///< candidates nearer a blade than this at the free state are constraints
-    int max_sweeps = 50;         ///< projected Gauss–Seidel sweeps before block pivoting finishes the solve
+    double reach_mm = 0.05;      ///< candidates nearer a blade than this (where the last frame left them) are constraints:
+                                 ///< more than a frame's blade travel (0.384° a frame at 250 Hz moves a 13 mm blade's tip 0.044 mm)
+    int max_sweeps = 4;          ///< projected Gauss–Seidel sweeps before block pivoting finishes the solve
+    /// Where pivoting fails (redundant rows), further sweeps (at most 100) stop at this: a gap or complementarity off
+    /// by 0.1 µm
+    double accept_mm = 1e-4;
     double tolerance_mm = 1e-10; ///< stop when no constraint's gap or complementarity is off by more than this
     /// A released clip closes at most this much in one frame (θ ≥ θ_start − it): the frames approach the balance of
     /// spring and tissue, each linearising the blades' rotation where the last frame left them.
     double max_closing_rad = 0.02;
+    /// A wall pair whose vertex lies further than this behind its face where the frame starts is not a constraint
+    /// (a crease of the wall, the far side of a fold: ContactBody's rule); nearer, the frame pushes it back out.
+    double wall_behind_mm = 0.005;
+    /// Wall pairs nearer than this where the frame starts are constraints: more than the two walls' approach in a
+    /// frame (each moves as far as a blade)
+    double wall_reach_mm = 0.15;
+    /// Passes per frame: each re-linearises the gaps where the last ended (a normal turns as its face moves), on the
+    /// same compliance; they stop when the candidates move less than 1000 × tolerance_mm between two.
+    int geometry_passes = 3;
+};
+
+/// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
+/// surface triangles whose corners are all candidates (indices into the linearisation's candidates), found by
+/// fem::contact_pairs where the frames are (the caller renews them as they move).
+struct CompliantWalls {
+    Eigen::MatrixX3i faces;                   ///< triangles, in candidate numbering, normals towards the opposite wall
+    std::vector<std::array<int, 2>> pairs;    ///< (vertex, face)
 };
 
 /// One clip frame on a linearisation.
@@ -81,8 +107,15 @@ struct CompliantFrame {
     Eigen::VectorXd candidate_u;       ///< the candidates' displacement (3|C|) [mm]
     BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
     std::vector<double> lambda;        ///< per constraint: its normal force (warm start of the next frame)
-    std::vector<std::pair<int, int>> constraint;  ///< per constraint: (candidate, blade ±1)
+    /// per constraint: (candidate, blade ±1), or (vertex, 2 + face) for a wall pair
+    std::vector<std::pair<int, int>> constraint;
+    int wall_rows = 0;                 ///< wall pairs within reach (constraints)
+    int wall_contacts = 0;             ///< wall pairs pressed together
+    double wall_force_n = 0;           ///< Σ their normal forces [N]
+    double wall_min_distance_mm = 0;   ///< the smallest signed distance among the pairs where the frame started (inf: none)
+    int wall_crossings = 0;            ///< solve_compliant_clip_walls: wall vertices newly behind a face after its last solve
     int sweeps = 0;
+    int passes = 0;                    ///< geometry passes (CompliantOptions::geometry_passes)
     int pivots = 0;                    ///< block-pivoting solves that finished the sweeps (0: the sweeps converged)
     double complementarity_mm = 0;     ///< the largest |min(λ_i, D_i)|-type violation left, in mm
     double seconds = 0;                ///< the frame's wall-clock time (constraints, Delassus matrix, sweeps)
@@ -95,7 +128,17 @@ struct CompliantFrame {
 /// @param warm        the last frame, whose forces start the sweeps where its constraints recur (may be null)
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm = nullptr,
-                                    const CompliantOptions& opt = {});
+                                    const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr);
+
+/// A frame with the inner walls' contact: the pairs found where the last frame left the candidates (fem::contact_pairs
+/// with cp, its close vertices included; faces in candidate numbering, Xc the candidates' reference positions), the
+/// frame solved, and where a wall vertex ends behind a face it was not behind at the start (fem::surface_crossings:
+/// it went through a face its pairs left out) the frame solved again with it and its ring paired with every face in
+/// reach, up to 3 times, as fem::solve_without_crossings does. The close vertices stay in cp for the frames after.
+/// @param repeats frames solved again (null: not counted)
+CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, ContactParams& cp,
+                                          const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
+                                          const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr);
 
 /// How far in front of blade s (±1) at opening θ the point x lies, the blade a solid whose sides and tip are rounded
 /// (ClipBody's geometry and edge radius): negative behind its face.

@@ -106,6 +106,18 @@ private:
     void add_pair_tangents(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const;
 };
 
+/// ContactBody's candidate vertex–face pairs (vertex, face) of the surface `faces` at the state u: a vertex and a face
+/// without it, beyond `exclude_rings` edges of its corners, within `search_mm` of it, facing each other (vertex and
+/// face normals more than 90° apart) and not behind it (by `behind_mm` or more: hard contact leaves a pressed vertex a
+/// hair behind its face); each of `close_vertices` with every face within reach but its own. u: 3 per node of X.
+std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p,
+                                              double behind_mm = 0);
+
+/// The signed distance from p to the closest point of the triangle (a, b, c) (negative when p projects into the face
+/// from behind it) and, with grad, its gradient over (p, a, b, c).
+double signed_vertex_face_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                                   Eigen::Matrix<double, 12, 1>* grad = nullptr);
+
 /// A surface vertex lying behind a face of the same surface (its closest point inside the face, on the face's
 /// back, less than `depth` deep) that did not lie behind it in the reference shape: the surface passed through
 /// itself there.
