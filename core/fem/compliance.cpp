@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <iterator>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -297,6 +298,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             ++wall_rows;
         }
     }
+    const double t_rows = sw.seconds();
     const Eigen::Index m = static_cast<Eigen::Index>(rows.size()), mz = m + (free_theta ? 1 : 0);
     const double k = spring.k_nmm_per_rad, th0 = spring.preload_rad;
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
@@ -332,13 +334,16 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
         }
     }
+    const double t_delassus = sw.seconds();
     // A node that cannot move (held DOFs) has no compliance: its row binds θ only, and rows that differ only there
-    // (the same place on both blades) would share their force in any proportion. A compliance of 10⁻⁹ of the
-    // largest on every row (constraint force mixing) makes the forces unique at a gap error of 10⁻⁹ of a typical
-    // node's give.
+    // (the same place on both blades) would share their force in any proportion; so would a vertex pressed on two
+    // faces of one edge of the opposite wall. A compliance of 10⁻⁹ of the largest on every row (constraint force
+    // mixing) makes the forces unique at a gap error of 10⁻⁹ of a typical node's give per newton. (10⁻⁶ did not
+    // make the pivoting on the sample's pressed walls converge any better, and cost the analytic tests 10⁻⁶.)
+    constexpr double CFM = 1e-9;
     double amax = 0;
     for (Eigen::Index i = 0; i < m; ++i) amax = std::max(amax, A(i, i) - (free_theta ? rows[static_cast<size_t>(i)].b * rows[static_cast<size_t>(i)].b / k : 0.0));
-    for (Eigen::Index i = 0; i < m; ++i) A(i, i) += 1e-9 * amax + 1e-15;
+    for (Eigen::Index i = 0; i < m; ++i) A(i, i) += CFM * amax + 1e-15;
     if (free_theta) {
         for (Eigen::Index i = 0; i < m; ++i) A(m, i) = A(i, m) = rows[static_cast<size_t>(i)].b / k;
         A(m, m) = 1.0 / k;
@@ -436,6 +441,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     }
     out.complementarity_mm = viol;
 
+    const double t_lcp = sw.seconds();
     // The frame's state: forces on the candidates, their displacement, θ, the blades' loads.
     out.candidate_forces = Eigen::VectorXd::Zero(3 * nc);
     for (Eigen::Index i = 0; i < m; ++i) {
@@ -481,6 +487,9 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     out.wall_rows = wall_rows;
     out.wall_min_distance_mm = wall_min;
     out.seconds = sw.seconds();
+    out.rows_s = t_rows;
+    out.delassus_s = t_delassus - t_rows;
+    out.lcp_s = t_lcp - t_delassus;
     return out;
 }
 
@@ -499,6 +508,9 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     int passes = 1;
     for (; passes < opt.geometry_passes; ++passes) {
         CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+        g.rows_s += f.rows_s;
+        g.delassus_s += f.delassus_s;
+        g.lcp_s += f.lcp_s;
         const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
         f = std::move(g);
         if (moved <= 1e3 * opt.tolerance_mm) {
@@ -515,19 +527,28 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
 
 namespace aneu::fem {
 
-CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, ContactParams& cp,
+CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm, const CompliantOptions& opt, int* repeats) {
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
     if (Xc.rows() != nc) throw InputError("compliant clip: " + std::to_string(Xc.rows()) + " candidate positions for " + std::to_string(nc) + " candidates");
+    ContactParams& cp = ws.params;
     const Eigen::VectorXd u0 = warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
     const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
-    // What is behind a face where the frame starts stays out of the count (a crease, an earlier crossing).
+    // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is
+    // not a crossing; the next frame's row pushes it back.)
     constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // a pressed vertex's linearisation error, well under the 0.02 mm limit
-    std::vector<std::pair<int, int>> before;
-    for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u0, cp.exclude_rings, depth))
-        if (q.depth_mm > CONTACT_ROUNDOFF_MM) before.emplace_back(q.v, q.f);
-    std::sort(before.begin(), before.end());
+    auto crossings = [&](const Eigen::VectorXd& u) {
+        std::vector<std::pair<int, int>> c;
+        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth))
+            if (q.depth_mm > CONTACT_ROUNDOFF_MM) c.emplace_back(q.v, q.f);
+        std::sort(c.begin(), c.end());
+        return c;
+    };
+    Stopwatch sw;
+    // What is behind a face where the frame starts stays out of the count (a crease, an earlier crossing): the last
+    // frame's end, when it ended here.
+    const std::vector<std::pair<int, int>> before = ws.ended_at.size() == u0.size() && ws.ended_at == u0 ? ws.ended_behind : crossings(u0);
     std::vector<std::vector<int>> nb(static_cast<size_t>(nc));
     for (Eigen::Index f = 0; f < faces.rows(); ++f)
         for (int k = 0; k < 3; ++k) {
@@ -537,40 +558,55 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     CompliantWalls walls;
     walls.faces = faces;
     if (repeats) *repeats = 0;
+    double search_s = sw.lap(), frames_s = 0;
+    CompliantFrame acc;
+    bool grew = false;  // close vertices added: search again
     for (int round = 0;; ++round) {
-        walls.pairs = contact_pairs(Xc, faces, u0, cp, opt.wall_behind_mm);
+        // The pairs: searched again when the candidates have moved far enough since the last search that a pair
+        // beyond its reach then could be within the rows' reach now.
+        const double slack = 0.5 * (cp.search_mm - opt.wall_reach_mm);
+        if (grew || ws.searched_at.size() != u0.size() || slack <= 0 || (u0 - ws.searched_at).lpNorm<Eigen::Infinity>() > slack) {
+            ws.pairs = contact_pairs(Xc, faces, u0, cp, opt.wall_behind_mm);
+            ws.searched_at = u0;
+            ++ws.searches;
+        }
+        walls.pairs = ws.pairs;
+        search_s += sw.lap();
         CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls);
-        std::vector<SurfaceCrossing> left;
-        // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is not a
-        // crossing; the next frame's row pushes it back.)
-        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, f.candidate_u, cp.exclude_rings, depth))
-            if (q.depth_mm > CONTACT_ROUNDOFF_MM && !std::binary_search(before.begin(), before.end(), std::make_pair(q.v, q.f))) left.push_back(q);
+        frames_s += sw.lap();
+        acc.rows_s += f.rows_s;
+        acc.delassus_s += f.delassus_s;
+        acc.lcp_s += f.lcp_s;
+        const std::vector<std::pair<int, int>> end = crossings(f.candidate_u);
+        std::vector<std::pair<int, int>> left;
+        std::set_difference(end.begin(), end.end(), before.begin(), before.end(), std::back_inserter(left));
         f.wall_crossings = static_cast<int>(left.size());
-        if (std::getenv("ANEU_COMPLIANT_DEBUG"))
-            for (const SurfaceCrossing& q : left) {
-                const bool paired = std::find(walls.pairs.begin(), walls.pairs.end(), std::array<int, 2>{q.v, q.f}) != walls.pairs.end();
-                auto pos = [&](const Eigen::VectorXd& u, int c) { return Eigen::Vector3d(Xc.row(c).transpose() + u.segment<3>(3 * c)); };
-                const double d0 = signed_vertex_face_distance(pos(u0, q.v), pos(u0, faces(q.f, 0)), pos(u0, faces(q.f, 1)), pos(u0, faces(q.f, 2)));
-                double lam = -1;
-                for (size_t i = 0; i < f.constraint.size(); ++i)
-                    if (f.constraint[i] == std::make_pair(q.v, 2 + q.f)) lam = f.lambda[i];
-                std::fprintf(stderr, "round %d: v %d f %d depth %.4f paired %d d0 %.4f row λ %.4g\n", round, q.v, q.f, q.depth_mm, paired, d0, lam);
-            }
-        if (left.empty() || round == 3) return f;
+        search_s += sw.lap();
+        f.rows_s = acc.rows_s;
+        f.delassus_s = acc.delassus_s;
+        f.lcp_s = acc.lcp_s;
+        f.search_s = search_s;
+        f.seconds = search_s + frames_s;
+        if (left.empty() || round == 3) {
+            ws.ended_at = f.candidate_u;
+            ws.ended_behind = end;
+            return f;
+        }
         if (repeats) ++*repeats;
         // Each crossing vertex and its ring, paired with every face within reach of its path (as far as it and the
         // face's corners moved, and the walls' reach beyond) in the frame solved again, and in the frames after.
         double reach = cp.search_mm;
-        for (const SurfaceCrossing& q : left) {
-            double moved = (f.candidate_u.segment<3>(3 * q.v) - u0.segment<3>(3 * q.v)).norm();
-            for (int k = 0; k < 3; ++k) moved += (f.candidate_u.segment<3>(3 * faces(q.f, k)) - u0.segment<3>(3 * faces(q.f, k))).norm() / 3.0;
+        for (const auto& [v, fc] : left) {
+            double moved = (f.candidate_u.segment<3>(3 * v) - u0.segment<3>(3 * v)).norm();
+            for (int k = 0; k < 3; ++k) moved += (f.candidate_u.segment<3>(3 * faces(fc, k)) - u0.segment<3>(3 * faces(fc, k))).norm() / 3.0;
             reach = std::max(reach, 2.0 * moved + cp.search_mm);
-            cp.close_vertices.push_back(q.v);
-            for (int w : nb[static_cast<size_t>(q.v)]) cp.close_vertices.push_back(w);
+            cp.close_vertices.push_back(v);
+            for (int w : nb[static_cast<size_t>(v)]) cp.close_vertices.push_back(w);
         }
         std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
         cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
         cp.close_search_mm = std::max(cp.close_search_mm, reach);
+        grew = true;
     }
 }
 

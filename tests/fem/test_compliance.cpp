@@ -248,7 +248,7 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
         Eigen::VectorXd u;
     };
     auto run = [&](bool with_walls) {
-        fem::ContactParams cp;  // its close vertices carried from frame to frame
+        fem::CompliantWallSearch cp;  // pairs, close vertices and crossings carried from frame to frame
         End e;
         e.u = Eigen::VectorXd::Zero(solid.dofs());
         e.f.theta = theta_touch;

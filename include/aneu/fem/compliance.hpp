@@ -119,6 +119,9 @@ struct CompliantFrame {
     int pivots = 0;                    ///< block-pivoting solves that finished the sweeps (0: the sweeps converged)
     double complementarity_mm = 0;     ///< the largest |min(λ_i, D_i)|-type violation left, in mm
     double seconds = 0;                ///< the frame's wall-clock time (constraints, Delassus matrix, sweeps)
+    /// Its parts [s], summed over passes (and a walls frame's repeats): making the rows, the Delassus matrix, the LCP
+    /// (sweeps, pivoting, forces and displacements), and with the walls the pair search and crossing checks.
+    double rows_s = 0, delassus_s = 0, lcp_s = 0, search_s = 0;
 };
 
 /// The clip's blades (at their pose; `theta_held` the forceps' opening, or none: released, θ free on its spring
@@ -130,13 +133,25 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm = nullptr,
                                     const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr);
 
-/// A frame with the inner walls' contact: the pairs found where the last frame left the candidates (fem::contact_pairs
-/// with cp, its close vertices included; faces in candidate numbering, Xc the candidates' reference positions), the
-/// frame solved, and where a wall vertex ends behind a face it was not behind at the start (fem::surface_crossings:
-/// it went through a face its pairs left out) the frame solved again with it and its ring paired with every face in
-/// reach, up to 3 times, as fem::solve_without_crossings does. The close vertices stay in cp for the frames after.
+/// What a sequence of wall frames keeps between frames: the pair rules (their close vertices grow as crossings are
+/// found), the last pair search and where it was made, the crossings where the last frame ended.
+struct CompliantWallSearch {
+    ContactParams params;
+    std::vector<std::array<int, 2>> pairs;
+    Eigen::VectorXd searched_at;
+    int searches = 0;  ///< pair searches so far
+    Eigen::VectorXd ended_at;
+    std::vector<std::pair<int, int>> ended_behind;
+};
+
+/// A frame with the inner walls' contact: the pairs (fem::contact_pairs with ws.params, its close vertices included;
+/// faces in candidate numbering, Xc the candidates' reference positions; searched again only when the candidates
+/// have moved half the search distance beyond the rows' reach since the last search), the frame solved, and where
+/// a wall vertex ends behind a face it was not behind at the start (fem::surface_crossings, deeper than 1 µm: it
+/// went through a face its pairs left out) the frame solved again with it and its ring paired with every face in
+/// reach, up to 3 times, as fem::solve_without_crossings does. The close vertices stay in ws for the frames after.
 /// @param repeats frames solved again (null: not counted)
-CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, ContactParams& cp,
+CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr);
 
