@@ -55,16 +55,6 @@ std::vector<double> parse_list(const std::string& s) {
     return v;
 }
 
-/// The simulator's patch rule (sim/sim_patch.cpp near_wedge): within `margin` of the jaws' wedge at opening θ.
-bool near_wedge(const fem::ClipBlades& b, double theta, const Eigen::Vector3d& p, double margin) {
-    const Eigen::Vector3d rel = p - b.hinge, w = b.axis.cross(b.up);
-    const double r = rel.dot(b.axis);
-    if (r < -margin || r > b.length_mm + margin) return false;
-    if (std::abs(rel.dot(w)) > 0.5 * b.width_mm + margin) return false;
-    const double rr = std::clamp(r, 0.0, b.length_mm);
-    return std::abs(rel.dot(b.up)) <= rr * std::tan(0.5 * theta) + 0.5 * b.closed_gap_mm + b.thickness_mm + margin;
-}
-
 double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, const Eigen::VectorXd* u) {
     double d = 1e9;
     for (int a : nodes) {
@@ -155,7 +145,7 @@ int main(int argc, char** argv) {
     std::vector<int> tets;
     for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
         for (int k = 0; k < 4; ++k)
-            if (near_wedge(blades, theta_build, vol.nodes.row(vol.tets(t, k)).transpose(), patch_radius)) {
+            if (blades.near_wedge(theta_build, vol.nodes.row(vol.tets(t, k)).transpose(), patch_radius)) {
                 tets.push_back(static_cast<int>(t));
                 break;
             }
@@ -169,7 +159,7 @@ int main(int argc, char** argv) {
     for (int o : outer_list) is_outer[static_cast<size_t>(o)] = 1;
     std::vector<int> cand;  // the outer nodes of the patch the blades can reach as they close: within 0.1 mm of the wedge
     for (Eigen::Index a = 0; a < np; ++a)
-        if (is_outer[static_cast<size_t>(pm.nodes()[static_cast<size_t>(a)])] && near_wedge(blades, theta_build, X.row(a).transpose(), 0.1))
+        if (is_outer[static_cast<size_t>(pm.nodes()[static_cast<size_t>(a)])] && blades.near_wedge(theta_build, X.row(a).transpose(), 0.1))
             cand.push_back(static_cast<int>(a));
     const size_t blade_cand = cand.size();
     // The inner walls: the lumen's faces in the patch (the simulator's), and for the frames those whose corners lie
@@ -180,8 +170,8 @@ int main(int argc, char** argv) {
         const int a = pm.local(Fin(f, 0)), b2 = pm.local(Fin(f, 1)), c = pm.local(Fin(f, 2));
         if (a < 0 || b2 < 0 || c < 0) continue;
         inner_p.emplace_back(a, b2, c);
-        if (near_wedge(blades, theta_build, X.row(a).transpose(), 0.3) && near_wedge(blades, theta_build, X.row(b2).transpose(), 0.3) &&
-            near_wedge(blades, theta_build, X.row(c).transpose(), 0.3))
+        if (blades.near_wedge(theta_build, X.row(a).transpose(), 0.3) && blades.near_wedge(theta_build, X.row(b2).transpose(), 0.3) &&
+            blades.near_wedge(theta_build, X.row(c).transpose(), 0.3))
             inner_near.emplace_back(a, b2, c);
     }
     Eigen::MatrixX3i inner(static_cast<Eigen::Index>(inner_p.size()), 3);

@@ -24,17 +24,6 @@ namespace aneu::sim {
 
 namespace {
 
-/// Whether p lies within `margin` of the jaws' wedge at opening θ: along the jaws, across their width, and
-/// between (or on) the blades.
-bool near_wedge(const fem::ClipBlades& b, double theta, const Eigen::Vector3d& p, double margin) {
-    const Eigen::Vector3d rel = p - b.hinge, w = b.axis.cross(b.up);
-    const double r = rel.dot(b.axis);
-    if (r < -margin || r > b.length_mm + margin) return false;
-    if (std::abs(rel.dot(w)) > 0.5 * b.width_mm + margin) return false;
-    const double rr = std::clamp(r, 0.0, b.length_mm);
-    return std::abs(rel.dot(b.up)) <= rr * std::tan(0.5 * theta) + 0.5 * b.closed_gap_mm + b.thickness_mm + margin;
-}
-
 /// How many of the nodes (at X) lie inside a blade's solid, or within `gap` in front of its face, at opening θ.
 int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, double gap) {
     int n = 0;
@@ -107,7 +96,7 @@ void Simulator::Impl::make_patches(Frame& fr) {
         bool near = false, uncovered = false;
         for (int v : cand) {
             const Eigen::Vector3d p = x_grid.row(v).transpose();
-            if (!near_wedge(b, theta, p, reach)) continue;
+            if (!b.near_wedge(theta, p, reach)) continue;
             near = true;
             if (have >= 0 && patches[static_cast<size_t>(have)].pm->local(sf.node[v]) < 0) uncovered = true;
         }
@@ -125,7 +114,7 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     std::vector<int> tets;
     for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
         for (int k = 0; k < 4; ++k)
-            if (near_wedge(blades, theta, vol.nodes.row(vol.tets(t, k)).transpose(), scene.patch.radius_mm)) {
+            if (blades.near_wedge(theta, vol.nodes.row(vol.tets(t, k)).transpose(), scene.patch.radius_mm)) {
                 tets.push_back(static_cast<int>(t));
                 break;
             }

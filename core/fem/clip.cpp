@@ -44,6 +44,15 @@ void ClipBlades::frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d&
     w = axis.cross(up);
 }
 
+bool ClipBlades::near_wedge(double theta, const Eigen::Vector3d& p, double margin) const {
+    const Eigen::Vector3d rel = p - hinge, w = axis.cross(up);
+    const double r = rel.dot(axis);
+    if (r < -margin || r > length_mm + margin) return false;
+    if (std::abs(rel.dot(w)) > 0.5 * width_mm + margin) return false;
+    const double rr = std::clamp(r, 0.0, length_mm);
+    return std::abs(rel.dot(up)) <= rr * std::tan(0.5 * theta) + 0.5 * closed_gap_mm + thickness_mm + margin;
+}
+
 ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std::vector<int>& candidates, const Eigen::VectorXd& v0,
                    const ClipBlades& blades, const ClipSpring& spring, const ClipContactParams& p, const std::vector<BladeGrip>* grips)
     : m_body(body), m_X(X), m_nodes(candidates), m_blades(blades), m_spring(spring), m_p(p) {

@@ -22,6 +22,7 @@
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/contact.hpp"
+#include "merged_pattern.hpp"
 
 namespace aneu::fem {
 
@@ -35,38 +36,6 @@ struct Linearisation::Impl {
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
 };
 
-namespace {
-
-/// The free block's upper triangle of a row-major tangent, from the entries right of the diagonal of each row.
-Eigen::SparseMatrix<double> free_upper(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const std::vector<int>& fi, Eigen::Index m) {
-    std::vector<std::int64_t> next(static_cast<size_t>(m) + 1, 0);
-    for (Eigen::Index r = 0; r < K.rows(); ++r) {
-        const int a = fi[static_cast<size_t>(r)];
-        if (a < 0) continue;
-        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
-            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
-            if (b >= a) ++next[static_cast<size_t>(b) + 1];
-        }
-    }
-    for (Eigen::Index b = 0; b < m; ++b) next[static_cast<size_t>(b) + 1] += next[static_cast<size_t>(b)];
-    Eigen::SparseMatrix<double> U(m, m);
-    U.resizeNonZeros(static_cast<Eigen::Index>(next.back()));
-    for (Eigen::Index b = 0; b <= m; ++b) U.outerIndexPtr()[b] = static_cast<int>(next[static_cast<size_t>(b)]);
-    for (Eigen::Index r = 0; r < K.rows(); ++r) {
-        const int a = fi[static_cast<size_t>(r)];
-        if (a < 0) continue;
-        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
-            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
-            if (b < a) continue;
-            const std::int64_t pos = next[static_cast<size_t>(b)]++;
-            U.innerIndexPtr()[pos] = a;
-            U.valuePtr()[pos] = K.valuePtr()[p];
-        }
-    }
-    return U;
-}
-
-}  // namespace
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                              const std::vector<int>& candidates)
@@ -96,14 +65,14 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     m->r0 = Eigen::VectorXd::Zero(mf);
     for (Eigen::Index i = 0; i < n; ++i)
         if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->r0[a] = -g[i];
-    Eigen::SparseMatrix<double> U = free_upper(body.tangent(u0), m->free_index, mf);
+    Eigen::SparseMatrix<double> U = detail::free_upper(body.tangent(u0), m->free_index, mf);
     tangent_s = sw.lap();
     m->llt.cholmod().print = 0;
     if (mf > 0) {
         m->llt.compute(U);
         if (m->llt.info() != Eigen::Success) {  // buckling: the element tangents projected onto PSD ones
             sw.lap();
-            U = free_upper(body.tangent(u0, true), m->free_index, mf);
+            U = detail::free_upper(body.tangent(u0, true), m->free_index, mf);
             tangent_s += sw.lap();
             m->llt.compute(U);
             if (m->llt.info() != Eigen::Success)
@@ -367,9 +336,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         }
         return v;
     };
-    int sweep = 0;
-    double viol = violation();
-    while (sweep < opt.max_sweeps && viol > opt.tolerance_mm) {
+    auto sweep_once = [&] {  // one projected Gauss–Seidel sweep
         for (Eigen::Index i = 0; i < mz; ++i) {
             if (!(A(i, i) > 0)) continue;
             const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
@@ -378,8 +345,13 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 z[i] = zi;
             }
         }
+        return violation();
+    };
+    int sweep = 0;
+    double viol = violation();
+    while (sweep < opt.max_sweeps && viol > opt.tolerance_mm) {
+        viol = sweep_once();
         ++sweep;
-        viol = violation();
     }
     out.sweeps = sweep;
     // The sweeps converge slowly where θ couples every row (a released clip); finish by block principal pivoting
@@ -428,16 +400,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // Pivoting that cycled or stalled (redundant rows: a vertex pressed on two faces of an edge): more sweeps from
     // the best so far, until the gaps are off by no more than accept_mm.
     for (int extra = 0; viol > opt.accept_mm && extra < 100; ++extra) {
-        for (Eigen::Index i = 0; i < mz; ++i) {
-            if (!(A(i, i) > 0)) continue;
-            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
-            if (dz != 0) {
-                w.noalias() += dz * A.col(i);
-                z[i] = zi;
-            }
-        }
+        viol = sweep_once();
         ++out.sweeps;
-        viol = violation();
     }
     out.complementarity_mm = viol;
 

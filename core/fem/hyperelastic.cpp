@@ -16,6 +16,7 @@
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/fem/element.hpp"
+#include "merged_pattern.hpp"
 
 namespace aneu::fem {
 
@@ -358,33 +359,11 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         // Kff's upper triangle from the rows' entries right of the diagonal (as they are assembled; the tangent's
         // two triangles need not agree to the last bit), scattered into columns: a count, then a fill row by row
         // (ascending rows: each column's row indices come out sorted). Two linear passes, no sort.
-        to_ff.assign(static_cast<size_t>(P.nonZeros()), -1);
+        Kff = detail::free_upper(P, free_index, m, &to_ff);
         diag_pos.assign(static_cast<size_t>(m), 0);
-        std::vector<std::int64_t> next(static_cast<size_t>(m) + 1, 0);
-        for (Eigen::Index r = 0; r < n; ++r) {
-            const int a = free_index[static_cast<size_t>(r)];
-            if (a < 0) continue;
-            for (std::int64_t p = P.outerIndexPtr()[r]; p < P.outerIndexPtr()[r + 1]; ++p) {
-                const int b = free_index[static_cast<size_t>(P.innerIndexPtr()[p])];
-                if (b >= a) ++next[static_cast<size_t>(b) + 1];
-            }
-        }
-        for (Eigen::Index b = 0; b < m; ++b) next[static_cast<size_t>(b) + 1] += next[static_cast<size_t>(b)];
-        Kff.resize(m, m);
-        Kff.resizeNonZeros(static_cast<Eigen::Index>(next.back()));
-        for (Eigen::Index b = 0; b <= m; ++b) Kff.outerIndexPtr()[b] = static_cast<int>(next[static_cast<size_t>(b)]);
-        for (Eigen::Index r = 0; r < n; ++r) {
-            const int a = free_index[static_cast<size_t>(r)];
-            if (a < 0) continue;
-            for (std::int64_t p = P.outerIndexPtr()[r]; p < P.outerIndexPtr()[r + 1]; ++p) {
-                const int b = free_index[static_cast<size_t>(P.innerIndexPtr()[p])];
-                if (b < a) continue;
-                const std::int64_t pos = next[static_cast<size_t>(b)]++;
-                Kff.innerIndexPtr()[pos] = a;
-                Kff.valuePtr()[pos] = 1.0;
-                to_ff[static_cast<size_t>(p)] = pos;
-                if (a == b) diag_pos[static_cast<size_t>(a)] = pos;
-            }
+        for (Eigen::Index b = 0; b < m; ++b) {  // a column's rows ascend to its diagonal
+            const std::int64_t last = static_cast<std::int64_t>(Kff.outerIndexPtr()[b + 1]) - 1;
+            if (last >= Kff.outerIndexPtr()[b] && Kff.innerIndexPtr()[last] == b) diag_pos[static_cast<size_t>(b)] = last;
         }
         if (m > 0) llt.analyzePattern(Kff);
         analysed = true;

@@ -13,6 +13,41 @@
 
 namespace aneu::fem::detail {
 
+/// The free block's upper triangle (CSC, rows sorted) of a row-major symmetric matrix K, from the entries on and right
+/// of the diagonal of each row: fi maps a DOF to its free index (−1: fixed), m free DOFs. Two linear passes (a count,
+/// then a fill row by row), no sort. where (non-null): for each stored entry of K, its index in the result's values
+/// (−1: not in the free upper block).
+inline Eigen::SparseMatrix<double> free_upper(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const std::vector<int>& fi, Eigen::Index m,
+                                              std::vector<std::int64_t>* where = nullptr) {
+    std::vector<std::int64_t> next(static_cast<size_t>(m) + 1, 0);
+    for (Eigen::Index r = 0; r < K.rows(); ++r) {
+        const int a = fi[static_cast<size_t>(r)];
+        if (a < 0) continue;
+        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
+            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
+            if (b >= a) ++next[static_cast<size_t>(b) + 1];
+        }
+    }
+    for (Eigen::Index b = 0; b < m; ++b) next[static_cast<size_t>(b) + 1] += next[static_cast<size_t>(b)];
+    Eigen::SparseMatrix<double> U(m, m);
+    U.resizeNonZeros(static_cast<Eigen::Index>(next.back()));
+    for (Eigen::Index b = 0; b <= m; ++b) U.outerIndexPtr()[b] = static_cast<int>(next[static_cast<size_t>(b)]);
+    if (where) where->assign(static_cast<size_t>(K.nonZeros()), -1);
+    for (Eigen::Index r = 0; r < K.rows(); ++r) {
+        const int a = fi[static_cast<size_t>(r)];
+        if (a < 0) continue;
+        for (std::int64_t p = K.outerIndexPtr()[r]; p < K.outerIndexPtr()[r + 1]; ++p) {
+            const int b = fi[static_cast<size_t>(K.innerIndexPtr()[p])];
+            if (b < a) continue;
+            const std::int64_t pos = next[static_cast<size_t>(b)]++;
+            U.innerIndexPtr()[pos] = a;
+            U.valuePtr()[pos] = K.valuePtr()[p];
+            if (where) (*where)[static_cast<size_t>(p)] = pos;
+        }
+    }
+    return U;
+}
+
 struct MergedPattern {
     Eigen::SparseMatrix<double, Eigen::RowMajor> pattern;  ///< the body's entries and a dense block per group
     std::vector<std::int64_t> body_to_pattern;             ///< where each of the body's stored entries lies in it

@@ -20,39 +20,13 @@
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/fem/hyperelastic.hpp"
 #include "aneu/fem/structured_mesh.hpp"
+#include "clip_test_util.hpp"
 
 using namespace aneu;
+using aneu::test::Block;
+using aneu::test::test_spring;
 
 namespace {
-
-/// Two nodes at (A, ±H, 0), each tied to a fixed ground node at the same place by an isotropic spring K.
-struct Block {
-    static constexpr double A = 4.0, H = 0.5, K = 20.0;
-    Eigen::MatrixX3d X{4, 3};
-    Eigen::VectorXi fixed{6};
-    std::unique_ptr<fem::LinearBody> body;
-    Block() {
-        X << A, H, 0, A, -H, 0, A, H, 0, A, -H, 0;
-        for (int k = 0; k < 6; ++k) fixed[k] = k;
-        std::vector<Eigen::Triplet<double>> t;
-        for (int pair = 0; pair < 2; ++pair)
-            for (int ax = 0; ax < 3; ++ax) {
-                const int g = 3 * pair + ax, b = 3 * (pair + 2) + ax;
-                t.emplace_back(g, g, K);
-                t.emplace_back(b, b, K);
-                t.emplace_back(g, b, -K);
-                t.emplace_back(b, g, -K);
-            }
-        Eigen::SparseMatrix<double, Eigen::RowMajor> Km(12, 12);
-        Km.setFromTriplets(t.begin(), t.end());
-        body = std::make_unique<fem::LinearBody>(Km);
-    }
-};
-
-fem::ClipSpring test_spring() {
-    const double r = 7.0 * 2.0 / 3.0;
-    return fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, 0.0), 1.5, 40 * DEG, 2.5);
-}
 
 /// Hard contact on the block: at opening θ the node on blade +1 starts d₀ in front of its face; pressed (d₀ < 0) it
 /// moves −d₀ along the face's normal against its ground spring, F = −K d₀, at r from the hinge.
@@ -146,20 +120,11 @@ TEST(CompliantClip, ReleasedOnABlockTheFramesStopAtTheAnalyticAngle) {
 
 TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalance) {
     // ClipBody's test block: 2 × 1 × 1 mm, 1 MPa, 3 … 5 mm from the hinge, its far face held; blades 2 mm wide.
-    const fem::StructuredMesh m = fem::box_mesh(2.0, 1.0, 1.0, 8, 4, 4);
-    Eigen::MatrixX3d X = m.V;
-    X.col(0).array() += 3.0;
-    X.col(1).array() -= 0.5;
-    X.col(2).array() -= 0.5;
-    const Eigen::VectorXi region = Eigen::VectorXi::Zero(m.T.rows());
-    const fem::NeoHookeanSolid solid(X, m.T, region, {Material{"wall", 1.0, 0.45}});
-    std::vector<int> fd, surface;
-    for (Eigen::Index i = 0; i < X.rows(); ++i) {
-        if (X(i, 0) > 5.0 - 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        if (std::abs(std::abs(X(i, 1)) - 0.5) < 1e-9) surface.push_back(static_cast<int>(i));
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    const aneu::test::HeldBlock hb;
+    const Eigen::MatrixX3d& X = hb.X;
+    const fem::NeoHookeanSolid& solid = *hb.solid;
+    const std::vector<int>& surface = hb.surface;
+    const Eigen::VectorXi& fixed = hb.fixed;
     fem::ClipBlades blades;
     blades.width_mm = 2.0;
     const fem::ClipSpring spring = test_spring();

@@ -63,6 +63,9 @@ struct ClipBlades {
     /// Blade s (±1) at opening θ: its direction t, inner-face normal n (towards the other blade) and the
     /// across-blade direction w.
     void frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d& n, Eigen::Vector3d& w) const;
+    /// Whether p lies within `margin` of the jaws' wedge at opening θ: along the jaws, across their width, and
+    /// between (or on) the blades (the simulator's patch and the tissue a closing clip can reach).
+    bool near_wedge(double theta, const Eigen::Vector3d& p, double margin) const;
 };
 
 struct ClipContactParams {
