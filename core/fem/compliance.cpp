@@ -6,10 +6,8 @@
 
 #include <algorithm>
 #include <array>
-#include <iterator>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <string>
