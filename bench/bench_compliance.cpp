@@ -55,14 +55,14 @@ std::vector<double> parse_list(const std::string& s) {
     return v;
 }
 
-double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, const Eigen::VectorXd* u) {
+/// The smallest distance of the nodes from either blade at opening θ, of those not behind it.
+double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes) {
     double d = 1e9;
-    for (int a : nodes) {
-        Eigen::Vector3d x = X.row(a).transpose();
-        if (u) x += u->segment<3>(3 * a);
-        for (int s : {1, -1})
-            if (fem::blade_distance(b, s, theta, x) > -0.02) d = std::min(d, fem::blade_distance(b, s, theta, x));
-    }
+    for (int a : nodes)
+        for (int s : {1, -1}) {
+            const double ds = fem::blade_distance(b, s, theta, X.row(a).transpose());
+            if (ds > -0.02) d = std::min(d, ds);
+        }
     return d;
 }
 
@@ -141,7 +141,7 @@ int main(int argc, char** argv) {
     std::vector<int> outer_list(outer.data(), outer.data() + outer.size());
     // Where the blades first come within 1 mm of the outer wall (the simulator's trigger), then touch it.
     double theta_build = open;
-    while (theta_build > 0 && min_distance(blades, theta_build, vol.nodes, outer_list, nullptr) > 1.0) theta_build -= 0.25 * DEG;
+    while (theta_build > 0 && min_distance(blades, theta_build, vol.nodes, outer_list) > 1.0) theta_build -= 0.25 * DEG;
     std::vector<int> tets;
     for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
         for (int k = 0; k < 4; ++k)
@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
     for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = X.row(cand[k]);
     std::vector<int> blade_nodes(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(blade_cand));
     double theta_touch = theta_build;
-    while (theta_touch > 0 && min_distance(blades, theta_touch, X, blade_nodes, nullptr) > 0) theta_touch -= 0.01 * DEG;
+    while (theta_touch > 0 && min_distance(blades, theta_touch, X, blade_nodes) > 0) theta_touch -= 0.01 * DEG;
     const double step = 48.0 * DEG / (0.5 * 250.0);
     std::vector<double> frames;
     for (double th = theta_touch; th > end_deg * DEG; th -= step) frames.push_back(th);

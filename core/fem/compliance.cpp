@@ -511,12 +511,6 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     // What is behind a face where the frame starts stays out of the count (a crease, an earlier crossing): the last
     // frame's end, when it ended here.
     const std::vector<std::pair<int, int>> before = ws.ended_at.size() == u0.size() && ws.ended_at == u0 ? ws.ended_behind : crossings(u0);
-    std::vector<std::vector<int>> nb(static_cast<size_t>(nc));
-    for (Eigen::Index f = 0; f < faces.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
-            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
-        }
     CompliantWalls walls;
     walls.faces = faces;
     if (repeats) *repeats = 0;
@@ -555,19 +549,9 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
             return f;
         }
         if (repeats) ++*repeats;
-        // Each crossing vertex and its ring, paired with every face within reach of its path (as far as it and the
-        // face's corners moved, and the walls' reach beyond) in the frame solved again, and in the frames after.
-        double reach = cp.search_mm;
-        for (const auto& [v, fc] : left) {
-            double moved = (f.candidate_u.segment<3>(3 * v) - u0.segment<3>(3 * v)).norm();
-            for (int k = 0; k < 3; ++k) moved += (f.candidate_u.segment<3>(3 * faces(fc, k)) - u0.segment<3>(3 * faces(fc, k))).norm() / 3.0;
-            reach = std::max(reach, 2.0 * moved + cp.search_mm);
-            cp.close_vertices.push_back(v);
-            for (int w : nb[static_cast<size_t>(v)]) cp.close_vertices.push_back(w);
-        }
-        std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
-        cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
-        cp.close_search_mm = std::max(cp.close_search_mm, reach);
+        // The crossing vertices and their rings paired with every face near their path, in the frame solved again
+        // and in the frames after.
+        pair_crossings_closely(cp, faces, u0, f.candidate_u, left);
         grew = true;
     }
 }

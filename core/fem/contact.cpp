@@ -369,12 +369,6 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
     std::vector<std::pair<int, int>> before;
     for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth)) before.emplace_back(q.v, q.f);
     std::sort(before.begin(), before.end());
-    std::vector<std::vector<int>> nb(static_cast<size_t>(X.rows()));
-    for (Eigen::Index f = 0; f < faces.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            nb[static_cast<size_t>(faces(f, k))].push_back(faces(f, (k + 1) % 3));
-            nb[static_cast<size_t>(faces(f, (k + 1) % 3))].push_back(faces(f, k));
-        }
     CrossingFreeSolve out;
     for (int round = 0;; ++round) {
         const ContactBody contact(body, X, faces, u0.head(n), cp);
@@ -389,20 +383,31 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
         }
         if (out.left.empty() || round == max_rounds) return out;
         ++out.rounds;
-        // Each crossing vertex and its ring, paired with every face within reach of its path: as far as it and
-        // the face's corners moved, and the wall's reach beyond.
-        double reach = cp.search_mm;
-        for (const SurfaceCrossing& q : out.left) {
-            double moved = (out.result.u.segment<3>(3 * q.v) - u0.segment<3>(3 * q.v)).norm();
-            for (int k = 0; k < 3; ++k) moved += (out.result.u.segment<3>(3 * faces(q.f, k)) - u0.segment<3>(3 * faces(q.f, k))).norm() / 3.0;
-            reach = std::max(reach, 2.0 * moved + cp.search_mm);
-            cp.close_vertices.push_back(q.v);
-            for (int w : nb[static_cast<size_t>(q.v)]) cp.close_vertices.push_back(w);
-        }
-        std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
-        cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
-        cp.close_search_mm = std::max(cp.close_search_mm, reach);
+        std::vector<std::pair<int, int>> left;
+        for (const SurfaceCrossing& q : out.left) left.emplace_back(q.v, q.f);
+        pair_crossings_closely(cp, faces, u0.head(n), out.result.u.head(n), left);
     }
+}
+
+void pair_crossings_closely(ContactParams& cp, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0, const Eigen::VectorXd& u1,
+                            const std::vector<std::pair<int, int>>& crossings) {
+    if (crossings.empty()) return;
+    // Each crossing vertex and its ring, paired with every face within reach of its path: as far as it and the
+    // face's corners moved, and the wall's reach beyond.
+    auto moved_of = [&](int node) { return (u1.segment<3>(3 * node) - u0.segment<3>(3 * node)).norm(); };
+    double reach = cp.search_mm;
+    for (const auto& [v, f] : crossings) {
+        double moved = moved_of(v);
+        for (int k = 0; k < 3; ++k) moved += moved_of(faces(f, k)) / 3.0;
+        reach = std::max(reach, 2.0 * moved + cp.search_mm);
+        cp.close_vertices.push_back(v);
+        for (Eigen::Index g = 0; g < faces.rows(); ++g)  // its one ring: the corners of the faces round it
+            if (faces(g, 0) == v || faces(g, 1) == v || faces(g, 2) == v)
+                for (int k = 0; k < 3; ++k) cp.close_vertices.push_back(faces(g, k));
+    }
+    std::sort(cp.close_vertices.begin(), cp.close_vertices.end());
+    cp.close_vertices.erase(std::unique(cp.close_vertices.begin(), cp.close_vertices.end()), cp.close_vertices.end());
+    cp.close_search_mm = std::max(cp.close_search_mm, reach);
 }
 
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,

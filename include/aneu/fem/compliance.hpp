@@ -112,7 +112,9 @@ struct CompliantFrame {
     int wall_rows = 0;                 ///< wall pairs within reach (constraints)
     int wall_contacts = 0;             ///< wall pairs pressed together
     double wall_force_n = 0;           ///< Σ their normal forces [N]
-    double wall_min_distance_mm = 0;   ///< the smallest signed distance among the pairs where the frame started (inf: none)
+    /// the smallest distance from its face's plane of a paired vertex lying over its face, where the last pass
+    /// linearised the gaps (inf: none)
+    double wall_min_distance_mm = 0;
     int wall_crossings = 0;            ///< solve_compliant_clip_walls: wall vertices newly behind a face after its last solve
     int sweeps = 0;
     int passes = 0;                    ///< geometry passes (CompliantOptions::geometry_passes)

@@ -133,6 +133,13 @@ struct SurfaceCrossing {
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
                                                double depth);
 
+/// After a solve from u0 to u1 left the given (vertex, face) crossings: each crossing vertex and its one ring become
+/// close vertices of cp (paired with every face within reach whatever the normals or rings), the reach being twice
+/// how far the vertex and the face moved plus the search distance. The repeat of solve_without_crossings and of the
+/// compliant wall frames.
+void pair_crossings_closely(ContactParams& cp, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0, const Eigen::VectorXd& u1,
+                            const std::vector<std::pair<int, int>>& crossings);
+
 /// A solve with wall contact that no vertex passes through. `solve` is run with a ContactBody made at `u0` (the
 /// body's DOFs; the solve's own state may append more, e.g. a clip's opening). Where its end state has a vertex
 /// behind a face it was not behind at u0 (surface_crossings, `depth`), the vertex went through a face its pairs
