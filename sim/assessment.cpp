@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
+#include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -170,6 +172,226 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
     return out;
 }
 
+namespace {
+
+/// The deformed lumen's geometry for ball queries: vertex normals, each vertex's faces, a grid of face centroids.
+class LumenBalls {
+public:
+    LumenBalls(const SimLumen& lumen, const Eigen::MatrixX3d& y) : m_F(lumen.F), m_y(y), m_wall(lumen.wall_mm) {
+        const Eigen::Index L = y.rows(), NF = m_F.rows();
+        m_vn = Eigen::MatrixX3d::Zero(L, 3);
+        m_faces_of.resize(static_cast<size_t>(L));
+        m_C.resize(NF, 3);
+        for (Eigen::Index f = 0; f < NF; ++f) {
+            const Eigen::Vector3d a = y.row(m_F(f, 0)), b = y.row(m_F(f, 1)), c = y.row(m_F(f, 2));
+            const Eigen::Vector3d n = (b - a).cross(c - a);  // area weighted
+            m_C.row(f) = ((a + b + c) / 3.0).transpose();
+            for (int k = 0; k < 3; ++k) {
+                m_vn.row(m_F(f, k)) += n.transpose();
+                m_faces_of[static_cast<size_t>(m_F(f, k))].push_back(static_cast<int>(f));
+                m_reach = std::max(m_reach, (y.row(m_F(f, k)) - m_C.row(f)).norm());
+            }
+        }
+        for (Eigen::Index v = 0; v < L; ++v) {
+            const double len = m_vn.row(v).norm();
+            if (len > 0) m_vn.row(v) /= len;
+        }
+        m_grid.build(m_C, std::max(0.25, 2 * m_reach));
+    }
+
+    const Eigen::MatrixX3d& centroids() const { return m_C; }
+
+    /// The diameter of the largest ball inside the lumen touching the wall at the point of `face` with weights w,
+    /// at most cap. Each constraint alone allows radii [0, r_k] (a triangle's or point's distance from the centre
+    /// p + r d, less r, does not grow with r: the distance is 1-Lipschitz), so the radius is the least r_k; a
+    /// constraint farther from p than twice the radius found so far cannot lower it.
+    double width(int face, const Eigen::Vector3d& w, double cap) {
+        Eigen::Vector3d p = Eigen::Vector3d::Zero(), nrm = Eigen::Vector3d::Zero();
+        for (int k = 0; k < 3; ++k) {
+            p += w[k] * m_y.row(m_F(face, k)).transpose();
+            nrm += w[k] * m_vn.row(m_F(face, k)).transpose();
+        }
+        if (!(nrm.norm() > 0)) {
+            const Eigen::Vector3d a = m_y.row(m_F(face, 0)), b = m_y.row(m_F(face, 1)), c = m_y.row(m_F(face, 2));
+            nrm = (b - a).cross(c - a);
+            if (!(nrm.norm() > 0)) return 0.0;  // a degenerate face: no width to speak of
+        }
+        const Eigen::Vector3d d = -nrm.normalized();  // into the lumen
+        // The two rings round the face: their vertices (not the face's own) are point constraints.
+        m_ring.clear();
+        for (int k = 0; k < 3; ++k)
+            for (int f : m_faces_of[static_cast<size_t>(m_F(face, k))])
+                for (int j = 0; j < 3; ++j)
+                    for (int g : m_faces_of[static_cast<size_t>(m_F(f, j))]) m_ring.push_back(g);
+        std::sort(m_ring.begin(), m_ring.end());
+        m_ring.erase(std::unique(m_ring.begin(), m_ring.end()), m_ring.end());
+        double r = 0.5 * cap;
+        for (int g : m_ring)
+            for (int j = 0; j < 3; ++j) {
+                const int v = m_F(g, j);
+                if (v == m_F(face, 0) || v == m_F(face, 1) || v == m_F(face, 2)) continue;
+                const Eigen::Vector3d q = m_y.row(v).transpose() - p;
+                const double h = q.dot(d);
+                if (h > 0) r = std::min(r, q.squaredNorm() / (2 * h));
+            }
+        // Along the inward normal: an opposite wall (facing back at the point: normals more than 120° apart)
+        // crossed at t bounds the diameter by t; one at the point or behind it within the point's own wall means
+        // the walls touch or pass through each other (a ball beside a wall that lies on the point is "clear" of
+        // it, so this is where touching walls are seen).
+        double behind = 0;
+        for (int k = 0; k < 3; ++k)
+            if (m_F(face, k) < m_wall.size()) behind += w[k] * m_wall[m_F(face, k)];
+        behind = std::max(behind, 1e-9);
+        const Eigen::Vector3d box = Eigen::Vector3d::Constant(2 * r + behind + m_reach);
+        m_grid.query(Aabb{p - box, p + box}, m_cand);
+        for (int g : m_cand) {
+            if (std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
+            const Eigen::Vector3d a = m_y.row(m_F(g, 0)), b = m_y.row(m_F(g, 1)), c = m_y.row(m_F(g, 2));
+            const Eigen::Vector3d e1 = b - a, e2 = c - a, fn = e1.cross(e2);
+            if (!(fn.norm() > 0) || fn.normalized().dot(d) < 0.5) continue;
+            const Eigen::Vector3d pv = d.cross(e2), tv = p - a, qv = tv.cross(e1);
+            const double det = e1.dot(pv);
+            if (std::abs(det) < 1e-14) continue;
+            const double u = tv.dot(pv) / det, v = d.dot(qv) / det;
+            if (u < 0 || u > 1 || v < 0 || u + v > 1) continue;
+            const double t = e2.dot(qv) / det;
+            if (t < -behind || t > 2 * r) continue;
+            if (t <= 0) return 0.0;
+            r = 0.5 * t;
+        }
+        for (int g : m_cand) {
+            if (std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
+            const Eigen::Vector3d a = m_y.row(m_F(g, 0)), b = m_y.row(m_F(g, 1)), c = m_y.row(m_F(g, 2));
+            if ((m_C.row(g).transpose() - (p + r * d)).norm() >= r + m_reach) continue;  // clear of the ball as it stands
+            auto clear = [&](double s) { return (closest_point_on_triangle(p + s * d, a, b, c) - (p + s * d)).norm() >= s; };
+            if (clear(r)) continue;
+            double lo = 0, hi = r;
+            for (int it = 0; it < 40 && hi - lo > 1e-7; ++it) {
+                const double mid = 0.5 * (lo + hi);
+                (clear(mid) ? lo : hi) = mid;
+            }
+            r = lo;
+        }
+        return 2 * r;
+    }
+
+private:
+    const Eigen::MatrixX3i& m_F;
+    const Eigen::MatrixX3d& m_y;
+    const Eigen::VectorXd& m_wall;
+    Eigen::MatrixX3d m_vn, m_C;
+    std::vector<std::vector<int>> m_faces_of;
+    double m_reach = 0;
+    PointGrid m_grid;
+    std::vector<int> m_ring, m_cand;
+};
+
+double point_segment_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    const Eigen::Vector3d ab = b - a;
+    const double len2 = ab.squaredNorm();
+    const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+    return (a + t * ab - p).norm();
+}
+
+}  // namespace
+
+double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm) {
+    LumenBalls balls(lumen, y);
+    return balls.width(face, w, cap_mm);
+}
+
+NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm, double clear_mm, double measure_mm) {
+    NeckChannel out;
+    if (lumen.neck_loops.empty() || sac_region < 0) return out;
+    const Eigen::MatrixX3i& F = lumen.F;
+    const Eigen::Index NF = F.rows();
+    // The neck line at rest, as segments.
+    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg;
+    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
+        const std::vector<NeckPointOnLumen> line = l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
+        std::vector<Eigen::Vector3d> pts;
+        for (const NeckPointOnLumen& q : line) {
+            Eigen::Vector3d x = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 3; ++k) x += q.weights[k] * lumen.X.row(F(q.face, k)).transpose();
+            pts.push_back(x);
+        }
+        for (size_t k = 0; k < pts.size(); ++k) seg.emplace_back(pts[k], pts[(k + 1) % pts.size()]);
+    }
+    if (seg.empty()) return out;
+    LumenBalls balls(lumen, y);
+    std::vector<double> width(static_cast<size_t>(NF), cap_mm);
+    std::vector<char> sac(static_cast<size_t>(NF), 0), parent(static_cast<size_t>(NF), 0);
+    bool any_sac = false, any_parent = false;
+    const Eigen::Vector3d third = Eigen::Vector3d::Constant(1.0 / 3.0);
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        const Eigen::Vector3d c = (lumen.X.row(F(f, 0)) + lumen.X.row(F(f, 1)) + lumen.X.row(F(f, 2))).transpose() / 3.0;
+        double dist = std::numeric_limits<double>::infinity();
+        for (const auto& [a, b] : seg) dist = std::min(dist, point_segment_distance(c, a, b));
+        if (dist >= clear_mm) {
+            (lumen.face_region[f] == sac_region ? sac : parent)[static_cast<size_t>(f)] = 1;
+            (lumen.face_region[f] == sac_region ? any_sac : any_parent) = true;
+        }
+        if (dist <= measure_mm) {
+            width[static_cast<size_t>(f)] = balls.width(static_cast<int>(f), third, cap_mm);
+            ++out.faces_measured;
+        }
+    }
+    if (!any_sac || !any_parent) return out;
+    // Faces joined across their edges, widest first (union–find); the width at which a sac face and a parent face
+    // first share a component is the widest channel between them (a maximin path).
+    std::vector<std::array<int, 3>> edges;  // (low vertex, high vertex, face)
+    for (Eigen::Index f = 0; f < NF; ++f)
+        for (int k = 0; k < 3; ++k) {
+            const int a = F(f, k), b = F(f, (k + 1) % 3);
+            edges.push_back({std::min(a, b), std::max(a, b), static_cast<int>(f)});
+        }
+    std::sort(edges.begin(), edges.end());
+    std::vector<std::vector<int>> nbr(static_cast<size_t>(NF));
+    for (size_t i = 0; i < edges.size();) {
+        size_t j = i;
+        while (j < edges.size() && edges[j][0] == edges[i][0] && edges[j][1] == edges[i][1]) ++j;
+        for (size_t p = i; p < j; ++p)
+            for (size_t q = i; q < j; ++q)
+                if (p != q) nbr[static_cast<size_t>(edges[p][2])].push_back(edges[q][2]);
+        i = j;
+    }
+    std::vector<int> order(static_cast<size_t>(NF));
+    for (int f = 0; f < NF; ++f) order[static_cast<size_t>(f)] = f;
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return width[static_cast<size_t>(a)] > width[static_cast<size_t>(b)]; });
+    std::vector<int> up(static_cast<size_t>(NF), -1);
+    std::vector<char> has_sac(static_cast<size_t>(NF), 0), has_parent(static_cast<size_t>(NF), 0);
+    auto find = [&](int x) {
+        while (up[static_cast<size_t>(x)] != x) {
+            up[static_cast<size_t>(x)] = up[static_cast<size_t>(up[static_cast<size_t>(x)])];
+            x = up[static_cast<size_t>(x)];
+        }
+        return x;
+    };
+    for (int f : order) {
+        const size_t fs = static_cast<size_t>(f);
+        up[fs] = f;
+        has_sac[fs] = sac[fs];
+        has_parent[fs] = parent[fs];
+        for (int g : nbr[fs]) {
+            if (up[static_cast<size_t>(g)] < 0) continue;
+            const int a = find(f), b = find(g);
+            if (a == b) continue;
+            up[static_cast<size_t>(b)] = a;
+            has_sac[static_cast<size_t>(a)] |= has_sac[static_cast<size_t>(b)];
+            has_parent[static_cast<size_t>(a)] |= has_parent[static_cast<size_t>(b)];
+        }
+        const int r = find(f);
+        if (has_sac[static_cast<size_t>(r)] && has_parent[static_cast<size_t>(r)]) {
+            out.width_mm = width[fs];
+            out.at = balls.centroids().row(f).transpose();
+            return out;
+        }
+    }
+    out.width_mm = 0.0;  // separated at every width (a sac and parent on different pieces of lumen)
+    return out;
+}
+
+
 Assessment Simulator::Impl::assess() {
     Assessment out = a;
     out.total_time_s = t_phys;
@@ -203,6 +425,13 @@ Assessment Simulator::Impl::assess() {
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
     out.neck_line.clear();
+    {
+        const auto& names = model.surface.region_names;
+        const auto it = std::find(names.begin(), names.end(), "aneurysm");
+        const NeckChannel ch = neck_channel(lumen, y, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
+        out.neck_channel_mm = ch.width_mm;
+        out.neck_channel_at = ch.at;
+    }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
     // Debugging: the deformed lumen as a Wavefront OBJ (neck vertices listed after it as comments).

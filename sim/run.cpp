@@ -493,6 +493,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
+    if (std::isfinite(a.neck_channel_mm)) {
+        j["neck_channel_mm"] = a.neck_channel_mm;  // the widest channel still joining sac and parent (2: wide open)
+        j["neck_channel_at"] = {a.neck_channel_at.x(), a.neck_channel_at.y(), a.neck_channel_at.z()};
+        j["neck_sealed"] = a.neck_channel_mm <= scene.neck_gap_mm;
+    }
     // Where along the neck line it stays open: [x, y, z, gap] per neck vertex in loop order (gap null: no opposite
     // wall within reach).
     j["neck_line"] = nlohmann::json::array();
@@ -607,6 +612,15 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                   scene.velocity_threshold_mm_s, a.velocity_exceedances, 100.0 * a.neck_closed_fraction, a.neck_length_mm,
                   scene.neck_gap_mm, 100.0 * a.neck_between_jaws_fraction);
     o << buf;
+    if (std::isfinite(a.neck_channel_mm)) {
+        if (a.neck_channel_mm <= scene.neck_gap_mm)
+            std::snprintf(buf, sizeof buf, "  sac sealed off the parent  yes (widest channel left %.3f mm)\n", a.neck_channel_mm);
+        else
+            std::snprintf(buf, sizeof buf, "  sac sealed off the parent  no: a channel %s%.3f mm wide, narrowest at (%.2f, %.2f, %.2f)\n",
+                          a.neck_channel_mm >= 2.0 ? "at least " : "", a.neck_channel_mm, a.neck_channel_at.x(), a.neck_channel_at.y(),
+                          a.neck_channel_at.z());
+        o << buf;
+    }
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
     for (const auto& c : a.clip_ends) {
         std::snprintf(buf, sizeof buf, "  clip %-2d %-18s %s, open %.1f deg, grip %.3g N", c.id, c.model.c_str(), c.deposited ? "deposited" : "held",

@@ -160,3 +160,43 @@ TEST(NeckOcclusion, AStaircaseNeckLineIsMeasuredOnTheBorderItFollows) {
     EXPECT_NEAR(neck_occlusion(s, s.X, 0.05, wall).length_mm,
                 2 * (open.points[0][1] - open.points[0][0]).norm(), 1e-9);
 }
+
+// The channel through the neck: the widest lumen joining the sac (faces with z > 1 mm) to the parent (z < −1 mm).
+TEST(NeckChannel, AnOpenTubeIsWideOpenAndItsWidthIsItsDiameter) {
+    const SimLumen s = tube();
+    // A point halfway along the tube, on a face's centroid: the ball touching the wall there is the tube's inscribed
+    // circle, 2 (R − t) (the polygon's, cos(π/96) of it, within the faceting).
+    const int face = 2 * (NZ / 2 * NT + 7);
+    EXPECT_NEAR(lumen_width(s, s.X, face, Eigen::Vector3d::Constant(1.0 / 3.0), 12.0), 2 * R_IN, 0.01);
+    EXPECT_DOUBLE_EQ(lumen_width(s, s.X, face, Eigen::Vector3d::Constant(1.0 / 3.0), 1.0), 1.0);  // capped
+    const NeckChannel ch = neck_channel(s, s.X, 1);
+    EXPECT_DOUBLE_EQ(ch.width_mm, 2.0);  // at least the cap
+    EXPECT_GT(ch.faces_measured, 0);
+    EXPECT_TRUE(std::isnan(neck_channel(s, s.X, -1).width_mm));  // no aneurysm region: nothing to seal
+}
+
+TEST(NeckChannel, APinchAcrossTheNeckSealsItAndASlitLeavesAChannelOfItsGap) {
+    const SimLumen s = tube();
+    // Pressed flat (folds of zero inner radius): sealed.
+    const NeckChannel flat = neck_channel(s, pinched(s, 0.0, 0.0), 1);
+    EXPECT_LE(flat.width_mm, 0.01);
+    // Flattened to a 0.3 mm slit: the folds' inner diameter is the slit's gap too (their mid-surface radius is
+    // (g + t) / 2), so the widest channel is 0.3 mm, through the pinch (|z| ≤ 1.5 mm).
+    const Eigen::MatrixX3d y = pinched(s, 0.0, 0.3);
+    const NeckChannel slit = neck_channel(s, y, 1);
+    EXPECT_NEAR(slit.width_mm, 0.3, 0.02);
+    EXPECT_LE(std::abs(slit.at.z()), 1.5 + 0.2);
+    // The width at a flat side's point and at a fold's apex (θ = 0 is the fold at +x; the flat sides lie round
+    // θ = π/2): both the gap.
+    const int k = NZ / 2 - 1;
+    EXPECT_NEAR(lumen_width(s, y, 2 * (k * NT + NT / 4), Eigen::Vector3d::Constant(1.0 / 3.0), 2.0), 0.3, 0.02);
+    EXPECT_NEAR(lumen_width(s, y, 2 * (k * NT + 0), Eigen::Vector3d(0.5, 0.0, 0.5), 2.0), 0.3, 0.03);
+}
+
+TEST(NeckChannel, APinchBesideTheNeckLeavesItOpen) {
+    // Flat across the sac 5 mm beyond the neck (or the parent 5 mm before it): the sac next to the neck still opens
+    // into the parent through the round neck.
+    const SimLumen s = tube();
+    EXPECT_DOUBLE_EQ(neck_channel(s, pinched(s, 5.0, 0.0), 1).width_mm, 2.0);
+    EXPECT_DOUBLE_EQ(neck_channel(s, pinched(s, -5.0, 0.0), 1).width_mm, 2.0);
+}

@@ -2,6 +2,7 @@
 #pragma once
 /// @file
 /// Measures of a clipping's result on the deformed vessel (sim/assessment.cpp).
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -34,5 +35,31 @@ struct NeckOcclusion {
 /// no length. A clip across the neck that presses the walls together closes nearly all of it; a clip beside the
 /// neck closes none.
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm);
+
+/// Whether the clip seals the sac off the parent, and if not, through how wide a channel blood still gets in.
+struct NeckChannel {
+    /// The widest channel of the deformed lumen joining the sac to the parent [mm]: the largest d such that the
+    /// lumen's faces of width ≥ d connect a sac face to a parent face (both at least `clear_mm` from the neck
+    /// line at rest), the width of a face being the diameter of the largest ball inside the lumen that touches
+    /// the wall at its centroid. At most `cap_mm` (a lumen that wide is open); NaN without a neck.
+    double width_mm = std::numeric_limits<double>::quiet_NaN();
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the channel's narrowest place (a face centroid, deformed)
+    int faces_measured = 0;                        ///< faces whose width was measured (the rest count as `cap_mm`)
+};
+
+/// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
+/// largest ball inside the lumen that touches the wall there (the maximal inscribed sphere of VMTK's centrelines,
+/// here tangent at a wall point: its centre lies along the inward normal interpolated there), at most `cap_mm`.
+/// Across a slit it is the slit's gap, at a fold the fold's inner diameter, in a round tube its diameter. The
+/// faces round the point's face (its two rings) constrain it by their vertices only: the ball does not rest on
+/// the facets' kinks beside the point.
+double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm);
+
+/// The channel through the neck (NeckChannel) on the deformed lumen `y`; `sac_region` is the aneurysm's index in
+/// SimLumen::face_region. Faces farther than `measure_mm` from the neck line at rest are taken as `cap_mm` wide.
+/// Unlike neck_occlusion, it does not ask where the seal lies: walls squeezed beside the jaws that leave the neck's
+/// border open can still seal the sac, and a border closed everywhere can leave a channel round a fold.
+NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm = 2.0, double clear_mm = 1.0,
+                         double measure_mm = 6.0);
 
 }  // namespace aneu::sim

@@ -8,6 +8,7 @@
 #include <optional>
 #include <memory>
 #include <mutex>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -76,6 +77,11 @@ struct Assessment {
     double neck_min_gap_mm = 0.0;             ///< smallest lumen gap across the neck line (negative: walls pass through)
     double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
+    /// The widest channel of the deformed lumen still joining the sac to the parent (neck_channel, assessment.hpp;
+    /// at most 2 mm: wide open; NaN: no neck), and where it is narrowest. The sac is sealed where it is at most
+    /// Scene::neck_gap_mm.
+    double neck_channel_mm = std::numeric_limits<double>::quiet_NaN();
+    Eigen::Vector3d neck_channel_at = Eigen::Vector3d::Zero();
     /// The neck line on the deformed lumen, vertex by vertex: where it stays open after the clipping.
     struct NeckPoint {
         Eigen::Vector3d x = Eigen::Vector3d::Zero();
