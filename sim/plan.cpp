@@ -284,29 +284,47 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                     cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size())});
             }
         }
-    std::stable_sort(cands.begin(), cands.end(), [](const Candidate& a, const Candidate& b) {
+    auto depth_step = [&](const Candidate& k) {
+        return static_cast<int>(std::floor((ways[static_cast<size_t>(k.way)].margin + k.extra) / 0.5 + 1e-9));
+    };
+    std::stable_sort(cands.begin(), cands.end(), [&](const Candidate& a, const Candidate& b) {
         // Coverage in steps of 5 % first: a pose covering 1 % more is not worth a turn or a tilt.
         const int ba = static_cast<int>(std::floor(20 * a.covered + 1e-9)), bb = static_cast<int>(std::floor(20 * b.covered + 1e-9));
         if (ba != bb) return ba > bb;
         if (a.alpha != b.alpha) return a.alpha < b.alpha;
+        // The neck deep in the jaws (the hinge near its near end, in 0.5 mm steps): a hinged clip closes least at
+        // its tips, and a neck held nearer the hinge is both pressed harder by the same spring and left less gap.
+        const int da = depth_step(a), db = depth_step(b);
+        if (da != db) return da < db;
         if (a.extra != b.extra) return a.extra < b.extra;
         if (a.way != b.way) return a.way < b.way;  // smaller yaw and opening first, the freer side first
         if (std::abs(a.covered - b.covered) > 1e-9) return a.covered > b.covered;
         return a.c > b.c;
     });
     // The clip for a candidate: its axis, hinge and the shortest standard blade (3 … 15 mm in 2 mm steps) whose
-    // tip reaches 0.5 mm past the neck's far end.
-    auto pose_of = [&](const Candidate& k, Eigen::Vector3d& axis, Eigen::Vector3d& hinge, double& blade) {
+    // tip passes the far end of the neck as the closing jaws leave it. Flattened, a neck's border of length P lies
+    // along the jaws as a slit P / 2 long about its centre (the sample's 5.2 mm neck, border 13.9 mm: 7 mm), and
+    // its far fold is a wall thickness beyond that: the tip must reach max(far end, P / 4) + wall + 0.5 mm from
+    // the centre. (0.5 mm past the far end at rest left the sample's fold round the tip of a 13 mm clip, an open
+    // channel 0.18 mm wide.) If no standard blade reaches that, the longest that passes the far end at rest by
+    // 0.5 mm, and the scene's header says the tips stop short.
+    const double flat_half = 0.25 * nf.line_mm / std::max<size_t>(1, s.lumen.neck_loops.size());
+    auto pose_of = [&](const Candidate& k, Eigen::Vector3d& axis, Eigen::Vector3d& hinge, double& blade, bool& short_out) {
         const Way& f = ways[static_cast<size_t>(k.way)];
         axis = std::cos(k.alpha) * f.side * f.u - std::sin(k.alpha) * n;
         const double back = f.margin + k.extra - f.near;  // along u, from the neck's centre to below the hinge
         hinge = nf.centre + k.c * n - back * f.side * f.u + back * std::tan(k.alpha) * n;
         blade = 0;
+        short_out = false;
         for (double l = 3; l <= 15; l += 2)
-            if (l * std::cos(k.alpha) >= back + f.far + 0.5) {
+            if (l * std::cos(k.alpha) >= back + std::max(f.far, flat_half) + t_max + 0.5) {
                 blade = l;
-                break;
+                return true;
             }
+        if (15 * std::cos(k.alpha) >= back + f.far + 0.5) {
+            blade = 15;
+            short_out = true;
+        }
         return blade > 0;
     };
     // The first clear one; if none of the best-covering 60000 that a standard blade spans is clear, the one that
@@ -317,10 +335,12 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0, chosen_in_way = 0, chosen_pinched = 0;
     Eigen::Vector3d axis, hinge;
     double blade = 0;
+    bool short_tips = false;
     for (const Candidate& k : cands) {
         Eigen::Vector3d ax, hi;
         double l = 0;
-        if (!pose_of(k, ax, hi, l)) continue;
+        bool short_k = false;
+        if (!pose_of(k, ax, hi, l, short_k)) continue;
         const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
         const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, l);
         const int h = in_way + pinched;
@@ -334,6 +354,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             axis = ax;
             hinge = hi;
             blade = l;
+            short_tips = short_k;
             chosen_in_way = in_way;
             chosen_pinched = pinched;
         }
@@ -412,7 +433,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   "// (over %.0f mm from the neck) lie half the jaws' width or more between them. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM);
-    return std::string(head) + j.dump(2) + "\n";
+    std::string header(head);
+    if (short_tips)
+        header += "// No standard blade reaches past the far fold of the neck flattened between the jaws: the 15 mm clip's tips stop short,\n"
+                  "// expect the far end of the neck to stay open (a longer clip, or a second one, would close it).\n";
+    return header + j.dump(2) + "\n";
 }
 
 }  // namespace aneu::sim
