@@ -336,6 +336,7 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
             ++out.faces_measured;
         }
     }
+    out.face_width_mm = width;
     if (!any_sac || !any_parent) return out;
     // Faces joined across their edges, widest first (union–find); the width at which a sac face and a parent face
     // first share a component is the widest channel between them (a maximin path).
@@ -425,16 +426,18 @@ Assessment Simulator::Impl::assess() {
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
     out.neck_line.clear();
+    NeckChannel channel;
     {
         const auto& names = model.surface.region_names;
         const auto it = std::find(names.begin(), names.end(), "aneurysm");
-        const NeckChannel ch = neck_channel(lumen, y, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
-        out.neck_channel_mm = ch.width_mm;
-        out.neck_channel_at = ch.at;
+        channel = neck_channel(lumen, y, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
+        out.neck_channel_mm = channel.width_mm;
+        out.neck_channel_at = channel.at;
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
-    // Debugging: the deformed lumen as a Wavefront OBJ (neck vertices listed after it as comments).
+    // Debugging and pictures (bench/render_channel.py): the deformed lumen as a Wavefront OBJ, the neck line's points, the
+    // faces' widths and the channel listed after it as comments.
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) {
         if (std::FILE* fo = std::fopen(obj, "w")) {
             for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
@@ -442,6 +445,8 @@ Assessment Simulator::Impl::assess() {
             for (size_t l = 0; l < occ.points.size(); ++l)
                 for (size_t k = 0; k < occ.points[l].size(); ++k)
                     std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
+            for (size_t f = 0; f < channel.face_width_mm.size(); ++f) std::fprintf(fo, "# width %zu %.6g\n", f, channel.face_width_mm[f]);
+            std::fprintf(fo, "# channel %.6g %.6f %.6f %.6f\n", channel.width_mm, channel.at.x(), channel.at.y(), channel.at.z());
             std::fclose(fo);
         }
     }

@@ -45,6 +45,7 @@ struct NeckChannel {
     double width_mm = std::numeric_limits<double>::quiet_NaN();
     Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the channel's narrowest place (a face centroid, deformed)
     int faces_measured = 0;                        ///< faces whose width was measured (the rest count as `cap_mm`)
+    std::vector<double> face_width_mm;             ///< per lumen face: its width (`cap_mm` where not measured)
 };
 
 /// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
