@@ -351,8 +351,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.tissue_k = k;
             P.prev_theta = th;
             P.prev_R = R;
-            // Held, the applier bounds it from below anyway: only the opening is limited to 1° a frame.
-            P.theta_bal = std::max(0.0, th - std::clamp(R / k, -1.0 * DEG, held ? 1e9 : 1.0 * DEG));
+            // (Held, the applier bounds it from below anyway.)
+            P.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0, r.converged);
         }
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades

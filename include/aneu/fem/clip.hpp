@@ -47,6 +47,15 @@ struct ClipSpring {
     static ClipSpring from_forces(double r_mm, double theta1, double f1, double theta2, double f2);
 };
 
+/// The opening a spring clip's next frame prescribes, approaching the balance of spring and tissue by a secant step:
+/// θ − R / k, R = τ(θ) − M(θ) the spring's torque less the tissue's moment at this frame's θ, k > 0 the secant
+/// dR/dθ. Opening, at most 1° a frame; closing, at most 1° a frame once released (`held`: the applier lets go as
+/// fast as it opens its forceps) and, while the blades touch tissue, at most half the opening left: a prescribed
+/// opening the tissue between the blades cannot fit in has an infinite barrier energy (a clip with twice the
+/// placeholder spring stepped from 0.58° to its stop in one frame on the sample, and its blades reported 6e14 N).
+/// A frame whose solve did not converge keeps its opening: its R is not the tissue's.
+double next_spring_opening(double theta, double R, double k, bool held, bool touching, bool converged);
+
 /// Opening angle [rad] at which a point at distance r from the hinge has its blades `opening_mm` apart, for
 /// blades whose inner faces are `closed_gap_mm` apart when closed: 2 r sin(θ/2) + closed_gap = opening.
 double opening_angle(double r_mm, double opening_mm, double closed_gap_mm);
