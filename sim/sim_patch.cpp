@@ -343,7 +343,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         } else {
             r = solve_with(pm, nullptr);
         }
-        if (cm.spring && r.reaction.size()) {
+        // A frame whose solve did not converge leaves the balance's estimate as it was (its reaction is not the
+        // tissue's; a held clip goes on following the applier).
+        if (cm.spring && r.reaction.size() && r.converged) {
             const double R = r.reaction[0], th = r.u[nb];
             double k = P.tissue_k;
             if (P.prev_theta >= 0 && std::abs(th - P.prev_theta) > 1e-7) k = (R - P.prev_R) / (th - P.prev_theta);
@@ -352,7 +354,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.prev_theta = th;
             P.prev_R = R;
             // (Held, the applier bounds it from below anyway.)
-            P.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0, r.converged);
+            P.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0);
         }
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades

@@ -451,9 +451,9 @@ LinearBody::LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K, bool uppe
     m_K.makeCompressed();
 }
 
-double next_spring_opening(double theta, double R, double k, bool held, bool touching, bool converged) {
+double next_spring_opening(double theta, double R, double k, bool held, bool touching) {
     constexpr double DEGREE = 3.14159265358979323846 / 180.0;
-    if (!converged || !(k > 0)) return theta;
+    if (!(k > 0)) return theta;
     double step = R / k;  // > 0: closing
     if (step < 0) step = std::max(step, -1.0 * DEGREE);
     else {

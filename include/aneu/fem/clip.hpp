@@ -53,8 +53,8 @@ struct ClipSpring {
 /// fast as it opens its forceps) and, while the blades touch tissue, at most half the opening left: a prescribed
 /// opening the tissue between the blades cannot fit in has an infinite barrier energy (a clip with twice the
 /// placeholder spring stepped from 0.58° to its stop in one frame on the sample, and its blades reported 6e14 N).
-/// A frame whose solve did not converge keeps its opening: its R is not the tissue's.
-double next_spring_opening(double theta, double R, double k, bool held, bool touching, bool converged);
+/// (The simulator takes no step on a frame whose solve did not converge: its R is not the tissue's.)
+double next_spring_opening(double theta, double R, double k, bool held, bool touching);
 
 /// Opening angle [rad] at which a point at distance r from the hinge has its blades `opening_mm` apart, for
 /// blades whose inner faces are `closed_gap_mm` apart when closed: 2 r sin(θ/2) + closed_gap = opening.
