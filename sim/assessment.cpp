@@ -10,7 +10,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
-#include <set>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -83,103 +82,34 @@ std::vector<NeckPointOnLumen> smoothed_neck_line(const SimLumen& lumen, const st
     return out;
 }
 
-NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm) {
-    NeckOcclusion out;
-    if (lumen.neck_loops.empty()) return out;
-    const Eigen::MatrixX3i& F = lumen.F;
-    const Eigen::Index L = y.rows(), NF = F.rows();
-    // Deformed normals (out of the lumen; area weighted at the vertices).
-    Eigen::MatrixX3d fn(NF, 3), vn = Eigen::MatrixX3d::Zero(L, 3);
-    std::vector<std::vector<int>> faces_of(static_cast<size_t>(L));
-    for (Eigen::Index f = 0; f < NF; ++f) {
-        const Eigen::Vector3d a = y.row(F(f, 0)), b = y.row(F(f, 1)), c = y.row(F(f, 2));
-        const Eigen::Vector3d n = (b - a).cross(c - a);
-        for (int k = 0; k < 3; ++k) {
-            vn.row(F(f, k)) += n.transpose();
-            faces_of[static_cast<size_t>(F(f, k))].push_back(static_cast<int>(f));
-        }
-        const double len = n.norm();
-        fn.row(f) = len > 0 ? Eigen::RowVector3d((n / len).transpose()) : Eigen::RowVector3d::Zero();
-    }
-    for (Eigen::Index v = 0; v < L; ++v) {
-        const double len = vn.row(v).norm();
-        if (len > 0) vn.row(v) /= len;
-    }
-    constexpr double SEARCH_MM = 12.0;  // across the widest neck
-    const double inf = std::numeric_limits<double>::infinity();
-    // The gap at a point of the neck line (on face `face` at barycentric `w`): along the ray from it across the
-    // lumen (against its interpolated normal), the nearest crossing of an opposite face (facing it: normals more
-    // than 120° apart), in front (the gap) or behind (the walls pass through each other, looked for no deeper
-    // than the point's own wall: beyond it lies another vessel or the sac overhanging the parent, not an
-    // interpenetration). The faces round its face's corners and their one ring are not "opposite".
-    auto gap_at = [&](int face, const Eigen::Vector3d& w, Eigen::Vector3d& where) {
-        double behind = 0;
-        Eigen::Vector3d yv = Eigen::Vector3d::Zero(), nrm = Eigen::Vector3d::Zero();
-        std::set<int> own;
-        for (int k = 0; k < 3; ++k) {
-            const int c = F(face, k);
-            yv += w[k] * y.row(c).transpose();
-            nrm += w[k] * vn.row(c).transpose();
-            if (c < wall_mm.size()) behind += w[k] * wall_mm[c];
-            for (int f : faces_of[static_cast<size_t>(c)])
-                for (int j = 0; j < 3; ++j)
-                    for (int g : faces_of[static_cast<size_t>(F(f, j))]) own.insert(g);
-        }
-        where = yv;
-        if (!(nrm.norm() > 0)) nrm = fn.row(face).transpose();
-        const Eigen::Vector3d dir = -nrm.normalized();
-        double gap = inf;
-        for (Eigen::Index f = 0; f < NF; ++f) {
-            if (fn.row(f).dot(dir) < 0.5 || own.count(static_cast<int>(f))) continue;
-            const Eigen::Vector3d a = y.row(F(f, 0)), b = y.row(F(f, 1)), c = y.row(F(f, 2));
-            if ((a - yv).norm() > SEARCH_MM + (b - a).norm() + (c - a).norm()) continue;  // cheap reject
-            // Möller–Trumbore, both directions along the ray.
-            const Eigen::Vector3d e1 = b - a, e2 = c - a, pv = dir.cross(e2);
-            const double det = e1.dot(pv);
-            if (std::abs(det) < 1e-14) continue;
-            const Eigen::Vector3d tv = yv - a;
-            const double u = tv.dot(pv) / det;
-            if (u < 0 || u > 1) continue;
-            const Eigen::Vector3d qv = tv.cross(e1);
-            const double v = dir.dot(qv) / det;
-            if (v < 0 || u + v > 1) continue;
-            const double hit = e2.dot(qv) / det;
-            if (hit <= SEARCH_MM && hit >= -behind && std::abs(hit) < std::abs(gap)) gap = hit;
-        }
-        return gap;
-    };
-    out.min_gap_mm = inf;
-    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
-        const std::vector<NeckPointOnLumen> line = l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
-        if (line.empty()) continue;
-        std::vector<double> g(line.size());
-        std::vector<Eigen::Vector3d> at(line.size());
-        for (size_t k = 0; k < line.size(); ++k) {
-            g[k] = gap_at(line[k].face, line[k].weights, at[k]);
-            out.min_gap_mm = std::min(out.min_gap_mm, g[k]);
-            if (g[k] < 0) out.max_interpenetration_mm = std::max(out.max_interpenetration_mm, -g[k]);
-        }
-        for (size_t k = 0; k < line.size(); ++k) {
-            const size_t m = (k + 1) % line.size();
-            const double len = (at[m] - at[k]).norm();
-            out.length_mm += len;
-            if (g[k] <= gap_tol_mm && g[m] <= gap_tol_mm) out.closed_mm += len;
-        }
-        out.gap_mm.push_back(g);
-        out.points.push_back(at);
-    }
-    out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
-    return out;
-}
-
 namespace {
 
-/// The deformed lumen's geometry for ball queries: vertex normals, each vertex's faces, a grid of face centroids.
-class LumenBalls {
+/// Where the ray p + t dir (t of either sign) crosses triangle abc (Möller–Trumbore): false if it misses.
+bool ray_crossing(const Eigen::Vector3d& p, const Eigen::Vector3d& dir, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                  const Eigen::Vector3d& c, double& t) {
+    const Eigen::Vector3d e1 = b - a, e2 = c - a, pv = dir.cross(e2);
+    const double det = e1.dot(pv);
+    if (std::abs(det) < 1e-14) return false;
+    const Eigen::Vector3d tv = p - a;
+    const double u = tv.dot(pv) / det;
+    if (u < 0 || u > 1) return false;
+    const Eigen::Vector3d qv = tv.cross(e1);
+    const double v = dir.dot(qv) / det;
+    if (v < 0 || u + v > 1) return false;
+    t = e2.dot(qv) / det;
+    return true;
+}
+
+/// The deformed lumen's geometry for the neck's measures: face and (area-weighted) vertex normals out of the
+/// lumen, each vertex's faces, a grid of face centroids; the gap across the lumen along a normal and the lumen's
+/// width (the largest ball inside it) at a wall point.
+class DeformedLumen {
 public:
-    LumenBalls(const SimLumen& lumen, const Eigen::MatrixX3d& y) : m_F(lumen.F), m_y(y), m_wall(lumen.wall_mm) {
+    /// `wall_mm`: the wall's thickness per vertex (how deep behind a point an opposite wall counts as through it).
+    DeformedLumen(const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& y, const Eigen::VectorXd& wall_mm) : m_F(F), m_y(y), m_wall(wall_mm) {
         const Eigen::Index L = y.rows(), NF = m_F.rows();
         m_vn = Eigen::MatrixX3d::Zero(L, 3);
+        m_fn.resize(NF, 3);
         m_faces_of.resize(static_cast<size_t>(L));
         m_C.resize(NF, 3);
         for (Eigen::Index f = 0; f < NF; ++f) {
@@ -191,6 +121,8 @@ public:
                 m_faces_of[static_cast<size_t>(m_F(f, k))].push_back(static_cast<int>(f));
                 m_reach = std::max(m_reach, (y.row(m_F(f, k)) - m_C.row(f)).norm());
             }
+            const double len = n.norm();
+            m_fn.row(f) = len > 0 ? Eigen::RowVector3d((n / len).transpose()) : Eigen::RowVector3d::Zero();
         }
         for (Eigen::Index v = 0; v < L; ++v) {
             const double len = m_vn.row(v).norm();
@@ -201,30 +133,67 @@ public:
 
     const Eigen::MatrixX3d& centroids() const { return m_C; }
 
+    /// The point of `face` at barycentric w, the direction into the lumen there (against the interpolated
+    /// normal; the face's own where that vanishes) and the wall's thickness there; false on a degenerate face.
+    bool at(int face, const Eigen::Vector3d& w, Eigen::Vector3d& p, Eigen::Vector3d& d, double& wall) const {
+        p.setZero();
+        Eigen::Vector3d nrm = Eigen::Vector3d::Zero();
+        wall = 0;
+        for (int k = 0; k < 3; ++k) {
+            const int c = m_F(face, k);
+            p += w[k] * m_y.row(c).transpose();
+            nrm += w[k] * m_vn.row(c).transpose();
+            if (c < m_wall.size()) wall += w[k] * m_wall[c];
+        }
+        if (!(nrm.norm() > 0)) nrm = m_fn.row(face).transpose();
+        if (!(nrm.norm() > 0)) return false;
+        d = -nrm.normalized();
+        return true;
+    }
+
+    /// The faces round `face`'s corners and their one ring (sorted): not "opposite" walls.
+    void two_ring(int face, std::vector<int>& out) const {
+        out.clear();
+        for (int k = 0; k < 3; ++k)
+            for (int f : m_faces_of[static_cast<size_t>(m_F(face, k))])
+                for (int j = 0; j < 3; ++j)
+                    for (int g : m_faces_of[static_cast<size_t>(m_F(f, j))]) out.push_back(g);
+        std::sort(out.begin(), out.end());
+        out.erase(std::unique(out.begin(), out.end()), out.end());
+    }
+
+    /// Whether face g faces back along d (its normal more than 120° from the point's: an opposite wall).
+    bool opposite(int g, const Eigen::Vector3d& d) const { return m_fn.row(g).dot(d) >= 0.5; }
+
+    /// The gap at a point of the neck line (neck_occlusion): along the ray from it across the lumen, the nearest
+    /// crossing of an opposite face not in its two rings, in front (the gap) or behind within its own wall
+    /// (negative: the walls pass through each other), +inf where none lies within `search`.
+    double gap(int face, const Eigen::Vector3d& w, double search, Eigen::Vector3d& where) {
+        Eigen::Vector3d d;
+        double behind = 0;
+        if (!at(face, w, where, d, behind)) return std::numeric_limits<double>::infinity();
+        two_ring(face, m_ring);
+        double gap = std::numeric_limits<double>::infinity();
+        for (Eigen::Index f = 0; f < m_F.rows(); ++f) {
+            if (!opposite(static_cast<int>(f), d) || std::binary_search(m_ring.begin(), m_ring.end(), static_cast<int>(f))) continue;
+            const Eigen::Vector3d a = m_y.row(m_F(f, 0)), b = m_y.row(m_F(f, 1)), c = m_y.row(m_F(f, 2));
+            if ((a - where).norm() > search + (b - a).norm() + (c - a).norm()) continue;  // cheap reject
+            double hit;
+            if (ray_crossing(where, d, a, b, c, hit) && hit <= search && hit >= -behind && std::abs(hit) < std::abs(gap)) gap = hit;
+        }
+        return gap;
+    }
+
     /// The diameter of the largest ball inside the lumen touching the wall at the point of `face` with weights w,
     /// at most cap. Each constraint alone allows radii [0, r_k] (a triangle's or point's distance from the centre
     /// p + r d, less r, does not grow with r: the distance is 1-Lipschitz), so the radius is the least r_k; a
     /// constraint farther from p than twice the radius found so far cannot lower it.
     double width(int face, const Eigen::Vector3d& w, double cap) {
-        Eigen::Vector3d p = Eigen::Vector3d::Zero(), nrm = Eigen::Vector3d::Zero();
-        for (int k = 0; k < 3; ++k) {
-            p += w[k] * m_y.row(m_F(face, k)).transpose();
-            nrm += w[k] * m_vn.row(m_F(face, k)).transpose();
-        }
-        if (!(nrm.norm() > 0)) {
-            const Eigen::Vector3d a = m_y.row(m_F(face, 0)), b = m_y.row(m_F(face, 1)), c = m_y.row(m_F(face, 2));
-            nrm = (b - a).cross(c - a);
-            if (!(nrm.norm() > 0)) return 0.0;  // a degenerate face: no width to speak of
-        }
-        const Eigen::Vector3d d = -nrm.normalized();  // into the lumen
+        Eigen::Vector3d p, d;
+        double behind = 0;
+        if (!at(face, w, p, d, behind)) return 0.0;  // a degenerate face: no width to speak of
         // The two rings round the face: their vertices (not the face's own) are point constraints.
-        m_ring.clear();
-        for (int k = 0; k < 3; ++k)
-            for (int f : m_faces_of[static_cast<size_t>(m_F(face, k))])
-                for (int j = 0; j < 3; ++j)
-                    for (int g : m_faces_of[static_cast<size_t>(m_F(f, j))]) m_ring.push_back(g);
-        std::sort(m_ring.begin(), m_ring.end());
-        m_ring.erase(std::unique(m_ring.begin(), m_ring.end()), m_ring.end());
+        two_ring(face, m_ring);
         double r = 0.5 * cap;
         for (int g : m_ring)
             for (int j = 0; j < 3; ++j) {
@@ -238,23 +207,13 @@ public:
         // crossed at t bounds the diameter by t; one at the point or behind it within the point's own wall means
         // the walls touch or pass through each other (a ball beside a wall that lies on the point is "clear" of
         // it, so this is where touching walls are seen).
-        double behind = 0;
-        for (int k = 0; k < 3; ++k)
-            if (m_F(face, k) < m_wall.size()) behind += w[k] * m_wall[m_F(face, k)];
         behind = std::max(behind, 1e-9);
         const Eigen::Vector3d box = Eigen::Vector3d::Constant(2 * r + behind + m_reach);
         m_grid.query(Aabb{p - box, p + box}, m_cand);
         for (int g : m_cand) {
-            if (std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
-            const Eigen::Vector3d a = m_y.row(m_F(g, 0)), b = m_y.row(m_F(g, 1)), c = m_y.row(m_F(g, 2));
-            const Eigen::Vector3d e1 = b - a, e2 = c - a, fn = e1.cross(e2);
-            if (!(fn.norm() > 0) || fn.normalized().dot(d) < 0.5) continue;
-            const Eigen::Vector3d pv = d.cross(e2), tv = p - a, qv = tv.cross(e1);
-            const double det = e1.dot(pv);
-            if (std::abs(det) < 1e-14) continue;
-            const double u = tv.dot(pv) / det, v = d.dot(qv) / det;
-            if (u < 0 || u > 1 || v < 0 || u + v > 1) continue;
-            const double t = e2.dot(qv) / det;
+            if (!opposite(g, d) || std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
+            double t;
+            if (!ray_crossing(p, d, m_y.row(m_F(g, 0)).transpose(), m_y.row(m_F(g, 1)).transpose(), m_y.row(m_F(g, 2)).transpose(), t)) continue;
             if (t < -behind || t > 2 * r) continue;
             if (t <= 0) return 0.0;
             r = 0.5 * t;
@@ -279,7 +238,7 @@ private:
     const Eigen::MatrixX3i& m_F;
     const Eigen::MatrixX3d& m_y;
     const Eigen::VectorXd& m_wall;
-    Eigen::MatrixX3d m_vn, m_C;
+    Eigen::MatrixX3d m_vn, m_fn, m_C;
     std::vector<std::vector<int>> m_faces_of;
     double m_reach = 0;
     PointGrid m_grid;
@@ -293,10 +252,45 @@ double point_segment_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a
     return (a + t * ab - p).norm();
 }
 
+/// Neck loop l's line on the lumen: SimLumen::neck_line's when set, else smoothed here.
+std::vector<NeckPointOnLumen> neck_line_of(const SimLumen& lumen, size_t l) {
+    return l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
+}
+
 }  // namespace
 
+NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm) {
+    NeckOcclusion out;
+    if (lumen.neck_loops.empty()) return out;
+    DeformedLumen geo(lumen.F, y, wall_mm);
+    constexpr double SEARCH_MM = 12.0;  // across the widest neck
+    const double inf = std::numeric_limits<double>::infinity();
+    out.min_gap_mm = inf;
+    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
+        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
+        if (line.empty()) continue;
+        std::vector<double> g(line.size());
+        std::vector<Eigen::Vector3d> at(line.size());
+        for (size_t k = 0; k < line.size(); ++k) {
+            g[k] = geo.gap(line[k].face, line[k].weights, SEARCH_MM, at[k]);
+            out.min_gap_mm = std::min(out.min_gap_mm, g[k]);
+            if (g[k] < 0) out.max_interpenetration_mm = std::max(out.max_interpenetration_mm, -g[k]);
+        }
+        for (size_t k = 0; k < line.size(); ++k) {
+            const size_t m = (k + 1) % line.size();
+            const double len = (at[m] - at[k]).norm();
+            out.length_mm += len;
+            if (g[k] <= gap_tol_mm && g[m] <= gap_tol_mm) out.closed_mm += len;
+        }
+        out.gap_mm.push_back(g);
+        out.points.push_back(at);
+    }
+    out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
+    return out;
+}
+
 double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm) {
-    LumenBalls balls(lumen, y);
+    DeformedLumen balls(lumen.F, y, lumen.wall_mm);
     return balls.width(face, w, cap_mm);
 }
 
@@ -308,7 +302,7 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     // The neck line at rest, as segments.
     std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg;
     for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
-        const std::vector<NeckPointOnLumen> line = l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
+        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
         std::vector<Eigen::Vector3d> pts;
         for (const NeckPointOnLumen& q : line) {
             Eigen::Vector3d x = Eigen::Vector3d::Zero();
@@ -318,7 +312,7 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
         for (size_t k = 0; k < pts.size(); ++k) seg.emplace_back(pts[k], pts[(k + 1) % pts.size()]);
     }
     if (seg.empty()) return out;
-    LumenBalls balls(lumen, y);
+    DeformedLumen balls(lumen.F, y, lumen.wall_mm);
     std::vector<double> width(static_cast<size_t>(NF), cap_mm);
     std::vector<char> sac(static_cast<size_t>(NF), 0), parent(static_cast<size_t>(NF), 0);
     bool any_sac = false, any_parent = false;
