@@ -14,9 +14,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <array>
 #include <mutex>
+#include <optional>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
 #include "aneu/fem/contact.hpp"
 #include "simulator_impl.hpp"
 
@@ -53,7 +56,7 @@ void Simulator::Impl::set_patch_part(Eigen::Index v, const Eigen::Vector3d& valu
 
 void Simulator::Impl::drop_patch(int index) {
     PatchRun& P = patches[static_cast<size_t>(index)];
-    for (size_t k = 0; k < P.cand.size(); ++k) set_patch_part(P.cand_vertex[k], Eigen::Vector3d::Zero());
+    for (size_t k = 0; k < P.cand_vertex.size(); ++k) set_patch_part(P.cand_vertex[k], Eigen::Vector3d::Zero());
     for (int v : P.map_vertex) set_patch_part(v, Eigen::Vector3d::Zero());
     patch_of_clip[static_cast<size_t>(P.clip)] = -1;
     P.alive = false;
@@ -136,18 +139,56 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     const auto np = static_cast<Eigen::Index>(pm.nodes().size());
     P.X.resize(np, 3);
     for (Eigen::Index a = 0; a < np; ++a) P.X.row(a) = vol.nodes.row(pm.nodes()[static_cast<size_t>(a)]);
+    std::vector<char> is_cand_vertex(static_cast<size_t>(S), 0);
     for (Eigen::Index v = 0; v < S; ++v) {
         const int a = pm.local(sf.node[v]);
         if (a >= 0 && in_region[static_cast<size_t>(v)]) {
             P.cand.push_back(a);
             P.cand_vertex.push_back(static_cast<int>(v));
+            is_cand_vertex[static_cast<size_t>(v)] = 1;
         }
+    }
+    // With 10-node elements the contacts act on the quadratic surface, mid-edge nodes included: on the corners alone
+    // the surface between them bulges through a blade or the opposite wall (bench/bench_fold.cpp). The blades' candidates
+    // get the mid-edge nodes of the simulated surface's edges between candidate vertices (after the vertices: the
+    // first cand_vertex.size() candidates are the surface's own), the inner walls' contact the lumen's triangles split
+    // at their mid-edge nodes.
+    const bool quadratic = vol.tets.cols() == 10;
+    std::optional<fem::MidEdgeNodes> mid;
+    if (quadratic) {
+        mid.emplace(vol.tets);  // all elements: a lumen edge between patch nodes may be an edge of elements outside it
+        std::vector<char> added(static_cast<size_t>(np), 0);
+        for (Eigen::Index f = 0; f < sf.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) {
+                const int va = sf.F(f, k), vb = sf.F(f, (k + 1) % 3);
+                if (!is_cand_vertex[static_cast<size_t>(va)] || !is_cand_vertex[static_cast<size_t>(vb)]) continue;
+                const int m = (*mid)(sf.node[va], sf.node[vb]);
+                const int a = m < 0 ? -1 : pm.local(m);
+                if (a < 0 || added[static_cast<size_t>(a)]) continue;
+                added[static_cast<size_t>(a)] = 1;
+                P.cand.push_back(a);
+            }
     }
     const SimLumen& L = sf.lumen;
     std::vector<Eigen::Vector3i> tri;
     for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
         const int a = pm.local(L.node[L.F(f, 0)]), b = pm.local(L.node[L.F(f, 1)]), c = pm.local(L.node[L.F(f, 2)]);
-        if (a >= 0 && b >= 0 && c >= 0) tri.emplace_back(a, c, b);  // into the lumen: towards the opposite wall
+        if (a < 0 || b < 0 || c < 0) continue;
+        if (!quadratic) {
+            tri.emplace_back(a, c, b);  // into the lumen: towards the opposite wall
+            continue;
+        }
+        const Eigen::MatrixX3i split =
+            fem::quadratic_surface_triangles(*mid, (Eigen::MatrixX3i(1, 3) << L.node[L.F(f, 0)], L.node[L.F(f, 2)], L.node[L.F(f, 1)]).finished());
+        bool inside = true;
+        std::array<Eigen::Vector3i, 4> loc;
+        for (int r = 0; r < 4; ++r)
+            for (int k = 0; k < 3; ++k) {
+                loc[static_cast<size_t>(r)][k] = pm.local(split(r, k));
+                inside = inside && loc[static_cast<size_t>(r)][k] >= 0;
+            }
+        if (inside)
+            for (const Eigen::Vector3i& t : loc) tri.push_back(t);
     }
     P.inner.resize(static_cast<Eigen::Index>(tri.size()), 3);
     for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
@@ -395,7 +436,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.wall_pairs_touching = touching;
         fr.fs.solve_s += 1e-3 * ms;
         // The surface: the patch's own vertices every frame, the rest of the region from the interface at region_hz.
-        for (size_t k = 0; k < P.cand.size(); ++k) set_patch_part(P.cand_vertex[k], P.v.segment<3>(3 * P.cand[k]));
+        for (size_t k = 0; k < P.cand_vertex.size(); ++k) set_patch_part(P.cand_vertex[k], P.v.segment<3>(3 * P.cand[k]));
         if (P.t_map < 0 || fr.t - P.t_map >= 1.0 / scene.region_hz - 1e-9) {
             P.t_map = fr.t;
             const Eigen::VectorXd m = pm.mapped_displacement(P.v.head(nb));

@@ -113,8 +113,11 @@ struct Simulator::Impl {
         std::unique_ptr<fem::PatchModel> pm;
         int tets = 0;
         Eigen::MatrixX3d X;                   // rest positions of the patch's nodes
-        std::vector<int> cand, cand_vertex;   // patch nodes on the simulated surface, and their vertex
-        Eigen::MatrixX3i inner;               // lumen corner triangles in the patch (patch nodes), normals into the lumen
+        /// patch nodes the blades can touch: the simulated surface's vertices (cand_vertex: their vertex), then with
+        /// 10-node elements the mid-edge nodes of its edges between them
+        std::vector<int> cand, cand_vertex;
+        Eigen::MatrixX3i inner;               // lumen triangles in the patch (patch nodes; 10-node elements: split at
+                                              // their mid-edge nodes), normals into the lumen
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
         Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
         double kappa_wall = 0, kappa_blade = 0;

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <string>
@@ -276,6 +277,46 @@ Eigen::MatrixXi quadratic_faces(const QuadraticMesh& q, int n_linear_nodes, cons
         }
     }
     return F6;
+}
+
+MidEdgeNodes::MidEdgeNodes(const Eigen::MatrixXi& T10, const std::vector<int>& tets) {
+    if (T10.cols() != 10) throw InputError("MidEdgeNodes: the elements must have 10 nodes, not " + std::to_string(T10.cols()));
+    auto add = [&](Eigen::Index t) {
+        if (t < 0 || t >= T10.rows()) throw InputError("MidEdgeNodes: element " + std::to_string(t) + " is outside the mesh");
+        for (int e = 0; e < 6; ++e) {
+            const auto [a, b] = std::minmax(T10(t, QUADRATIC_TET_EDGES[e][0]), T10(t, QUADRATIC_TET_EDGES[e][1]));
+            m_sorted.emplace_back((static_cast<std::uint64_t>(static_cast<std::uint32_t>(a)) << 32) | static_cast<std::uint32_t>(b), T10(t, 4 + e));
+        }
+    };
+    if (tets.empty())
+        for (Eigen::Index t = 0; t < T10.rows(); ++t) add(t);
+    else
+        for (int t : tets) add(t);
+    std::sort(m_sorted.begin(), m_sorted.end());
+    m_sorted.erase(std::unique(m_sorted.begin(), m_sorted.end()), m_sorted.end());
+}
+
+int MidEdgeNodes::operator()(int a, int b) const {
+    const auto [lo, hi] = std::minmax(a, b);
+    const std::uint64_t key = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(lo)) << 32) | static_cast<std::uint32_t>(hi);
+    const auto it = std::lower_bound(m_sorted.begin(), m_sorted.end(), std::make_pair(key, std::numeric_limits<int>::min()));
+    return it != m_sorted.end() && it->first == key ? it->second : -1;
+}
+
+Eigen::MatrixX3i quadratic_surface_triangles(const MidEdgeNodes& mid, const Eigen::MatrixX3i& F3) {
+    Eigen::MatrixX3i out(4 * F3.rows(), 3);
+    for (Eigen::Index f = 0; f < F3.rows(); ++f) {
+        const int a = F3(f, 0), b = F3(f, 1), c = F3(f, 2);
+        const int ab = mid(a, b), bc = mid(b, c), ca = mid(c, a);
+        if (ab < 0 || bc < 0 || ca < 0)
+            throw InputError("quadratic_surface_triangles: triangle " + std::to_string(f) + " (" + std::to_string(a) + ", " + std::to_string(b) + ", " +
+                             std::to_string(c) + ") has an edge with no mid-edge node");
+        out.row(4 * f) << a, ab, ca;
+        out.row(4 * f + 1) << ab, b, bc;
+        out.row(4 * f + 2) << ca, bc, c;
+        out.row(4 * f + 3) << ab, bc, ca;
+    }
+    return out;
 }
 
 Eigen::VectorXi quadratic_node_set(const QuadraticMesh& q, const Eigen::MatrixXi& T4, int n_linear_nodes,

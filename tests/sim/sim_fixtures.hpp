@@ -4,6 +4,7 @@
 // fixed, outer surface condensed), with a patch of elements labelled "aneurysm" for the neck measures.
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/fem/assembly.hpp"
@@ -56,6 +57,54 @@ inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, d
     f.fixed_dofs = sets.fixed;
     b.fem = f;
     b.condensed = fem::condense(c.K, sets.fixed, sets.kept, cp);
+    return c;
+}
+
+
+/// The tube r 1.5..1.9 mm, 8 mm long, one layer of 10-node tetrahedra through its wall ("artery" throughout), ends
+/// fixed, the outer surface's corner nodes condensed (as the pipeline's bundles: the simulated surface is the
+/// corners', the elements quadratic).
+inline TubeCase quadratic_tube_case(Precision precision, int n_theta = 24, int n_z = 16, double E = 1.0, double nu = 0.45) {
+    TubeCase c;
+    c.mesh = fem::tube_mesh(1.5, 1.9, 8.0, 1, n_theta, n_z);
+    const auto& m = c.mesh;
+    const fem::QuadraticMesh q = fem::quadratic_mesh(m.V, m.T);
+    const int n_lin = static_cast<int>(m.V.rows());
+    const Eigen::VectorXi region = Eigen::VectorXi::Zero(q.T.rows());
+    std::vector<Material> mats{{"artery", E, nu}};
+    c.K = fem::assemble_stiffness(q.V, q.T, region, mats);
+    std::vector<int> fixed, kept;
+    std::vector<char> outer(static_cast<size_t>(n_lin), 0);
+    for (Eigen::Index k = 0; k < m.outer.size(); ++k) outer[static_cast<size_t>(m.outer[k])] = 1;
+    for (Eigen::Index n = 0; n < q.V.rows(); ++n) {
+        const bool end = q.V(n, 2) < 1e-9 || q.V(n, 2) > 8.0 - 1e-9;
+        for (int a = 0; a < 3; ++a) {
+            if (end) fixed.push_back(static_cast<int>(3 * n + a));
+            else if (n < n_lin && outer[static_cast<size_t>(n)]) kept.push_back(static_cast<int>(3 * n + a));
+        }
+    }
+    fem::CondenseParams cp;
+    cp.precision = precision;
+    cp.tile_size = 64;
+    cp.residual_columns = 0;
+    Bundle& b = c.bundle;
+    b.meta.case_id = "quadratic-tube-test";
+    VolumeData v;
+    v.nodes = q.V;
+    v.tets = q.T;
+    v.tet_region = region;
+    v.region_names = {"artery"};
+    v.node_sets["outer"] = fem::quadratic_node_set(q, m.T, n_lin, m.outer);
+    v.node_sets["inner"] = fem::quadratic_node_set(q, m.T, n_lin, m.inner);
+    b.volume = v;
+    FemData f;
+    f.element_order = 2;
+    f.K = c.K;
+    f.K_upper_only = false;
+    f.materials = mats;
+    f.fixed_dofs = Eigen::Map<Eigen::VectorXi>(fixed.data(), static_cast<Eigen::Index>(fixed.size()));
+    b.fem = f;
+    b.condensed = fem::condense(c.K, f.fixed_dofs, Eigen::Map<Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), cp);
     return c;
 }
 

@@ -14,6 +14,7 @@
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
+#include "aneu/fem/assembly.hpp"
 #include "aneu/fem/clip.hpp"
 #include "aneu/fem/contact.hpp"
 #include "aneu/fem/hyperelastic.hpp"
@@ -607,7 +608,7 @@ namespace {
 // A clip across the tube at z = 4: jaws along −x from a hinge at x = 8, squeezing along y, closed from 40° to
 // θ_end, where its blades are 0.9 mm apart on the tube's axis (the two 0.4 mm walls touch inside).
 constexpr double FLAT_HINGE_X = 8.0, FLAT_END_DEG = 5.014;
-json flattening_scene(const std::string& bundle, const std::string& wall, bool release) {
+json flattening_scene(const std::string& bundle, const std::string& wall, bool release, double end_deg = FLAT_END_DEG) {
     const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
     auto k = [&](double t, double open) { return key(t, {FLAT_HINGE_X, 0, 4.0}, ax, up, open); };
     json keys = json::array();
@@ -615,14 +616,14 @@ json flattening_scene(const std::string& bundle, const std::string& wall, bool r
     k0["load"] = "flat";
     keys.push_back(k0);
     keys.push_back(k(0.02, 40));
-    keys.push_back(k(0.14, FLAT_END_DEG));
-    keys.push_back(k(0.16, FLAT_END_DEG));
+    keys.push_back(k(0.14, end_deg));
+    keys.push_back(k(0.16, end_deg));
     if (release) {
-        json r = k(0.17, FLAT_END_DEG);
+        json r = k(0.17, end_deg);
         r["release"] = true;
         keys.push_back(r);
-        keys.push_back(key(0.20, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, FLAT_END_DEG));
-        keys.push_back(key(0.32, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, FLAT_END_DEG));
+        keys.push_back(key(0.20, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, end_deg));
+        keys.push_back(key(0.32, {FLAT_HINGE_X + 3, 0, 4.0}, ax, up, end_deg));
     }
     json clip = {{"jaw_length_mm", 10.5}, {"jaw_width_mm", 1.2}, {"jaw_thickness_mm", 0.5}, {"closed_gap_mm", 0.2}, {"max_opening_deg", 45}};
     if (release) clip["spring"] = {{"label_force_n", 0.3}, {"open_force_n", 0.5}, {"placeholder", true}, {"source", "test"}};
@@ -662,6 +663,56 @@ std::pair<int, double> under_the_flat_blades(const Eigen::MatrixX3d& x) {
     return {under, worst};
 }
 
+
+/// The reference for the flattening scene: the whole tube neo-Hookean, closed along the openings of the simulator's
+/// frames (100 Hz, 40° at 0.02 s to end_deg at 0.14 s, held for two more frames) with the same blade friction (μ =
+/// 0.3, the default), its grips renewed after each step as the simulator renews them each frame (friction is path
+/// dependent: the same steps give the same path). The blades touch every outer node (10-node elements: mid-edge
+/// nodes too), the walls touch on the inner surface's triangles (10-node elements: split at their mid-edge nodes,
+/// fem::quadratic_surface_triangles), as in the patch. Returns the blades' loads and the walls' closest distance.
+std::pair<fem::BladeLoads, double> flattening_reference(const std::string& bundle, double end_deg) {
+    BundleParts parts;
+    parts.image = parts.surfaces = parts.condensed_W = parts.flow = false;
+    const Bundle b = read_bundle(bundle, parts);
+    const VolumeData& vol = *b.volume;
+    const fem::NeoHookeanSolid solid(vol.nodes, vol.tets, vol.tet_region, b.fem->materials);
+    const Eigen::MatrixXi IF = fem::boundary_faces_in_set(vol.nodes, vol.tets, vol.node_sets.at("inner"));
+    const Eigen::MatrixX3i inner =
+        vol.tets.cols() == 10 ? fem::quadratic_surface_triangles(fem::MidEdgeNodes(vol.tets), IF.leftCols(3)) : Eigen::MatrixX3i(IF.leftCols(3));
+    std::vector<int> outer(vol.node_sets.at("outer").data(), vol.node_sets.at("outer").data() + vol.node_sets.at("outer").size());
+    fem::ClipBlades bl;
+    bl.hinge = {FLAT_HINGE_X, 0, 4};
+    bl.axis = {-1, 0, 0};
+    bl.up = {0, 1, 0};
+    bl.length_mm = 10.5;
+    bl.width_mm = 1.2;
+    bl.thickness_mm = 0.5;
+    bl.closed_gap_mm = 0.2;
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(solid.dofs() + 1);
+    v[solid.dofs()] = 40 * aneu::DEG;
+    fem::BladeLoads ref;
+    double ref_min = 0;
+    std::vector<double> steps;
+    for (int k = 1; k <= 12; ++k) steps.push_back(40 - k / 12.0 * (40 - end_deg));
+    steps.push_back(end_deg);
+    steps.push_back(end_deg);
+    fem::ClipContactParams bp;
+    bp.friction = 0.3;
+    std::vector<fem::BladeGrip> grips;
+    for (size_t k = 0; k < steps.size(); ++k) {
+        fem::ContactParams cp;
+        cp.search_mm = 0.2 + 2.0 * 3.0 * aneu::DEG * bl.length_mm;  // as far as the jaws close in a step
+        const fem::ContactBody wall(solid, vol.nodes, inner, v.head(solid.dofs()), cp);
+        const fem::ClipBody cb(wall, vol.nodes, outer, v, bl, fem::ClipSpring{1e-3, 0.0}, bp, k ? &grips : nullptr);
+        v = fem::solve_neo_hookean(cb, b.fem->fixed_dofs, std::vector<std::pair<int, double>>{{static_cast<int>(cb.theta_dof()), steps[k] * aneu::DEG}}, v).u;
+        grips = cb.grips(v);
+        if (k + 1 == steps.size()) {
+            ref = cb.loads(v);
+            ref_min = wall.min_distance(v.head(solid.dofs()));
+        }
+    }
+    return {ref, ref_min};
+}
 }  // namespace
 
 TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWallsDoNotCross) {
@@ -697,49 +748,7 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
     }
     for (const auto& m : msgs) EXPECT_EQ(m.find("beyond the linear model's range"), std::string::npos) << m;
 
-    // The reference: the whole tube neo-Hookean, closed along the openings of the simulator's frames (100 Hz,
-    // 40° at 0.02 s to 5.014° at 0.14 s, held for two more frames) with the same blade friction (μ = 0.3, the
-    // default), its grips renewed after each step as the simulator renews them each frame (friction is path
-    // dependent: the same steps give the same path).
-    BundleParts parts;
-    parts.image = parts.surfaces = parts.condensed_W = parts.flow = false;
-    const Bundle b = read_bundle(bundle, parts);
-    const VolumeData& vol = *b.volume;
-    const fem::NeoHookeanSolid solid(vol.nodes, vol.tets, vol.tet_region, b.fem->materials);
-    const Eigen::MatrixXi IF = fem::boundary_faces_in_set(vol.nodes, vol.tets, vol.node_sets.at("inner"));
-    const Eigen::MatrixX3i inner = IF.leftCols(3);
-    std::vector<int> outer(vol.node_sets.at("outer").data(), vol.node_sets.at("outer").data() + vol.node_sets.at("outer").size());
-    fem::ClipBlades bl;
-    bl.hinge = {FLAT_HINGE_X, 0, 4};
-    bl.axis = {-1, 0, 0};
-    bl.up = {0, 1, 0};
-    bl.length_mm = 10.5;
-    bl.width_mm = 1.2;
-    bl.thickness_mm = 0.5;
-    bl.closed_gap_mm = 0.2;
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(solid.dofs() + 1);
-    v[solid.dofs()] = 40 * aneu::DEG;
-    fem::BladeLoads ref;
-    double ref_min = 0;
-    std::vector<double> steps;
-    for (int k = 1; k <= 12; ++k) steps.push_back(40 - k / 12.0 * (40 - FLAT_END_DEG));
-    steps.push_back(FLAT_END_DEG);
-    steps.push_back(FLAT_END_DEG);
-    fem::ClipContactParams bp;
-    bp.friction = 0.3;
-    std::vector<fem::BladeGrip> grips;
-    for (size_t k = 0; k < steps.size(); ++k) {
-        fem::ContactParams cp;
-        cp.search_mm = 0.2 + 2.0 * 3.0 * aneu::DEG * bl.length_mm;  // as far as the jaws close in a step
-        const fem::ContactBody wall(solid, vol.nodes, inner, v.head(solid.dofs()), cp);
-        const fem::ClipBody cb(wall, vol.nodes, outer, v, bl, fem::ClipSpring{1e-3, 0.0}, bp, k ? &grips : nullptr);
-        v = fem::solve_neo_hookean(cb, b.fem->fixed_dofs, std::vector<std::pair<int, double>>{{static_cast<int>(cb.theta_dof()), steps[k] * aneu::DEG}}, v).u;
-        grips = cb.grips(v);
-        if (k + 1 == steps.size()) {
-            ref = cb.loads(v);
-            ref_min = wall.min_distance(v.head(solid.dofs()));
-        }
-    }
+    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
     const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
     EXPECT_GT(ref_min, -0.02);
     EXPECT_NEAR(c.grip_force_n, f_ref, 0.02 * f_ref);
@@ -750,6 +759,38 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
                 "inner walls %.4f mm apart at the closest (reference %.4f), %d pairs touching; %.1f Newton its, %.1f ms a frame\n",
                 FLAT_END_DEG, p.nodes, p.interface_nodes, c.grip_force_n, f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm,
                 ref_min, p.wall_pairs_touching, p.mean_iterations, p.mean_solve_ms);
+}
+
+TEST(SimulatorPatch, OnTenNodeElementsTheWallsTouchAlongTheQuadraticSurface) {
+    // One layer of 10-node tetrahedra (as the pipeline's bundles), the outer surface's corners condensed: the patch's
+    // blades press its corners and the mid-edge nodes between them, its walls touch on the lumen's triangles split at
+    // their mid-edge nodes. Flattened until the blades stand 0.7 mm apart on the axis (the two 0.4 mm walls 12 %
+    // compressed), the patch matches the whole tube solved with the same contact, and no node of the quadratic inner
+    // surface lies behind the opposite wall. (With the walls' contact on the corner triangles only, the quadratic
+    // surface passes through: WallContact.QuadraticPlatesTouchAlongTheirMidEdgeNodesOnlyWithTheSplitFaces.)
+    test::TempDir d("patchsim10");
+    const std::string bundle = d.file("tube10.h5");
+    write_bundle(bundle, test::quadratic_tube_case(Precision::FLOAT64, 16, 12).bundle);
+    const double end_deg = 2 * std::asin((0.7 - 0.2) / (2 * FLAT_HINGE_X)) / aneu::DEG;  // 3.58°
+    json scene = flattening_scene(bundle, "patch", false, end_deg);
+    scene["model"]["newton_per_frame"] = 80;  // the quadratic surface's contact takes more iterations near the end
+    sim::Simulator s = make(scene, d.file(""), "patch10.json");
+    const sim::Assessment a = sim::run_scene(s, sim::RunOptions{});
+    ASSERT_EQ(a.patches.size(), 1u);
+    const auto& p = a.patches[0];
+    EXPECT_EQ(p.unconverged_frames, 0);
+    EXPECT_GT(p.wall_pairs_touching, 0);
+    EXPECT_GT(p.min_wall_distance_mm, -1e-3);  // on the split triangles: every node of the quadratic surface
+    EXPECT_LT(p.min_wall_distance_mm, 0.011);
+    const sim::Clip& c = s.clips().at(0);
+    EXPECT_NEAR(c.opening_deg, end_deg, 1e-9);
+    const auto [ref, ref_min] = flattening_reference(bundle, end_deg);
+    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
+    EXPECT_GT(ref_min, -1e-3);
+    EXPECT_NEAR(c.grip_force_n, f_ref, 0.03 * f_ref);  // measured +0.8 %
+    std::printf("10-node tube flattened to %.2f deg: patch %d nodes, blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), walls %.4f mm apart "
+                "at the closest (reference %.4f), %d pairs touching\n",
+                end_deg, p.nodes, c.grip_force_n, f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm, ref_min, p.wall_pairs_touching);
 }
 
 TEST(SimulatorPatch, APatchTakesOverTissueTheLinearModelPushedWithTheOpenJaws) {

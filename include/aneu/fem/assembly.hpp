@@ -2,6 +2,8 @@
 #pragma once
 /// @file
 /// Assembly of the global stiffness matrix of a tetrahedral mesh, and the checks that it can be solved.
+#include <cstdint>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -45,6 +47,28 @@ Eigen::VectorXi quadratic_node_set(const QuadraticMesh& q, const Eigen::MatrixXi
 
 /// The 6-node faces (corners, then mid-edges (0,1), (1,2), (2,0)) of corner faces F3 of a quadratic mesh.
 Eigen::MatrixXi quadratic_faces(const QuadraticMesh& q, int n_linear_nodes, const Eigen::MatrixX3i& F3);
+
+/// The mid-edge nodes of a 10-node mesh (T10: #T×10, element.hpp's order), looked up by their two corners.
+class MidEdgeNodes {
+public:
+    /// @param tets which rows of T10 to take (empty: all)
+    /// @throws InputError T10 is not #T×10, or a row index is outside it
+    explicit MidEdgeNodes(const Eigen::MatrixXi& T10, const std::vector<int>& tets = {});
+    /// The node between corners a and b (either order); −1 where a–b is no edge of the elements taken.
+    int operator()(int a, int b) const;
+
+private:
+    std::vector<std::pair<std::uint64_t, int>> m_sorted;  // (corner pair key, mid node), sorted by key
+};
+
+/// The quadratic surface as flat triangles: each corner triangle (a, b, c) of F3 split at its edges' mid-edge nodes
+/// into (a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca), in its orientation (rows 4f … 4f + 3 for triangle f).
+/// Contact on these acts on every node of the 10-node elements' faces; on the corner triangles alone the quadratic
+/// surface between the corners bulges through what it touches and away from it (bench/bench_fold.cpp: a tube
+/// flattened to 0.7 × its two walls' thickness, one layer of elements, needs 2.9 × the blade force once its walls
+/// touch along their mid-edge nodes too).
+/// @throws InputError an edge of F3 with no mid-edge node in `mid`
+Eigen::MatrixX3i quadratic_surface_triangles(const MidEdgeNodes& mid, const Eigen::MatrixX3i& F3);
 
 /// Boundary faces of a tetrahedral mesh (faces used by exactly one tetrahedron), oriented outward,
 /// as corner-node triples.

@@ -1,0 +1,56 @@
+# SPDX-License-Identifier: MIT
+# One line (tab-separated) summing up a planned patch run made by bench/run_patch_case.sh: the plan, where the clip
+# stopped, the neck (closed share of its border, the widest sac-parent channel, sealed or not, the walls' deepest
+# interpenetration), the forces against the clip model's range, and the patch frames' cost.
+#   python3 bench/patch_case_summary.py RUN_DIR SECONDS SPRING_SCALE     -> the line
+#   python3 bench/patch_case_summary.py RUN_DIR --render-args            -> render_channel.py's arguments after OUT.png
+import json, math, os, sys
+
+run = sys.argv[1]
+scene = json.load(open(os.path.join(run, "scene.json")))
+report = json.load(open(os.path.join(run, "report.json"))) if os.path.exists(os.path.join(run, "report.json")) else {}
+app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
+keys = app["keyframes"]
+model_name = keys[0]["load"]
+model = scene["clip_models"][model_name]
+# the applier's pose where it closes the clip: the first keyframe asking for the smallest opening
+axis, up = keys[0]["axis"], keys[0]["up"]
+closing = keys[0]
+for k in keys:
+    axis, up = k.get("axis", axis), k.get("up", up)
+    if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
+        closing = dict(k, axis=axis, up=up)
+clip = (report.get("clips") or [{}])[0]
+case = os.path.basename(os.path.dirname(os.path.abspath(scene["bundle"])))
+if sys.argv[2] == "--render-args":
+    f = lambda v: ",".join("%.5f" % x for x in v)
+    title = "%s: %s, %.2f deg" % (case, model_name, clip.get("opening_deg", float("nan")))
+    print("'%s' %s %s %s %g %.4f" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), model["jaw_length_mm"],
+                                    clip.get("opening_deg", 0.0)))
+    sys.exit(0)
+secs, scale = int(sys.argv[2]), float(sys.argv[3])
+header = [l for l in open(os.path.join(run, "plan.json")) if l.startswith("//")]
+short = any("stop short" in l for l in header)
+sp = model["spring"]
+# the clip model's closing-force range: its label force (1 mm open) to its force fully open, ±10 %
+lo, hi = 0.9 * sp["label_force_n"], 1.1 * sp["open_force_n"]
+p = (report.get("patches") or [{}])[0]
+# the clip's force: the larger blade's grip on the tissue at its peak (the haptic peak is what the hand feels)
+blade = p.get("peak_blade_force_n", report.get("peak_vessel_force_n", float("nan")))
+fields = [
+    case,
+    "clip=%s open=%g tips_short=%s spring_x=%g%s" % (model_name, keys[0]["opening_deg"], "yes" if short else "no", scale,
+                                                    " (placeholder)" if sp.get("placeholder") else ""),
+    "state=%s held_deg=%.3f grip_n=%.3f" % (clip.get("state", "?"), clip.get("opening_deg", float("nan")), clip.get("grip_force_n", float("nan"))),
+    "neck_closed=%.1f%% channel_mm=%s sealed=%s interpenetration_mm=%.4f" % (
+        100 * report.get("neck_closed_fraction", float("nan")),
+        "%.3f" % report["neck_channel_mm"] if report.get("neck_channel_mm") is not None else "-",
+        report.get("neck_sealed", "-"), report.get("neck_interpenetration_mm", float("nan"))),
+    "peak_clip_force_n=%.3f range_n=%.2f-%.2f within=%s haptic_peak_n=%.3f" % (
+        blade, lo, hi, "yes" if lo <= blade <= hi else "no", report.get("peak_force_n", float("nan"))),
+    "patch_frames=%s unconverged=%s mean_solve_s=%.1f walls_min_mm=%s" % (
+        p.get("frames", "-"), p.get("unconverged_frames", "-"), p.get("mean_solve_ms", float("nan")) / 1000,
+        "%.4f" % p["min_wall_distance_mm"] if p.get("min_wall_distance_mm") is not None else "-"),
+    "scene_t=%.3f run_s=%d" % (report.get("total_time_s", float("nan")), secs),
+]
+print("\t".join(fields))
