@@ -18,7 +18,7 @@ for i, spec in enumerate(objs):
     ren = vtk.vtkRenderer(); ren.SetViewport(i / len(objs), 0, (i + 1) / len(objs), 1); ren.SetBackground(1, 1, 1)
     m = vtk.vtkPolyDataMapper(); m.SetInputConnection(cut.GetOutputPort()); m.SetLookupTable(lut); m.SetScalarRange(0, 0.3); m.SetScalarModeToUseCellData()
     a = vtk.vtkActor(); a.SetMapper(m); a.GetProperty().SetLineWidth(3); ren.AddActor(a)
-    x = ch[1][0]
+    x = float(__import__("os").environ.get("FOCUSX", ch[1][0])) if ch[0] == 0 or "FOCUSX_ALL" in __import__("os").environ else ch[1][0]
     cam = ren.GetActiveCamera(); cam.SetFocalPoint(x - 0.4 * (1 if x > 0 else -1), 0, 3); cam.SetPosition(x - 0.4 * (1 if x > 0 else -1), 0, 30); cam.SetViewUp(0, 1, 0)
     cam.ParallelProjectionOn(); cam.SetParallelScale(0.6)
     t = vtk.vtkTextActor(); t.SetInput("%s: channel %.3f mm" % (title, ch[0])); t.GetTextProperty().SetColor(0, 0, 0); t.GetTextProperty().SetFontSize(15); ren.AddActor2D(t)

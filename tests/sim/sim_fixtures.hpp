@@ -19,6 +19,36 @@ struct TubeCase {
     fem::StructuredMesh mesh;
 };
 
+/// A case bundle (volume, fem, condensed) of a mesh: K condensed onto `kept` with `fixed` held.
+inline Bundle case_bundle(Precision precision, const std::string& id, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets,
+                          const Eigen::VectorXi& region, const std::vector<std::string>& region_names, const Eigen::VectorXi& outer,
+                          const Eigen::VectorXi& inner, const std::vector<Material>& mats, const Eigen::SparseMatrix<double, Eigen::RowMajor>& K,
+                          const Eigen::VectorXi& fixed, const Eigen::VectorXi& kept) {
+    fem::CondenseParams cp;
+    cp.precision = precision;
+    cp.tile_size = 64;
+    cp.residual_columns = 0;
+    Bundle b;
+    b.meta.case_id = id;
+    VolumeData v;
+    v.nodes = nodes;
+    v.tets = tets;
+    v.tet_region = region;
+    v.region_names = region_names;
+    v.node_sets["outer"] = outer;
+    v.node_sets["inner"] = inner;
+    b.volume = v;
+    FemData f;
+    f.element_order = tets.cols() == 10 ? 2 : 1;
+    f.K = K;
+    f.K_upper_only = false;
+    f.materials = mats;
+    f.fixed_dofs = fixed;
+    b.fem = f;
+    b.condensed = fem::condense(K, fixed, kept, cp);
+    return b;
+}
+
 /// Tube r 1.5..1.9 mm, length 8 mm along z; elements whose centroid has z in [sac_z0, sac_z1] (3, 5) and angle
 /// within ±sac_deg (40°) of +x are "aneurysm" (E_sac), the rest "artery" (E_art).
 inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, double E_art = 1.0, double E_sac = 1.0,
@@ -36,27 +66,7 @@ inline TubeCase tube_case(Precision precision, int n_theta = 24, int n_z = 16, d
     std::vector<Material> mats{{"artery", E_art, nu}, {"aneurysm", E_sac, nu}};
     c.K = fem::assemble_stiffness(m.V, m.T, region, mats);
     const fem::WallDofSets sets = fem::wall_dof_sets(m);
-    fem::CondenseParams cp;
-    cp.precision = precision;
-    cp.tile_size = 64;
-    cp.residual_columns = 0;
-    Bundle& b = c.bundle;
-    b.meta.case_id = "tube-test";
-    VolumeData v;
-    v.nodes = m.V;
-    v.tets = m.T;
-    v.tet_region = region;
-    v.region_names = {"artery", "aneurysm"};
-    v.node_sets["outer"] = m.outer;
-    v.node_sets["inner"] = m.inner;
-    b.volume = v;
-    FemData f;
-    f.K = c.K;
-    f.K_upper_only = false;
-    f.materials = mats;
-    f.fixed_dofs = sets.fixed;
-    b.fem = f;
-    b.condensed = fem::condense(c.K, sets.fixed, sets.kept, cp);
+    c.bundle = case_bundle(precision, "tube-test", m.V, m.T, region, {"artery", "aneurysm"}, m.outer, m.inner, mats, c.K, sets.fixed, sets.kept);
     return c;
 }
 
@@ -83,28 +93,10 @@ inline TubeCase quadratic_tube_case(Precision precision, int n_theta = 24, int n
             else if (n < n_lin && outer[static_cast<size_t>(n)]) kept.push_back(static_cast<int>(3 * n + a));
         }
     }
-    fem::CondenseParams cp;
-    cp.precision = precision;
-    cp.tile_size = 64;
-    cp.residual_columns = 0;
-    Bundle& b = c.bundle;
-    b.meta.case_id = "quadratic-tube-test";
-    VolumeData v;
-    v.nodes = q.V;
-    v.tets = q.T;
-    v.tet_region = region;
-    v.region_names = {"artery"};
-    v.node_sets["outer"] = fem::quadratic_node_set(q, m.T, n_lin, m.outer);
-    v.node_sets["inner"] = fem::quadratic_node_set(q, m.T, n_lin, m.inner);
-    b.volume = v;
-    FemData f;
-    f.element_order = 2;
-    f.K = c.K;
-    f.K_upper_only = false;
-    f.materials = mats;
-    f.fixed_dofs = Eigen::Map<Eigen::VectorXi>(fixed.data(), static_cast<Eigen::Index>(fixed.size()));
-    b.fem = f;
-    b.condensed = fem::condense(c.K, f.fixed_dofs, Eigen::Map<Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), cp);
+    c.bundle = case_bundle(precision, "quadratic-tube-test", q.V, q.T, region, {"artery"}, fem::quadratic_node_set(q, m.T, n_lin, m.outer),
+                           fem::quadratic_node_set(q, m.T, n_lin, m.inner), mats, c.K,
+                           Eigen::Map<Eigen::VectorXi>(fixed.data(), static_cast<Eigen::Index>(fixed.size())),
+                           Eigen::Map<Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())));
     return c;
 }
 
