@@ -10,11 +10,11 @@
 // rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
 // solve's).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
-#include <array>
 #include <mutex>
 #include <optional>
 
