@@ -10,7 +10,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=bench/results/study
-specs=${*:-"1:24 1:48 2:24 2:48 1:72 1:96 1:24:q 1:48:q"}
+specs=${*:-"1:24 1:48 2:24 2:48 1:72 1:96 1:24:q 1:48:q 1:72:q 1:96:q"}
 for spec in $specs; do
   IFS=: read -r layers around q <<<"$spec"
   if [ "${q:-}" = q ]; then flag=--p2-contact; dst=$out/fold_quadratic.jsonl; else flag=; dst=$out/fold_corner.jsonl; fi
