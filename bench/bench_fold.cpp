@@ -24,7 +24,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <numeric>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -45,52 +44,6 @@
 using namespace aneu;
 
 namespace {
-
-// The channel across the blades' mid-plane z = zc: faces sorted widest first joined across shared edges until a
-// face with z < zc − clear meets one with z > zc + clear (union–find). Returns that width and the face where it is.
-std::pair<double, int> channel(const Eigen::MatrixX3i& F, const Eigen::MatrixX3d& Xrest, const std::vector<double>& width, double zc,
-                               double clear) {
-    const Eigen::Index NF = F.rows();
-    std::vector<int> order(static_cast<size_t>(NF));
-    std::iota(order.begin(), order.end(), 0);
-    std::sort(order.begin(), order.end(), [&](int a, int b) { return width[static_cast<size_t>(a)] > width[static_cast<size_t>(b)]; });
-    std::vector<int> parent(static_cast<size_t>(NF));
-    std::iota(parent.begin(), parent.end(), 0);
-    std::vector<char> lo(static_cast<size_t>(NF)), hi(static_cast<size_t>(NF)), on(static_cast<size_t>(NF), 0);
-    for (Eigen::Index f = 0; f < NF; ++f) {
-        const double z = (Xrest(F(f, 0), 2) + Xrest(F(f, 1), 2) + Xrest(F(f, 2), 2)) / 3.0;
-        lo[static_cast<size_t>(f)] = z < zc - clear;
-        hi[static_cast<size_t>(f)] = z > zc + clear;
-    }
-    auto find = [&](int a) {
-        while (parent[static_cast<size_t>(a)] != a) a = parent[static_cast<size_t>(a)] = parent[static_cast<size_t>(parent[static_cast<size_t>(a)])];
-        return a;
-    };
-    // edges → faces
-    std::vector<std::vector<int>> faces_of(static_cast<size_t>(Xrest.rows()));
-    for (Eigen::Index f = 0; f < NF; ++f)
-        for (int k = 0; k < 3; ++k) faces_of[static_cast<size_t>(F(f, k))].push_back(static_cast<int>(f));
-    for (int f : order) {
-        on[static_cast<size_t>(f)] = 1;
-        for (int k = 0; k < 3; ++k) {
-            const int a = F(f, k), b = F(f, (k + 1) % 3);
-            for (int g : faces_of[static_cast<size_t>(a)]) {
-                if (!on[static_cast<size_t>(g)] || g == f) continue;
-                bool shares = false;
-                for (int j = 0; j < 3; ++j) shares |= F(g, j) == b;
-                if (!shares) continue;
-                int rf = find(f), rg = find(g);
-                if (rf == rg) continue;
-                parent[static_cast<size_t>(rg)] = rf;
-                lo[static_cast<size_t>(rf)] |= lo[static_cast<size_t>(rg)];
-                hi[static_cast<size_t>(rf)] |= hi[static_cast<size_t>(rg)];
-            }
-        }
-        const int r = find(f);
-        if (lo[static_cast<size_t>(r)] && hi[static_cast<size_t>(r)]) return {width[static_cast<size_t>(f)], f};
-    }
-    return {0.0, -1};
-}
 
 std::vector<double> parse_list(const std::string& s) {
     std::vector<double> v;
@@ -269,7 +222,14 @@ int main(int argc, char** argv) {
                 ++measured;
                 if (std::abs(z - zc) <= 0.5 * jaw) fold_max = std::max(fold_max, width[static_cast<size_t>(f)]);
             }
-            const auto [ch, at] = channel(L.F, L.X, width, zc, 1.5);
+            // The channel from before the blades to beyond them: faces more than 1.5 mm from their mid-plane at rest.
+            std::vector<char> before(static_cast<size_t>(L.F.rows())), beyond(static_cast<size_t>(L.F.rows()));
+            for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
+                const double z = (L.X(L.F(f, 0), 2) + L.X(L.F(f, 1), 2) + L.X(L.F(f, 2), 2)) / 3.0;
+                before[static_cast<size_t>(f)] = z < zc - 1.5;
+                beyond[static_cast<size_t>(f)] = z > zc + 1.5;
+            }
+            const auto [ch, at] = sim::widest_channel(L.F, width, before, beyond);
             Eigen::Vector3d where = Eigen::Vector3d::Zero();
             if (at >= 0)
                 for (int k = 0; k < 3; ++k) where += y.row(L.F(at, k)).transpose() / 3.0;

@@ -294,6 +294,58 @@ double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, c
     return balls.width(face, w, cap_mm);
 }
 
+std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& a_side,
+                                      const std::vector<char>& b_side) {
+    const Eigen::Index NF = F.rows();
+    // Faces joined across their edges, widest first (union–find); the width at which an A face and a B face first
+    // share a component is the widest channel between them (a maximin path).
+    std::vector<std::array<int, 3>> edges;  // (low vertex, high vertex, face)
+    for (Eigen::Index f = 0; f < NF; ++f)
+        for (int k = 0; k < 3; ++k) {
+            const int a = F(f, k), b = F(f, (k + 1) % 3);
+            edges.push_back({std::min(a, b), std::max(a, b), static_cast<int>(f)});
+        }
+    std::sort(edges.begin(), edges.end());
+    std::vector<std::vector<int>> nbr(static_cast<size_t>(NF));
+    for (size_t i = 0; i < edges.size();) {
+        size_t j = i;
+        while (j < edges.size() && edges[j][0] == edges[i][0] && edges[j][1] == edges[i][1]) ++j;
+        for (size_t p = i; p < j; ++p)
+            for (size_t q = i; q < j; ++q)
+                if (p != q) nbr[static_cast<size_t>(edges[p][2])].push_back(edges[q][2]);
+        i = j;
+    }
+    std::vector<int> order(static_cast<size_t>(NF));
+    for (int f = 0; f < NF; ++f) order[static_cast<size_t>(f)] = f;
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return width[static_cast<size_t>(a)] > width[static_cast<size_t>(b)]; });
+    std::vector<int> up(static_cast<size_t>(NF), -1);
+    std::vector<char> has_a(static_cast<size_t>(NF), 0), has_b(static_cast<size_t>(NF), 0);
+    auto find = [&](int x) {
+        while (up[static_cast<size_t>(x)] != x) {
+            up[static_cast<size_t>(x)] = up[static_cast<size_t>(up[static_cast<size_t>(x)])];
+            x = up[static_cast<size_t>(x)];
+        }
+        return x;
+    };
+    for (int f : order) {
+        const size_t fs = static_cast<size_t>(f);
+        up[fs] = f;
+        has_a[fs] = a_side[fs];
+        has_b[fs] = b_side[fs];
+        for (int g : nbr[fs]) {
+            if (up[static_cast<size_t>(g)] < 0) continue;
+            const int a = find(f), b = find(g);
+            if (a == b) continue;
+            up[static_cast<size_t>(b)] = a;
+            has_a[static_cast<size_t>(a)] |= has_a[static_cast<size_t>(b)];
+            has_b[static_cast<size_t>(a)] |= has_b[static_cast<size_t>(b)];
+        }
+        const int r = find(f);
+        if (has_a[static_cast<size_t>(r)] && has_b[static_cast<size_t>(r)]) return {width[fs], f};
+    }
+    return {0.0, -1};
+}
+
 NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm, double clear_mm, double measure_mm) {
     NeckChannel out;
     if (lumen.neck_loops.empty() || sac_region < 0) return out;
@@ -332,57 +384,9 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     }
     out.face_width_mm = width;
     if (!any_sac || !any_parent) return out;
-    // Faces joined across their edges, widest first (union–find); the width at which a sac face and a parent face
-    // first share a component is the widest channel between them (a maximin path).
-    std::vector<std::array<int, 3>> edges;  // (low vertex, high vertex, face)
-    for (Eigen::Index f = 0; f < NF; ++f)
-        for (int k = 0; k < 3; ++k) {
-            const int a = F(f, k), b = F(f, (k + 1) % 3);
-            edges.push_back({std::min(a, b), std::max(a, b), static_cast<int>(f)});
-        }
-    std::sort(edges.begin(), edges.end());
-    std::vector<std::vector<int>> nbr(static_cast<size_t>(NF));
-    for (size_t i = 0; i < edges.size();) {
-        size_t j = i;
-        while (j < edges.size() && edges[j][0] == edges[i][0] && edges[j][1] == edges[i][1]) ++j;
-        for (size_t p = i; p < j; ++p)
-            for (size_t q = i; q < j; ++q)
-                if (p != q) nbr[static_cast<size_t>(edges[p][2])].push_back(edges[q][2]);
-        i = j;
-    }
-    std::vector<int> order(static_cast<size_t>(NF));
-    for (int f = 0; f < NF; ++f) order[static_cast<size_t>(f)] = f;
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return width[static_cast<size_t>(a)] > width[static_cast<size_t>(b)]; });
-    std::vector<int> up(static_cast<size_t>(NF), -1);
-    std::vector<char> has_sac(static_cast<size_t>(NF), 0), has_parent(static_cast<size_t>(NF), 0);
-    auto find = [&](int x) {
-        while (up[static_cast<size_t>(x)] != x) {
-            up[static_cast<size_t>(x)] = up[static_cast<size_t>(up[static_cast<size_t>(x)])];
-            x = up[static_cast<size_t>(x)];
-        }
-        return x;
-    };
-    for (int f : order) {
-        const size_t fs = static_cast<size_t>(f);
-        up[fs] = f;
-        has_sac[fs] = sac[fs];
-        has_parent[fs] = parent[fs];
-        for (int g : nbr[fs]) {
-            if (up[static_cast<size_t>(g)] < 0) continue;
-            const int a = find(f), b = find(g);
-            if (a == b) continue;
-            up[static_cast<size_t>(b)] = a;
-            has_sac[static_cast<size_t>(a)] |= has_sac[static_cast<size_t>(b)];
-            has_parent[static_cast<size_t>(a)] |= has_parent[static_cast<size_t>(b)];
-        }
-        const int r = find(f);
-        if (has_sac[static_cast<size_t>(r)] && has_parent[static_cast<size_t>(r)]) {
-            out.width_mm = width[fs];
-            out.at = balls.centroids().row(f).transpose();
-            return out;
-        }
-    }
-    out.width_mm = 0.0;  // separated at every width (a sac and parent on different pieces of lumen)
+    const auto [w, at] = widest_channel(F, width, sac, parent);
+    out.width_mm = w;  // 0: separated at every width (a sac and parent on different pieces of lumen)
+    if (at >= 0) out.at = balls.centroids().row(at).transpose();
     return out;
 }
 

@@ -10,7 +10,6 @@
 // rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
 // solve's).
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -169,26 +168,25 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
                 P.cand.push_back(a);
             }
     }
+    // The lumen's triangles in the patch, turned into the lumen (towards the opposite wall), in volume nodes.
     const SimLumen& L = sf.lumen;
+    std::vector<int> in_patch;
+    for (Eigen::Index f = 0; f < L.F.rows(); ++f)
+        if (pm.local(L.node[L.F(f, 0)]) >= 0 && pm.local(L.node[L.F(f, 1)]) >= 0 && pm.local(L.node[L.F(f, 2)]) >= 0)
+            in_patch.push_back(static_cast<int>(f));
+    Eigen::MatrixX3i walls(static_cast<Eigen::Index>(in_patch.size()), 3);
+    for (size_t k = 0; k < in_patch.size(); ++k)
+        walls.row(static_cast<Eigen::Index>(k)) << L.node[L.F(in_patch[k], 0)], L.node[L.F(in_patch[k], 2)], L.node[L.F(in_patch[k], 1)];
+    if (quadratic) walls = fem::quadratic_surface_triangles(*mid, walls);
+    // In patch numbering; a split triangle with a mid-edge node outside the patch is left out with its three siblings.
     std::vector<Eigen::Vector3i> tri;
-    for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
-        const int a = pm.local(L.node[L.F(f, 0)]), b = pm.local(L.node[L.F(f, 1)]), c = pm.local(L.node[L.F(f, 2)]);
-        if (a < 0 || b < 0 || c < 0) continue;
-        if (!quadratic) {
-            tri.emplace_back(a, c, b);  // into the lumen: towards the opposite wall
-            continue;
-        }
-        const Eigen::MatrixX3i split =
-            fem::quadratic_surface_triangles(*mid, (Eigen::MatrixX3i(1, 3) << L.node[L.F(f, 0)], L.node[L.F(f, 2)], L.node[L.F(f, 1)]).finished());
+    const int per = quadratic ? 4 : 1;
+    for (Eigen::Index f = 0; f < walls.rows(); f += per) {
         bool inside = true;
-        std::array<Eigen::Vector3i, 4> loc;
-        for (int r = 0; r < 4; ++r)
-            for (int k = 0; k < 3; ++k) {
-                loc[static_cast<size_t>(r)][k] = pm.local(split(r, k));
-                inside = inside && loc[static_cast<size_t>(r)][k] >= 0;
-            }
-        if (inside)
-            for (const Eigen::Vector3i& t : loc) tri.push_back(t);
+        for (int r = 0; r < per; ++r)
+            for (int k = 0; k < 3; ++k) inside = inside && pm.local(walls(f + r, k)) >= 0;
+        if (!inside) continue;
+        for (int r = 0; r < per; ++r) tri.emplace_back(pm.local(walls(f + r, 0)), pm.local(walls(f + r, 1)), pm.local(walls(f + r, 2)));
     }
     P.inner.resize(static_cast<Eigen::Index>(tri.size()), 3);
     for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();

@@ -8,6 +8,7 @@
 
 #include <Eigen/Geometry>
 
+#include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "ccd.hpp"
 #include "merged_pattern.hpp"
@@ -452,12 +453,11 @@ LinearBody::LinearBody(Eigen::SparseMatrix<double, Eigen::RowMajor> K, bool uppe
 }
 
 double next_spring_opening(double theta, double R, double k, bool held, bool touching) {
-    constexpr double DEGREE = 3.14159265358979323846 / 180.0;
     if (!(k > 0)) return theta;
     double step = R / k;  // > 0: closing
-    if (step < 0) step = std::max(step, -1.0 * DEGREE);
+    if (step < 0) step = std::max(step, -1.0 * DEG);
     else {
-        if (!held) step = std::min(step, 1.0 * DEGREE);
+        if (!held) step = std::min(step, 1.0 * DEG);
         if (touching) step = std::min(step, 0.5 * theta);
     }
     return std::max(0.0, theta - step);

@@ -3,6 +3,7 @@
 /// @file
 /// Measures of a clipping's result on the deformed vessel (sim/assessment.cpp).
 #include <limits>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -55,6 +56,14 @@ struct NeckChannel {
 /// faces round the point's face (its two rings) constrain it by their vertices only: the ball does not rest on
 /// the facets' kinks beside the point.
 double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm);
+
+/// The widest channel across a triangle surface between two sets of its faces: the largest d such that faces of
+/// `width` ≥ d, joined across shared edges, connect a face of `a_side` to one of `b_side` (a maximin path, by
+/// union–find over the faces widest first). Returns d and the face where the channel is narrowest; (0, −1) when the
+/// two sides lie on different pieces of the surface. The neck's channel (neck_channel) and the flattened tube's
+/// (bench/bench_fold.cpp).
+std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& a_side,
+                                      const std::vector<char>& b_side);
 
 /// The channel through the neck (NeckChannel) on the deformed lumen `y`; `sac_region` is the aneurysm's index in
 /// SimLumen::face_region. Faces farther than `measure_mm` from the neck line at rest are taken as `cap_mm` wide.
