@@ -16,7 +16,8 @@
 // measure). The lumen is the inner surface's 6-node faces split in four (the quadratic elements' mid-edge nodes
 // shape the fold); the walls' contact acts on the corner triangles, as in the simulator, or with --p2-contact on
 // the split faces (every node of the quadratic inner surface). Each line also gives how far the quadratic surface's
-// walls pass through each other (its closest pair's signed distance).
+// walls pass through each other (its closest pair's signed distance), and the channel measured on the corner
+// triangles alone (channel_corner_triangles_mm: the simulator's neck measures see the lumen's corner nodes).
 // Usage: aneu_bench_fold [--layers 1] [--around 24] [--along 16] [--inner-radius-mm 1.5] [--wall-mm 0.28]
 //                        [--length-mm 6] [--jaw-mm 1] [--E 1] [--nu 0.45] [--gaps 0.9,0.8,0.7,0.6] [--obj PREFIX]
 // --obj PREFIX: the deformed lumen at each gap as PREFIX_<gap>.obj (with "# width f w" lines, as ANEU_LUMEN_OBJ).
@@ -122,22 +123,31 @@ int main(int argc, char** argv) {
         const Eigen::MatrixX3i& contact_faces = p2_contact ? split_faces : corner_faces;
         // The measured lumen: the same triangles over the inner surface's nodes only, reversed (a lumen's faces
         // point into the wall).
-        std::vector<int> lum_node, lum_of(static_cast<size_t>(X.rows()), -1);
-        auto lum = [&](int n) {
-            if (lum_of[static_cast<size_t>(n)] < 0) {
-                lum_of[static_cast<size_t>(n)] = static_cast<int>(lum_node.size());
-                lum_node.push_back(n);
-            }
-            return lum_of[static_cast<size_t>(n)];
+        struct Lumen {
+            sim::SimLumen L;
+            std::vector<int> node;  // the tube's node of each lumen vertex
         };
-        std::vector<Eigen::Vector3i> lf;
-        for (Eigen::Index f = 0; f < split_faces.rows(); ++f) lf.emplace_back(lum(split_faces(f, 0)), lum(split_faces(f, 2)), lum(split_faces(f, 1)));
-        sim::SimLumen L;
-        L.F.resize(static_cast<Eigen::Index>(lf.size()), 3);
-        for (size_t f = 0; f < lf.size(); ++f) L.F.row(static_cast<Eigen::Index>(f)) = lf[f].transpose();
-        L.X.resize(static_cast<Eigen::Index>(lum_node.size()), 3);
-        for (size_t k = 0; k < lum_node.size(); ++k) L.X.row(static_cast<Eigen::Index>(k)) = X.row(lum_node[k]);
-        L.wall_mm = Eigen::VectorXd::Constant(L.X.rows(), wall);
+        auto lumen_of = [&](const Eigen::MatrixX3i& faces) {
+            Lumen out;
+            std::vector<int> of(static_cast<size_t>(X.rows()), -1);
+            auto lum = [&](int n) {
+                if (of[static_cast<size_t>(n)] < 0) {
+                    of[static_cast<size_t>(n)] = static_cast<int>(out.node.size());
+                    out.node.push_back(n);
+                }
+                return of[static_cast<size_t>(n)];
+            };
+            out.L.F.resize(faces.rows(), 3);
+            for (Eigen::Index f = 0; f < faces.rows(); ++f) out.L.F.row(f) << lum(faces(f, 0)), lum(faces(f, 2)), lum(faces(f, 1));
+            out.L.X.resize(static_cast<Eigen::Index>(out.node.size()), 3);
+            for (size_t k = 0; k < out.node.size(); ++k) out.L.X.row(static_cast<Eigen::Index>(k)) = X.row(out.node[k]);
+            out.L.wall_mm = Eigen::VectorXd::Constant(out.L.X.rows(), wall);
+            return out;
+        };
+        // The quadratic surface (what the walls' contact acts on with --p2-contact) and its corner triangles (what
+        // the simulator's neck measures see: the lumen's corner nodes).
+        const Lumen quad = lumen_of(split_faces), corner = lumen_of(corner_faces);
+        const sim::SimLumen& L = quad.L;
         std::fprintf(stderr, "tube: %d layers, %d around, %d along: %lld nodes (%lld DOFs), %lld tetrahedra; %zu blade candidates, %lld wall faces\n",
                      layers, around, along, static_cast<long long>(X.rows()), static_cast<long long>(solid.dofs()), static_cast<long long>(q.T.rows()),
                      cand.size(), static_cast<long long>(contact_faces.rows()));
@@ -210,29 +220,41 @@ int main(int argc, char** argv) {
             // The quadratic surface itself (mid-edge nodes included): how far its walls pass through each other
             // where the contact acts on the corner triangles only.
             const fem::ContactBody wb2(solid, X, split_faces, u, cp);
-            Eigen::MatrixX3d y = L.X;
-            for (size_t k = 0; k < lum_node.size(); ++k) y.row(static_cast<Eigen::Index>(k)) += u.segment<3>(3 * lum_node[k]).transpose();
-            std::vector<double> width(static_cast<size_t>(L.F.rows()), 2.0);
-            int measured = 0;
-            double fold_max = 0;
-            for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
-                const double z = (L.X(L.F(f, 0), 2) + L.X(L.F(f, 1), 2) + L.X(L.F(f, 2), 2)) / 3.0;
-                if (std::abs(z - zc) > 0.5 * jaw + 1.5) continue;
-                width[static_cast<size_t>(f)] = sim::lumen_width(L, y, static_cast<int>(f), Eigen::Vector3d::Constant(1.0 / 3.0), 2.0);
-                ++measured;
-                if (std::abs(z - zc) <= 0.5 * jaw) fold_max = std::max(fold_max, width[static_cast<size_t>(f)]);
-            }
-            // The channel from before the blades to beyond them: faces more than 1.5 mm from their mid-plane at rest.
-            std::vector<char> before(static_cast<size_t>(L.F.rows())), beyond(static_cast<size_t>(L.F.rows()));
-            for (Eigen::Index f = 0; f < L.F.rows(); ++f) {
-                const double z = (L.X(L.F(f, 0), 2) + L.X(L.F(f, 1), 2) + L.X(L.F(f, 2), 2)) / 3.0;
-                before[static_cast<size_t>(f)] = z < zc - 1.5;
-                beyond[static_cast<size_t>(f)] = z > zc + 1.5;
-            }
-            const auto [ch, at] = sim::widest_channel(L.F, width, before, beyond);
-            Eigen::Vector3d where = Eigen::Vector3d::Zero();
-            if (at >= 0)
-                for (int k = 0; k < 3; ++k) where += y.row(L.F(at, k)).transpose() / 3.0;
+            struct Channel {
+                double width = 0, fold_max = 0;
+                int measured = 0;
+                Eigen::Vector3d where = Eigen::Vector3d::Zero();
+                Eigen::MatrixX3d y;
+                std::vector<double> face_width;
+            };
+            auto channel_of = [&](const Lumen& lu) {
+                Channel c;
+                const sim::SimLumen& M = lu.L;
+                c.y = M.X;
+                for (size_t k = 0; k < lu.node.size(); ++k) c.y.row(static_cast<Eigen::Index>(k)) += u.segment<3>(3 * lu.node[k]).transpose();
+                c.face_width.assign(static_cast<size_t>(M.F.rows()), 2.0);
+                std::vector<char> before(static_cast<size_t>(M.F.rows())), beyond(static_cast<size_t>(M.F.rows()));
+                for (Eigen::Index f = 0; f < M.F.rows(); ++f) {
+                    const double z = (M.X(M.F(f, 0), 2) + M.X(M.F(f, 1), 2) + M.X(M.F(f, 2), 2)) / 3.0;
+                    // The channel from before the blades to beyond them: faces more than 1.5 mm from their mid-plane at rest.
+                    before[static_cast<size_t>(f)] = z < zc - 1.5;
+                    beyond[static_cast<size_t>(f)] = z > zc + 1.5;
+                    if (std::abs(z - zc) > 0.5 * jaw + 1.5) continue;
+                    c.face_width[static_cast<size_t>(f)] = sim::lumen_width(M, c.y, static_cast<int>(f), Eigen::Vector3d::Constant(1.0 / 3.0), 2.0);
+                    ++c.measured;
+                    if (std::abs(z - zc) <= 0.5 * jaw) c.fold_max = std::max(c.fold_max, c.face_width[static_cast<size_t>(f)]);
+                }
+                const auto [w, at] = sim::widest_channel(M.F, c.face_width, before, beyond);
+                c.width = w;
+                if (at >= 0)
+                    for (int k = 0; k < 3; ++k) c.where += c.y.row(M.F(at, k)).transpose() / 3.0;
+                return c;
+            };
+            const Channel cq = channel_of(quad), cc = channel_of(corner);
+            const Eigen::MatrixX3d& y = cq.y;
+            const std::vector<double>& width = cq.face_width;
+            const double ch = cq.width;
+            const Eigen::Vector3d& where = cq.where;
             if (!obj.empty()) {
                 char name[64];
                 std::snprintf(name, sizeof name, "_%.2f.obj", target_rel);
@@ -259,8 +281,9 @@ int main(int argc, char** argv) {
             j["contact_on"] = p2_contact ? "quadratic surface (6-node faces split in four)" : "corner triangles";
             j["channel_mm"] = ch;
             j["channel_at"] = {where.x(), where.y(), where.z()};
-            j["widest_face_under_jaws_mm"] = fold_max;
-            j["faces_measured"] = measured;
+            j["channel_corner_triangles_mm"] = cc.width;  // the same measure on the corner triangles (the simulator's lumen)
+            j["widest_face_under_jaws_mm"] = cq.fold_max;
+            j["faces_measured"] = cq.measured;
             j["steps"] = steps;
             j["unconverged_steps"] = unconverged;
             j["newton_iterations"] = its;

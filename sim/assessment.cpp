@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
+#include "aneu/fem/assembly.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
 
@@ -10,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -259,6 +261,32 @@ std::vector<NeckPointOnLumen> neck_line_of(const SimLumen& lumen, size_t l) {
 
 }  // namespace
 
+Eigen::VectorXd lumen_edges_mm(const SimLumen& lumen) {
+    const Eigen::MatrixX3i& F = lumen.F;
+    const Eigen::Index NF = F.rows();
+    Eigen::VectorXd shortest(NF);
+    std::vector<std::vector<int>> faces_of(static_cast<size_t>(lumen.X.rows()));
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        shortest[f] = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+            shortest[f] = std::min(shortest[f], (lumen.X.row(F(f, k)) - lumen.X.row(F(f, (k + 1) % 3))).norm());
+            faces_of[static_cast<size_t>(F(f, k))].push_back(static_cast<int>(f));
+        }
+    }
+    Eigen::VectorXd out(NF);
+    std::vector<int> ring;
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        ring.clear();
+        for (int k = 0; k < 3; ++k) ring.insert(ring.end(), faces_of[static_cast<size_t>(F(f, k))].begin(), faces_of[static_cast<size_t>(F(f, k))].end());
+        std::sort(ring.begin(), ring.end());
+        ring.erase(std::unique(ring.begin(), ring.end()), ring.end());
+        double sum = 0;
+        for (int g : ring) sum += shortest[g];
+        out[f] = sum / static_cast<double>(ring.size());
+    }
+    return out;
+}
+
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm) {
     NeckOcclusion out;
     if (lumen.neck_loops.empty()) return out;
@@ -386,7 +414,10 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     if (!any_sac || !any_parent) return out;
     const auto [w, at] = widest_channel(F, width, sac, parent);
     out.width_mm = w;  // 0: separated at every width (a sac and parent on different pieces of lumen)
-    if (at >= 0) out.at = balls.centroids().row(at).transpose();
+    if (at >= 0) {
+        out.at = balls.centroids().row(at).transpose();
+        out.face = at;
+    }
     return out;
 }
 
@@ -418,7 +449,37 @@ Assessment Simulator::Impl::assess() {
             y.row(l) = lumen.X.row(l) + P.v.segment<3>(3 * p).transpose() + (d.row(b) - d_patch.row(b));
         }
     }
-    const NeckOcclusion occ = neck_occlusion(lumen, y, scene.neck_gap_mm, lumen.wall_mm);
+    // With a patch of 10-node elements the neck is measured on the quadratic surface (split_lumen): the walls touch
+    // there, and on the corner triangles a flattened fold's channel reads about twice as wide (bench/bench_fold.cpp).
+    // The mid-edge vertices take the patch's displacement where it has them, else the mean of their corners'.
+    const PatchRun* quad = nullptr;
+    for (const PatchRun& P : patches)
+        if (P.alive && P.quadratic && quad == nullptr) quad = &P;
+    std::optional<SplitLumen> split;
+    Eigen::MatrixX3d yq;
+    if (quad != nullptr) {
+        const fem::MidEdgeNodes mid(model.volume->tets);
+        split = split_lumen(lumen, [&](int a, int b) { return mid(a, b); }, model.volume->nodes);
+        const SimLumen& Q = split->lumen;
+        yq.resize(Q.X.rows(), 3);
+        yq.topRows(y.rows()) = y;
+        for (Eigen::Index e = 0; e < split->between.rows(); ++e) {
+            const Eigen::Index v = y.rows() + e, a = split->between(e, 0), b = split->between(e, 1);
+            Eigen::RowVector3d u = 0.5 * ((y.row(a) - lumen.X.row(a)) + (y.row(b) - lumen.X.row(b)));
+            for (const PatchRun& P : patches) {
+                const int p = P.alive ? P.pm->local(Q.node[v]) : -1;
+                if (p < 0) continue;
+                const Eigen::Index ba = lumen.bind[a], bb = lumen.bind[b];
+                u = P.v.segment<3>(3 * p).transpose() + 0.5 * ((d.row(ba) - d_patch.row(ba)) + (d.row(bb) - d_patch.row(bb)));
+                break;
+            }
+            yq.row(v) = Q.X.row(v) + u;
+        }
+    }
+    const SimLumen& measured = split ? split->lumen : lumen;
+    out.neck_on_quadratic_surface = split.has_value();
+    const Eigen::MatrixX3d& ym = split ? yq : y;
+    const NeckOcclusion occ = neck_occlusion(measured, ym, scene.neck_gap_mm, measured.wall_mm);
     out.neck_closed_fraction = occ.fraction;
     out.neck_length_mm = occ.length_mm;
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
@@ -428,9 +489,10 @@ Assessment Simulator::Impl::assess() {
     {
         const auto& names = model.surface.region_names;
         const auto it = std::find(names.begin(), names.end(), "aneurysm");
-        channel = neck_channel(lumen, y, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
+        channel = neck_channel(measured, ym, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
         out.neck_channel_mm = channel.width_mm;
         out.neck_channel_at = channel.at;
+        if (channel.face >= 0) out.neck_channel_edge_mm = lumen_edges_mm(lumen)[split ? channel.face / 4 : channel.face];
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
@@ -438,8 +500,9 @@ Assessment Simulator::Impl::assess() {
     // faces' widths and the channel listed after it as comments.
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) {
         if (std::FILE* fo = std::fopen(obj, "w")) {
-            for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
-            for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) std::fprintf(fo, "f %d %d %d\n", lumen.F(f, 0) + 1, lumen.F(f, 1) + 1, lumen.F(f, 2) + 1);
+            for (Eigen::Index v = 0; v < ym.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", ym(v, 0), ym(v, 1), ym(v, 2));
+            for (Eigen::Index f = 0; f < measured.F.rows(); ++f)
+                std::fprintf(fo, "f %d %d %d\n", measured.F(f, 0) + 1, measured.F(f, 1) + 1, measured.F(f, 2) + 1);
             for (size_t l = 0; l < occ.points.size(); ++l)
                 for (size_t k = 0; k < occ.points[l].size(); ++k)
                     std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);

@@ -152,6 +152,91 @@ SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const
     return L;
 }
 
+SplitLumen split_lumen(const SimLumen& lumen, const std::function<int(int, int)>& mid, const Eigen::MatrixX3d& nodes) {
+    SplitLumen out;
+    SimLumen& Q = out.lumen;
+    const Eigen::Index NL = lumen.X.rows(), NF = lumen.F.rows();
+    std::map<std::pair<int, int>, int> vertex_of_edge;  // (low, high lumen vertex) -> split vertex
+    std::vector<std::pair<int, int>> between;
+    std::vector<int> node;
+    auto edge_vertex = [&](int a, int b) {
+        const auto key = std::minmax(a, b);
+        const auto it = vertex_of_edge.find(key);
+        if (it != vertex_of_edge.end()) return it->second;
+        const int m = mid(lumen.node[a], lumen.node[b]);
+        if (m < 0)
+            throw InputError("split_lumen: the lumen's edge between nodes " + std::to_string(lumen.node[a]) + " and " + std::to_string(lumen.node[b]) +
+                             " has no mid-edge node");
+        const int v = static_cast<int>(NL + static_cast<Eigen::Index>(between.size()));
+        vertex_of_edge.emplace(key, v);
+        between.emplace_back(key.first, key.second);
+        node.push_back(m);
+        return v;
+    };
+    Q.F.resize(4 * NF, 3);
+    Q.face_region.resize(4 * NF);
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        const int a = lumen.F(f, 0), b = lumen.F(f, 1), c = lumen.F(f, 2);
+        const int ab = edge_vertex(a, b), bc = edge_vertex(b, c), ca = edge_vertex(c, a);
+        Q.F.row(4 * f) << a, ab, ca;
+        Q.F.row(4 * f + 1) << ab, b, bc;
+        Q.F.row(4 * f + 2) << ca, bc, c;
+        Q.F.row(4 * f + 3) << ab, bc, ca;
+        Q.face_region.segment(4 * f, 4).setConstant(lumen.face_region[f]);
+    }
+    const Eigen::Index NE = static_cast<Eigen::Index>(between.size());
+    Q.X.resize(NL + NE, 3);
+    Q.node.resize(NL + NE);
+    Q.bind.resize(NL + NE);
+    Q.wall_mm.resize(NL + NE);
+    Q.X.topRows(NL) = lumen.X;
+    Q.node.head(NL) = lumen.node;
+    Q.bind.head(NL) = lumen.bind;
+    Q.wall_mm.head(NL) = lumen.wall_mm;
+    out.between.resize(NE, 2);
+    for (Eigen::Index e = 0; e < NE; ++e) {
+        const auto [a, b] = between[static_cast<size_t>(e)];
+        out.between.row(e) << a, b;
+        Q.X.row(NL + e) = nodes.row(node[static_cast<size_t>(e)]);
+        Q.node[NL + e] = node[static_cast<size_t>(e)];
+        Q.bind[NL + e] = lumen.bind[a];
+        Q.wall_mm[NL + e] = 0.5 * (lumen.wall_mm[a] + lumen.wall_mm[b]);
+    }
+    for (const auto& loop : lumen.neck_loops) {
+        std::vector<int> q;
+        for (size_t k = 0; k < loop.size(); ++k) {
+            q.push_back(loop[k]);
+            q.push_back(edge_vertex(loop[k], loop[(k + 1) % loop.size()]));
+        }
+        Q.neck_loops.push_back(q);
+    }
+    // A point at barycentric w of face f lies in the child holding it: a corner's where that corner's weight is at
+    // least ½, else the middle one (the children's coordinates: 2w − 1 and 2w at a corner child's; 1 − 2w at the middle's).
+    for (const auto& line : lumen.neck_line) {
+        std::vector<NeckPointOnLumen> q;
+        for (const NeckPointOnLumen& p : line) {
+            const Eigen::Vector3d& w = p.weights;
+            NeckPointOnLumen c;
+            if (w[0] >= 0.5) {
+                c.face = 4 * p.face;
+                c.weights = Eigen::Vector3d(2 * w[0] - 1, 2 * w[1], 2 * w[2]);  // (a, ab, ca)
+            } else if (w[1] >= 0.5) {
+                c.face = 4 * p.face + 1;
+                c.weights = Eigen::Vector3d(2 * w[0], 2 * w[1] - 1, 2 * w[2]);  // (ab, b, bc)
+            } else if (w[2] >= 0.5) {
+                c.face = 4 * p.face + 2;
+                c.weights = Eigen::Vector3d(2 * w[0], 2 * w[1], 2 * w[2] - 1);  // (ca, bc, c)
+            } else {
+                c.face = 4 * p.face + 3;
+                c.weights = Eigen::Vector3d(1 - 2 * w[2], 1 - 2 * w[0], 1 - 2 * w[1]);  // (ab, bc, ca)
+            }
+            q.push_back(c);
+        }
+        Q.neck_line.push_back(q);
+    }
+    return out;
+}
+
 SimSurface extract_surface(const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
                            const std::vector<std::string>& region_names, const std::vector<int>& row_of_dof) {
     static constexpr int FACES[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};  // outward for positive tets

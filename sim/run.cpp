@@ -490,6 +490,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["neck_length_mm"] = a.neck_length_mm;
     j["neck_closed_fraction"] = a.neck_closed_fraction;
     j["neck_gap_mm"] = scene.neck_gap_mm;
+    j["neck_measured_on"] = a.neck_on_quadratic_surface ? "quadratic surface" : "corner triangles";
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
@@ -497,6 +498,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         j["neck_channel_mm"] = a.neck_channel_mm;  // the widest channel still joining sac and parent (2: wide open)
         j["neck_channel_at"] = {a.neck_channel_at.x(), a.neck_channel_at.y(), a.neck_channel_at.z()};
         j["neck_sealed"] = a.neck_channel_mm <= scene.neck_gap_mm;
+        if (std::isfinite(a.neck_channel_edge_mm)) j["neck_channel_edge_mm"] = a.neck_channel_edge_mm;
     }
     // Where along the neck line it stays open: [x, y, z, gap] per neck vertex in loop order (gap null: no opposite
     // wall within reach).

@@ -153,6 +153,7 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     // first cand_vertex.size() candidates are the surface's own), the inner walls' contact the lumen's triangles split
     // at their mid-edge nodes.
     const bool quadratic = vol.tets.cols() == 10;
+    P.quadratic = quadratic;
     std::optional<fem::MidEdgeNodes> mid;
     if (quadratic) {
         mid.emplace(vol.tets);  // all elements: a lumen edge between patch nodes may be an edge of elements outside it

@@ -112,6 +112,7 @@ struct Simulator::Impl {
         int clip = -1;
         std::unique_ptr<fem::PatchModel> pm;
         int tets = 0;
+        bool quadratic = false;               // 10-node elements: the contacts act on the quadratic surface
         Eigen::MatrixX3d X;                   // rest positions of the patch's nodes
         /// patch nodes the blades can touch: the simulated surface's vertices (cand_vertex: their vertex), then with
         /// 10-node elements the mid-edge nodes of its edges between them

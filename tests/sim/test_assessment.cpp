@@ -3,9 +3,12 @@
 // exact "pinch" map (the wall's mid-surface becomes a stadium of half-height g/2 + t/2, so the lumen gap in the
 // flat part is exactly g), across the neck and beside it.
 #include <cmath>
+#include <map>
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
+#include "aneu/core/error.hpp"
 #include "aneu/sim/assessment.hpp"
 
 using namespace aneu::sim;
@@ -191,6 +194,114 @@ TEST(NeckChannel, APinchAcrossTheNeckSealsItAndASlitLeavesAChannelOfItsGap) {
     const int k = NZ / 2 - 1;
     EXPECT_NEAR(lumen_width(s, y, 2 * (k * NT + NT / 4), Eigen::Vector3d::Constant(1.0 / 3.0), 2.0), 0.3, 0.02);
     EXPECT_NEAR(lumen_width(s, y, 2 * (k * NT + 0), Eigen::Vector3d(0.5, 0.0, 0.5), 2.0), 0.3, 0.03);
+}
+
+// The lumen's edge round each face (the resolution a flattened fold's channel depends on) and where the channel is.
+TEST(NeckChannel, TheLumensEdgeRoundEachFaceAndTheChannelsFace) {
+    SimLumen s = tube();
+    // Every face is a right triangle with legs 2 R sin(π/96) round the tube and 0.2 mm along it.
+    const double chord = 2 * R_IN * std::sin(PI / NT);
+    const Eigen::VectorXd edge = lumen_edges_mm(s);
+    ASSERT_EQ(edge.size(), s.F.rows());
+    EXPECT_NEAR(edge.minCoeff(), chord, 1e-12);
+    EXPECT_NEAR(edge.maxCoeff(), chord, 1e-12);
+    // Refined round the tube's ring at z = 2 mm: the faces there see the finer edges, one ring away the coarse.
+    SimLumen f = s;
+    const Eigen::Index k = NZ / 2 + 10;
+    for (int i = 0; i < NT; ++i) f.X(k * NT + i, 2) = f.X((k - 1) * NT + i, 2) + 0.05;  // the ring 0.05 mm from the one before
+    const Eigen::VectorXd ef = lumen_edges_mm(f);
+    EXPECT_LT(ef[2 * ((k - 1) * NT + 5)], chord);                       // between the close rings: 0.05 mm edges
+    EXPECT_NEAR(ef[2 * ((k - 4) * NT + 5)], chord, 1e-12);              // far from them
+    // The channel's narrowest place names its face: for the 0.3 mm slit, a face in the pinch.
+    const NeckChannel slit = neck_channel(s, pinched(s, 0.0, 0.3), 1);
+    ASSERT_GE(slit.face, 0);
+    ASSERT_LT(slit.face, s.F.rows());
+    EXPECT_LE(std::abs(s.X(s.F(slit.face, 0), 2)), 1.5 + 0.2);
+    EXPECT_EQ(neck_channel(s, s.X, -1).face, -1);
+}
+
+// The lumen split at mid-edge nodes (the quadratic surface the patch's walls touch on): here every "volume node" is
+// a lumen vertex and the mid-edge nodes are extra nodes, on the cylinder (the quadratic surface) or at the chords'
+// midpoints (the corner triangles' own surface).
+TEST(SplitLumen, FourChildrenPerFaceTheNeckThroughTheMidEdgeVerticesAndItsPointsKept) {
+    SimLumen s = tube();
+    s.node.resize(s.X.rows());
+    s.bind.resize(s.X.rows());
+    for (Eigen::Index v = 0; v < s.X.rows(); ++v) s.node[v] = s.bind[v] = static_cast<int>(v);
+    s.wall_mm = Eigen::VectorXd::Constant(s.X.rows(), T);
+    s.neck_line = {smoothed_neck_line(s, s.neck_loops[0])};
+    for (const bool on_cylinder : {false, true}) {
+        std::map<std::pair<int, int>, int> mid_of;
+        std::vector<Eigen::RowVector3d> extra;
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) {
+                const auto key = std::minmax(s.F(f, k), s.F(f, (k + 1) % 3));
+                if (mid_of.count(key)) continue;
+                Eigen::RowVector3d m = 0.5 * (s.X.row(key.first) + s.X.row(key.second));
+                if (on_cylinder) m.head<2>() *= R_IN / m.head<2>().norm();
+                mid_of[key] = static_cast<int>(s.X.rows() + static_cast<Eigen::Index>(extra.size()));
+                extra.push_back(m);
+            }
+        Eigen::MatrixX3d nodes(s.X.rows() + static_cast<Eigen::Index>(extra.size()), 3);
+        nodes.topRows(s.X.rows()) = s.X;
+        for (size_t e = 0; e < extra.size(); ++e) nodes.row(s.X.rows() + static_cast<Eigen::Index>(e)) = extra[e];
+        const auto mid = [&](int a, int b) {
+            const auto it = mid_of.find(std::minmax(a, b));
+            return it == mid_of.end() ? -1 : it->second;
+        };
+        const SplitLumen sp = split_lumen(s, mid, nodes);
+        const SimLumen& q = sp.lumen;
+        ASSERT_EQ(q.F.rows(), 4 * s.F.rows());
+        ASSERT_EQ(q.X.rows(), nodes.rows());
+        ASSERT_EQ(sp.between.rows(), static_cast<Eigen::Index>(extra.size()));
+        for (Eigen::Index f = 0; f < s.F.rows(); ++f) {
+            // The children tile the parent: same region, same orientation (normals along the parent's).
+            const Eigen::Vector3d n = (s.X.row(s.F(f, 1)) - s.X.row(s.F(f, 0))).cross(s.X.row(s.F(f, 2)) - s.X.row(s.F(f, 0))).transpose();
+            for (int c = 0; c < 4; ++c) {
+                const Eigen::Index g = 4 * f + c;
+                EXPECT_EQ(q.face_region[g], s.face_region[f]);
+                const Eigen::Vector3d m = (q.X.row(q.F(g, 1)) - q.X.row(q.F(g, 0))).cross(q.X.row(q.F(g, 2)) - q.X.row(q.F(g, 0))).transpose();
+                EXPECT_GT(m.dot(n), 0.0) << f << " " << c;
+            }
+        }
+        // The neck loop passes through its edges' mid-edge vertices: twice the vertices, each new one between its
+        // neighbours on the loop.
+        ASSERT_EQ(q.neck_loops.size(), 1u);
+        const std::vector<int>& loop = q.neck_loops[0];
+        ASSERT_EQ(loop.size(), 2 * s.neck_loops[0].size());
+        for (size_t k = 1; k < loop.size(); k += 2) {
+            const Eigen::Index e = loop[k] - s.X.rows();
+            ASSERT_GE(e, 0);
+            EXPECT_EQ(std::minmax(sp.between(e, 0), sp.between(e, 1)), std::minmax(loop[k - 1], loop[(k + 1) % loop.size()]));
+        }
+        // On the chords' midpoints the children are the parent's own plane: every neck point stays where it was.
+        ASSERT_EQ(q.neck_line.size(), 1u);
+        ASSERT_EQ(q.neck_line[0].size(), s.neck_line[0].size());
+        double moved = 0;
+        for (size_t k = 0; k < s.neck_line[0].size(); ++k) {
+            const NeckPointOnLumen &p = s.neck_line[0][k], &c = q.neck_line[0][k];
+            EXPECT_EQ(c.face / 4, p.face);
+            EXPECT_GE(c.weights.minCoeff(), -1e-12);
+            EXPECT_NEAR(c.weights.sum(), 1.0, 1e-12);
+            Eigen::Vector3d xp = Eigen::Vector3d::Zero(), xc = Eigen::Vector3d::Zero();
+            for (int j = 0; j < 3; ++j) {
+                xp += p.weights[j] * s.X.row(s.F(p.face, j)).transpose();
+                xc += c.weights[j] * q.X.row(q.F(c.face, j)).transpose();
+            }
+            moved = std::max(moved, (xc - xp).norm());
+        }
+        if (!on_cylinder) {
+            EXPECT_LT(moved, 1e-12);
+            // The same lumen, measured: the same occlusion, open and pinched shut.
+            const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T), wq = Eigen::VectorXd::Constant(q.X.rows(), T);
+            EXPECT_NEAR(neck_occlusion(q, pinched(q, 0.0, 0.0), 0.05, wq).fraction, neck_occlusion(s, pinched(s, 0.0, 0.0), 0.05, wall).fraction, 0.03);
+        } else {
+            EXPECT_LT(moved, R_IN * (1 - std::cos(PI / NT)) + 1e-9);  // at most the chord's sagitta off the cylinder
+            EXPECT_NEAR(q.X.row(q.neck_loops[0][1]).head<2>().norm(), R_IN, 1e-12);
+        }
+    }
+    // An edge with no mid-edge node: refused, naming the nodes.
+    EXPECT_THROW(split_lumen(s, [](int, int) { return -1; }, s.X), aneu::InputError);
 }
 
 TEST(NeckChannel, APinchBesideTheNeckLeavesItOpen) {

@@ -37,6 +37,11 @@ struct NeckOcclusion {
 /// neck closes none.
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm);
 
+/// The lumen's edge length round each face at rest: the mean, over the faces sharing a vertex with it, of their
+/// shortest edge (on a mesh of edge h, about h; across a stretched mesh, its fine direction: the resolution across
+/// a fold, which sets the channel a flattened fold keeps on the mesh: bench/bench_fold.cpp, patch_sim_notes.md).
+Eigen::VectorXd lumen_edges_mm(const SimLumen& lumen);
+
 /// Whether the clip seals the sac off the parent, and if not, through how wide a channel blood still gets in.
 struct NeckChannel {
     /// The widest channel of the deformed lumen joining the sac to the parent [mm]: the largest d such that the
@@ -45,6 +50,7 @@ struct NeckChannel {
     /// the wall at its centroid. At most `cap_mm` (a lumen that wide is open); NaN without a neck.
     double width_mm = std::numeric_limits<double>::quiet_NaN();
     Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the channel's narrowest place (a face centroid, deformed)
+    int face = -1;                                 ///< the face there (−1: none)
     int faces_measured = 0;                        ///< faces whose width was measured (the rest count as `cap_mm`)
     std::vector<double> face_width_mm;             ///< per lumen face: its width (`cap_mm` where not measured)
 };

@@ -3,6 +3,7 @@
 /// @file
 /// The simulator's view of a case bundle: the simulated surface (boundary faces of the tetrahedral mesh
 /// whose nodes all carry condensed DOFs) and the columns of W its working region needs.
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -76,6 +77,20 @@ Eigen::VectorXd wall_thickness(const SimSurface& s, const Eigen::MatrixX3d& node
 /// vertex within 1.5 mm; faces with a vertex left unbound (outside the working region) are dropped.
 SimLumen extract_lumen(const SimSurface& s, const Eigen::MatrixX3d& nodes, const Eigen::MatrixXi& tets, const Eigen::VectorXi& tet_region,
                        const Eigen::VectorXi& inner);
+
+/// The lumen on the quadratic surface of 10-node elements, for measuring it (the neck's occlusion and channel):
+/// every face of `lumen` split in four at its edges' mid-edge nodes (`mid(a, b)`: the volume node between volume
+/// nodes a and b, −1 if none), children 4f … 4f + 3 of face f as fem::quadratic_surface_triangles orders them; the
+/// lumen's vertices first, then one per edge (`between`: its two lumen vertices), at the mid-edge node's rest
+/// position, its wall the mean of theirs, bound to the first. The neck loops pass through the mid-edge vertices
+/// of their edges and the smoothed neck line keeps its points, on the children. On the corner triangles alone a
+/// flattened fold's channel reads about twice what the quadratic surface leaves (bench/bench_fold.cpp).
+/// @throws InputError an edge of the lumen has no mid-edge node
+struct SplitLumen {
+    SimLumen lumen;
+    Eigen::MatrixX2i between;  ///< per vertex after the original ones: the two lumen vertices it lies between
+};
+SplitLumen split_lumen(const SimLumen& lumen, const std::function<int(int, int)>& mid, const Eigen::MatrixX3d& nodes);
 
 /// The neck line of one loop, smoothed. A loop of label-border vertices is a staircase of mesh edges: on a
 /// mesh of edge h it zig-zags by about h on either side of the sac's border (the sample's: 21.5 mm long where

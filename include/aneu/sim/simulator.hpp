@@ -82,6 +82,11 @@ struct Assessment {
     /// Scene::neck_gap_mm.
     double neck_channel_mm = std::numeric_limits<double>::quiet_NaN();
     Eigen::Vector3d neck_channel_at = Eigen::Vector3d::Zero();
+    /// The lumen's edge there at rest (its corner triangles': lumen_edges_mm, assessment.hpp): the resolution a fold's
+    /// channel depends on (bench/bench_fold.cpp).
+    double neck_channel_edge_mm = std::numeric_limits<double>::quiet_NaN();
+    /// The neck measured on the quadratic surface of a 10-node patch (split_lumen, model.hpp), not the corner triangles.
+    bool neck_on_quadratic_surface = false;
     /// The neck line on the deformed lumen, vertex by vertex: where it stays open after the clipping.
     struct NeckPoint {
         Eigen::Vector3d x = Eigen::Vector3d::Zero();
