@@ -452,12 +452,10 @@ Assessment Simulator::Impl::assess() {
     // With a patch of 10-node elements the neck is measured on the quadratic surface (split_lumen): the walls touch
     // there, and on the corner triangles a flattened fold's channel reads about twice as wide (bench/bench_fold.cpp).
     // The mid-edge vertices take the patch's displacement where it has them, else the mean of their corners'.
-    const PatchRun* quad = nullptr;
-    for (const PatchRun& P : patches)
-        if (P.alive && P.quadratic && quad == nullptr) quad = &P;
+    const bool quadratic = std::any_of(patches.begin(), patches.end(), [](const PatchRun& P) { return P.alive && P.quadratic; });
     std::optional<SplitLumen> split;
     Eigen::MatrixX3d yq;
-    if (quad != nullptr) {
+    if (quadratic) {
         const fem::MidEdgeNodes mid(model.volume->tets);
         split = split_lumen(lumen, [&](int a, int b) { return mid(a, b); }, model.volume->nodes);
         const SimLumen& Q = split->lumen;
