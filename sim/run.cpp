@@ -526,7 +526,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                                     {"mean_newton_iterations", p.mean_iterations}, {"mean_solve_ms", p.mean_solve_ms},
                                     {"max_solve_ms", p.max_solve_ms}, {"peak_blade_force_n", p.peak_blade_force_n},
                                     {"min_wall_distance_mm", std::isfinite(p.min_wall_distance_mm) ? nlohmann::json(p.min_wall_distance_mm) : nlohmann::json()},
-                                    {"wall_pairs_touching", p.wall_pairs_touching}, {"wall_resolves", p.wall_resolves}});
+                                    {"wall_pairs_touching", p.wall_pairs_touching}, {"wall_resolves", p.wall_resolves},
+                                    {"restarts", p.restarts}});
     }
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;
@@ -637,9 +638,9 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     }
     for (const auto& p : a.patches) {
         std::snprintf(buf, sizeof buf,
-                      "  clip %-2d nonlinear patch   %d nodes (%d on the interface), %ld frames (%ld not converged), %.1f Newton its and "
+                      "  clip %-2d nonlinear patch   %d nodes (%d on the interface), %ld frames (%ld not converged, %ld restarts), %.1f Newton its and "
                       "%.1f ms a frame (max %d, %.1f ms); peak blade force %.3g N; %s\n",
-                      p.clip, p.nodes, p.interface_nodes, p.frames, p.unconverged_frames, p.mean_iterations, p.mean_solve_ms, p.max_iterations,
+                      p.clip, p.nodes, p.interface_nodes, p.frames, p.unconverged_frames, p.restarts, p.mean_iterations, p.mean_solve_ms, p.max_iterations,
                       p.max_solve_ms, p.peak_blade_force_n,
                       std::isfinite(p.min_wall_distance_mm) ? ("inner walls " + std::to_string(p.min_wall_distance_mm) + " mm apart at the closest").c_str()
                                                             : "no opposite inner walls came near");

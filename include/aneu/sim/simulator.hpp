@@ -118,6 +118,9 @@ struct Assessment {
                                              ///< +inf: none came within reach)
         int wall_pairs_touching = 0;         ///< at the end
         long wall_resolves = 0;              ///< frames solved again: a vertex went through a face its pairs left out
+        /// Second unconverged frames in a row: the patch went back to the last converged frame's state and the
+        /// opening's change a frame was halved (sim_patch.cpp)
+        long restarts = 0;
     };
     std::vector<PatchEnd> patches;
     long frames = 0, haptic_ticks = 0;
