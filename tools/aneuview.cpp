@@ -161,6 +161,10 @@ struct View {
     std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
     long renders = 0;
     double render_s = 0;  // time in Render()
+    /// The steady rate's start: the first frame that showed a surface (before it: the window, the connection, the
+    /// server loading its bundle) and the frames rendered up to it.
+    std::chrono::steady_clock::time_point steady_start;
+    long steady_from = -1;
     // Steering one instrument from the keyboard (without a haptic device).
     igtl::ClientSocket* sock = nullptr;
     std::string steer, clip_model;
@@ -448,6 +452,10 @@ void update(View& v) {
     v.win->Render();
     v.render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count();
     ++v.renders;
+    if (v.steady_from < 0 && v.shown > 0) {
+        v.steady_start = std::chrono::steady_clock::now();
+        v.steady_from = v.renders;
+    }
     if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0 && v.next_key >= v.keys.size()) {
         write_png(v.win, v.screenshot);
         if (!v.points_out.empty()) {
@@ -691,8 +699,10 @@ int main(int argc, char** argv) {
     win->Render();
     iren->Start();
     const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
-    std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
-                secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
+    const double steady_s = v.steady_from < 0 ? 0.0 : std::chrono::duration<double>(std::chrono::steady_clock::now() - v.steady_start).count();
+    std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nframe_rate_steady_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
+                secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, steady_s > 0 ? static_cast<double>(v.renders - v.steady_from) / steady_s : 0.0,
+                v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
     sh.done = true;
     sock->CloseSocket();
     net.join();
