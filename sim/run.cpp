@@ -264,11 +264,18 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
     };
     FrameStats last;
     std::vector<Eigen::Vector3d> F(sc.instruments.size(), Eigen::Vector3d::Zero());
+    // A stop request (RunOptions::stop) ends the run where it is; the scene time of the last tick is kept.
+    double t_last = 0, stop_at = -1;
+    const auto stopped = [&] {
+        if (stop_at < 0 && opt.stop && opt.stop->load()) stop_at = t_last;
+        return stop_at >= 0;
+    };
 
     if (opt.deterministic) {
         long n = 0;
         double t_prev = -1;
         auto tick = [&](double t) {
+            t_last = t;
             if (n % phys_every == 0) {
                 last = sim.physics_step(t);
                 frames.push_back(last);
@@ -291,6 +298,7 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             const long ticks = static_cast<long>(std::floor(sc.duration_s * H + 1e-9));
             for (long k = 0; k <= ticks; ++k) {
                 const double t = static_cast<double>(k) / H;
+                if (stopped()) break;
                 sim.apply_script(t_prev, t);
                 t_prev = t;
                 tick(t);
@@ -303,11 +311,12 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
                 message("pose stream line " + std::to_string(line) + " skipped: " + why);
             };
             while (const auto s = reader.next(skipped)) {
+                if (stopped()) break;
                 // Advance the timeline to the sample's time, then apply it.
                 while (static_cast<double>(n) / H + 1e-12 < s->sample.t) tick(static_cast<double>(n) / H);
                 sim.set_input(s->instrument, s->sample.key, s->sample.t);
             }
-            tick(static_cast<double>(n) / H);
+            if (stop_at < 0) tick(static_cast<double>(n) / H);
         }
     } else {
         // Threads: haptic loop at its rate (input sampling + contact-plane force), physics (collision +
@@ -401,6 +410,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         while (true) {
             const double t = now();
             if (!sc.live_input && t > sc.duration_s) break;
+            t_last = t;
+            if (stopped()) break;
             bool ended = false;
             // Inputs first, then the force, so a tick's force answers the poses that arrived before it (as in the
             // deterministic timeline). A text stream gives one sample per tick at most (a pose device streams at the
@@ -443,7 +454,12 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         frames = fbuf;
     }
     flush_messages();
-    const Assessment a = sim.assess();
+    Assessment a = sim.assess();
+    if (stop_at >= 0) {
+        a.stopped_at_s = stop_at;
+        message("stopped at t=" + std::to_string(stop_at) + " s, before the scene's end (" + std::to_string(sc.duration_s) +
+                " s): the outputs and the report are for the time reached");
+    }
     log.out.finish();
     hlog.out.finish();
     series.finish();
@@ -478,6 +494,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["case_id"] = model.case_id;
     j["deposited_clip_method"] = scene.clip_method == GroupMethod::EXACT ? "exact" : "two-solve";
     j["total_time_s"] = a.total_time_s;
+    if (a.stopped_at_s >= 0) j["stopped_at_s"] = a.stopped_at_s;
     j["clips_used"] = a.clips_used;
     j["clips_deposited"] = a.clips_deposited;
     j["repositionings"] = a.repositionings;

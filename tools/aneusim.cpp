@@ -2,6 +2,8 @@
 // aneusim: the real-time clipping simulator. Links aneu_sim + aneu_core only (no offline stack).
 #include <malloc.h>
 
+#include <atomic>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -16,6 +18,23 @@
 #include "aneu/sim/serve.hpp"
 #include "aneu/sim/simulator.hpp"
 #include "cli_common.hpp"
+
+namespace {
+std::atomic<bool> run_stop{false};
+std::atomic<int> stop_signal{0};
+static_assert(std::atomic<bool>::is_always_lock_free && std::atomic<int>::is_always_lock_free, "set from a signal handler");
+// `aneusim run`: the first SIGINT/SIGTERM asks the run to stop where it is (its outputs and report written, exit
+// status 128 + the signal, as a shell reports a signal); the second ends the process (the default action).
+void on_stop_signal(int sig) {
+    if (run_stop.load()) {
+        std::signal(sig, SIG_DFL);
+        std::raise(sig);
+        return;
+    }
+    stop_signal.store(sig);
+    run_stop.store(true);
+}
+}  // namespace
 
 int main(int argc, char** argv) {
     using namespace aneu::tools;
@@ -156,7 +175,11 @@ int main(int argc, char** argv) {
                        c.dropped_oversize, c.dropped_garbage, c.forces_sent, c.forces_skipped, c.polydata_sent, c.transforms_sent, c.status_sent);
         });
     }
-    return run_guarded("aneusim run", [&] {
+    const int rc = run_guarded("aneusim run", [&] {
+        // SIGINT/SIGTERM (Ctrl-C, a batch system's time limit) end the run at the next tick (while loading: before
+        // the first) with its outputs and report written for the time reached; a second signal ends the process.
+        std::signal(SIGINT, on_stop_signal);
+        std::signal(SIGTERM, on_stop_signal);
         aneu::sim::Scene scene = aneu::sim::read_scene(scene_path);
         if (!bundle_override.empty()) scene.bundle = bundle_override;
         if (!log_out.empty()) scene.log = log_out;
@@ -177,6 +200,7 @@ int main(int argc, char** argv) {
         aneu::sim::RunOptions opt;
         opt.deterministic = deterministic;
         opt.live = &std::cin;
+        opt.stop = &run_stop;
         opt.on_message = [](const std::string& m) { logger().warn("{}", m); };
         const aneu::sim::Assessment a = aneu::sim::run_scene(sim, opt);
         fmt::print("time_s {:.3f}\nclips_used {}\nclips_deposited {}\nrepositionings {}\nforce_exceedances {}\n"
@@ -185,5 +209,7 @@ int main(int argc, char** argv) {
                    a.total_time_s, a.clips_used, a.clips_deposited, a.repositionings, a.force_exceedances,
                    a.velocity_exceedances, a.peak_force_n, a.peak_vessel_force_n, a.neck_closed_fraction, a.skipped_inputs,
                    a.frames, a.haptic_ticks);
+        if (a.stopped_at_s >= 0) fmt::print("stopped_at_s {:.4f}\n", a.stopped_at_s);
     });
+    return rc == 0 && run_stop.load() ? 128 + stop_signal.load() : rc;
 }

@@ -4,6 +4,8 @@
 // bad scenes and pose streams.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <fstream>
 #include <sstream>
@@ -189,6 +191,46 @@ TEST(Simulator, DeterministicModeGivesBitIdenticalLogs) {
     ASSERT_GT(a.size(), 1000u);
     EXPECT_EQ(a, b);
     EXPECT_EQ(slurp(d.file("hap_a.csv")), slurp(d.file("hap_b.csv")));
+}
+
+TEST(Simulator, AStopRequestEndsTheRunWhereItIsAndItsLogIsTheFullRunsBeginning) {
+    // RunOptions::stop (aneusim run's SIGINT/SIGTERM) set after the frame at t = 0.1 s: the run ends at the next
+    // tick, the report says where (stopped_at_s) and its figures are for the time reached, and the log is the first
+    // part of the whole run's log, line for line.
+    test::TempDir d("stop");
+    std::string logs[2];
+    sim::Assessment as[2];
+    for (int run = 0; run < 2; ++run) {
+        json j = two_clip_scene(tube_bundle(Precision::FLOAT64), "exact");
+        j["outputs"] = {{"log", "log" + std::to_string(run) + ".csv"}, {"report", "report" + std::to_string(run) + ".json"}};
+        sim::Simulator sim = make(j, d.file(""), "stop" + std::to_string(run) + ".json");
+        std::atomic<bool> stop{false};
+        sim::RunOptions opt;
+        std::vector<std::string> msgs;
+        opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
+        if (run == 1) {
+            opt.stop = &stop;
+            opt.on_frame = [&](const sim::FrameStats& f) {
+                if (f.t >= 0.1 - 1e-12) stop = true;
+            };
+        }
+        as[run] = sim::run_scene(sim, opt);
+        logs[run] = slurp(d.file("log" + std::to_string(run) + ".csv"));
+        const json rep = json::parse(slurp(d.file("report" + std::to_string(run) + ".json")));
+        if (run == 0) {
+            EXPECT_LT(as[0].stopped_at_s, 0);
+            EXPECT_FALSE(rep.contains("stopped_at_s"));
+        } else {
+            EXPECT_NEAR(as[1].stopped_at_s, 0.1, 1e-9);
+            EXPECT_NEAR(rep["stopped_at_s"].get<double>(), 0.1, 1e-9);
+            EXPECT_NEAR(rep["total_time_s"].get<double>(), 0.1, 1e-3);
+            EXPECT_TRUE(std::any_of(msgs.begin(), msgs.end(), [](const std::string& m) { return m.find("stopped at t=0.1") != std::string::npos; }));
+        }
+    }
+    EXPECT_GT(as[0].total_time_s, 0.5);
+    ASSERT_GT(logs[1].size(), 200u);
+    ASSERT_LT(logs[1].size(), logs[0].size());
+    EXPECT_EQ(logs[0].compare(0, logs[1].size(), logs[1]), 0) << "the stopped run's log is not the whole run's beginning";
 }
 
 TEST(Simulator, NearRowUpdateGivesTheSameContactsAndForcesAsTheWholeRegion) {

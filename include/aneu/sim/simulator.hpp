@@ -3,6 +3,7 @@
 /// @file
 /// The clipping simulator: instrument and clip contacts → prescribed displacements → forces → deformation
 /// (ContactSolver), deposited clips, suction, contact-plane haptic force, and the assessment.
+#include <atomic>
 #include <iosfwd>
 #include <functional>
 #include <optional>
@@ -59,6 +60,8 @@ struct FrameStats {
 /// The assessment of a session.
 struct Assessment {
     double total_time_s = 0.0;
+    /// The scene time at which RunOptions::stop ended the run before the scene's end (−1: it ran to its end).
+    double stopped_at_s = -1.0;
     int clips_used = 0;
     int clips_deposited = 0;        ///< clips left on the vessel at the end
     int repositionings = 0;         ///< deposited clips picked up again
@@ -185,6 +188,9 @@ struct RunOptions {
     /// the ticks that cross each period; real-time: on the output thread).
     double surface_hz = 0.0;
     std::function<void(double t, const Eigen::MatrixX3d& x, const std::vector<Clip>& clips, const std::vector<std::optional<Pose>>& instruments)> on_surface;
+    /// Set (by a signal handler: `aneusim run` on SIGINT/SIGTERM) to end the run at the next haptic tick: the
+    /// outputs and the report are written for the time reached, the report saying so (`stopped_at_s`).
+    const std::atomic<bool>* stop = nullptr;
 };
 
 /// Runs a scene to its end and writes the outputs the scene asks for (log, haptic log, series, report).
