@@ -42,8 +42,9 @@ fields = [
     "clip=%s open=%g tips_short=%s spring_x=%g%s" % (model_name, keys[0]["opening_deg"], "yes" if short else "no", scale,
                                                     " (placeholder)" if sp.get("placeholder") else ""),
     "state=%s held_deg=%.3f grip_n=%.3f" % (clip.get("state", "?"), clip.get("opening_deg", float("nan")), clip.get("grip_force_n", float("nan"))),
-    "neck_closed=%.1f%% channel_mm=%s sealed=%s interpenetration_mm=%.4f on=%s edge_mm=%s" % (
+    "neck_closed=%.1f%% cut_off=%s channel_mm=%s sealed=%s interpenetration_mm=%.4f on=%s edge_mm=%s" % (
         100 * report.get("neck_closed_fraction", float("nan")),
+        "%.1f%%" % (100 * report["neck_cut_off_fraction"]) if report.get("neck_cut_off_fraction") is not None else "-",
         "%.3f" % report["neck_channel_mm"] if report.get("neck_channel_mm") is not None else "-",
         report.get("neck_sealed", "-"), report.get("neck_interpenetration_mm", float("nan")),
         report.get("neck_measured_on", "corner triangles").replace(" ", "_"),

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
+#include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
@@ -12,6 +13,7 @@
 #include <cstdlib>
 #include <limits>
 #include <optional>
+#include <queue>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -322,11 +324,10 @@ double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, c
     return balls.width(face, w, cap_mm);
 }
 
-std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& a_side,
-                                      const std::vector<char>& b_side) {
+namespace {
+// Per face: the faces sharing an edge with it.
+std::vector<std::vector<int>> face_neighbours(const Eigen::MatrixX3i& F) {
     const Eigen::Index NF = F.rows();
-    // Faces joined across their edges, widest first (union–find); the width at which an A face and a B face first
-    // share a component is the widest channel between them (a maximin path).
     std::vector<std::array<int, 3>> edges;  // (low vertex, high vertex, face)
     for (Eigen::Index f = 0; f < NF; ++f)
         for (int k = 0; k < 3; ++k) {
@@ -343,6 +344,43 @@ std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vect
                 if (p != q) nbr[static_cast<size_t>(edges[p][2])].push_back(edges[q][2]);
         i = j;
     }
+    return nbr;
+}
+}  // namespace
+
+std::vector<double> widest_reach(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& from) {
+    const std::vector<std::vector<int>> nbr = face_neighbours(F);
+    std::vector<double> reach(static_cast<size_t>(F.rows()), 0.0);
+    // Widest first (a maximin Dijkstra): a face's reach is final when it leaves the queue.
+    std::priority_queue<std::pair<double, int>> q;
+    for (Eigen::Index f = 0; f < F.rows(); ++f)
+        if (from[static_cast<size_t>(f)]) {
+            reach[static_cast<size_t>(f)] = width[static_cast<size_t>(f)];
+            q.emplace(reach[static_cast<size_t>(f)], static_cast<int>(f));
+        }
+    std::vector<char> done(static_cast<size_t>(F.rows()), 0);
+    while (!q.empty()) {
+        const auto [r, f] = q.top();
+        q.pop();
+        if (done[static_cast<size_t>(f)]) continue;
+        done[static_cast<size_t>(f)] = 1;
+        for (int g : nbr[static_cast<size_t>(f)]) {
+            const double c = std::min(r, width[static_cast<size_t>(g)]);
+            if (!done[static_cast<size_t>(g)] && c > reach[static_cast<size_t>(g)]) {
+                reach[static_cast<size_t>(g)] = c;
+                q.emplace(c, g);
+            }
+        }
+    }
+    return reach;
+}
+
+std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& a_side,
+                                      const std::vector<char>& b_side) {
+    const Eigen::Index NF = F.rows();
+    // Faces joined across their edges, widest first (union–find); the width at which an A face and a B face first
+    // share a component is the widest channel between them (a maximin path).
+    const std::vector<std::vector<int>> nbr = face_neighbours(F);
     std::vector<int> order(static_cast<size_t>(NF));
     for (int f = 0; f < NF; ++f) order[static_cast<size_t>(f)] = f;
     std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return width[static_cast<size_t>(a)] > width[static_cast<size_t>(b)]; });
@@ -412,6 +450,7 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     }
     out.face_width_mm = width;
     if (!any_sac || !any_parent) return out;
+    out.reach_mm = widest_reach(F, width, parent);
     const auto [w, at] = widest_channel(F, width, sac, parent);
     out.width_mm = w;  // 0: separated at every width (a sac and parent on different pieces of lumen)
     if (at >= 0) {
@@ -421,6 +460,26 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     return out;
 }
 
+
+double neck_cut_off_fraction(const SimLumen& lumen, const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm) {
+    if (channel.reach_mm.empty()) return -1.0;
+    // Segments of the neck line (deformed lengths, as the occlusion's) whose two ends lie on faces the parent's
+    // blood reaches only through channels at most the tolerance wide.
+    double len = 0, cut = 0;
+    for (size_t l = 0; l < occ.points.size(); ++l) {
+        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
+        const auto& pts = occ.points[l];
+        if (line.size() != pts.size()) throw NumericalError("neck_cut_off_fraction: the occlusion was measured on another lumen");
+        for (size_t k = 0; k < pts.size(); ++k) {
+            const size_t m = (k + 1) % pts.size();
+            const double seg_mm = (pts[m] - pts[k]).norm();
+            len += seg_mm;
+            if (channel.reach_mm[static_cast<size_t>(line[k].face)] <= gap_tol_mm && channel.reach_mm[static_cast<size_t>(line[m].face)] <= gap_tol_mm)
+                cut += seg_mm;
+        }
+    }
+    return len > 0 ? cut / len : -1.0;
+}
 
 Assessment Simulator::Impl::assess() {
     Assessment out = a;
@@ -491,6 +550,7 @@ Assessment Simulator::Impl::assess() {
         out.neck_channel_mm = channel.width_mm;
         out.neck_channel_at = channel.at;
         if (channel.face >= 0) out.neck_channel_edge_mm = lumen_edges_mm(lumen)[split ? channel.face / 4 : channel.face];
+        out.neck_cut_off_fraction = neck_cut_off_fraction(measured, occ, channel, scene.neck_gap_mm);
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});

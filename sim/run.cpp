@@ -515,6 +515,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         j["neck_channel_mm"] = a.neck_channel_mm;  // the widest channel still joining sac and parent (2: wide open)
         j["neck_channel_at"] = {a.neck_channel_at.x(), a.neck_channel_at.y(), a.neck_channel_at.z()};
         j["neck_sealed"] = a.neck_channel_mm <= scene.neck_gap_mm;
+        if (a.neck_cut_off_fraction >= 0) j["neck_cut_off_fraction"] = a.neck_cut_off_fraction;
         if (std::isfinite(a.neck_channel_edge_mm)) j["neck_channel_edge_mm"] = a.neck_channel_edge_mm;
     }
     // Where along the neck line it stays open: [x, y, z, gap] per neck vertex in loop order (gap null: no opposite
@@ -640,6 +641,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                           a.neck_channel_mm >= 2.0 ? "at least " : "", a.neck_channel_mm, a.neck_channel_at.x(), a.neck_channel_at.y(),
                           a.neck_channel_at.z());
         o << buf;
+        if (a.neck_cut_off_fraction >= 0) {
+            std::snprintf(buf, sizeof buf, "  neck cut off the parent    %.0f %% of the neck line (the rest still reached by a channel over %.2g mm)\n",
+                          100.0 * a.neck_cut_off_fraction, scene.neck_gap_mm);
+            o << buf;
+        }
     }
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
     for (const auto& c : a.clip_ends) {

@@ -4,6 +4,7 @@
 // flat part is exactly g), across the neck and beside it.
 #include <cmath>
 #include <map>
+#include <tuple>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -302,6 +303,56 @@ TEST(SplitLumen, FourChildrenPerFaceTheNeckThroughTheMidEdgeVerticesAndItsPoints
     }
     // An edge with no mid-edge node: refused, naming the nodes.
     EXPECT_THROW(split_lumen(s, [](int, int) { return -1; }, s.X), aneu::InputError);
+}
+
+TEST(NeckChannel, TheNeckLineCutOffFromTheParentIsWhatItsBloodNoLongerReaches) {
+    // Known answers on the tube (sac z > 0, neck line the ring at z = 0, the parent's faces z < −1 mm):
+    const SimLumen s = tube();
+    const Eigen::VectorXd wall = Eigen::VectorXd::Constant(s.X.rows(), T);
+    auto both = [&](const Eigen::MatrixX3d& y) {
+        const NeckOcclusion occ = neck_occlusion(s, y, 0.05, wall);
+        const NeckChannel ch = neck_channel(s, y, 1);
+        return std::make_tuple(occ.fraction, neck_cut_off_fraction(s, occ, ch, 0.05), ch.width_mm);
+    };
+    // open: none of it cut off;
+    EXPECT_EQ(std::get<1>(both(s.X)), 0.0);
+    // pressed flat across the neck: all of it, as the occlusion;
+    const auto [closed_flat, cut_flat, ch_flat] = both(pinched(s, 0.0, 0.0));
+    EXPECT_GE(cut_flat, 0.97);
+    EXPECT_NEAR(cut_flat, closed_flat, 0.03);
+    // a 0.3 mm slit across it: none (the parent's blood passes 0.3 mm);
+    EXPECT_EQ(std::get<1>(both(pinched(s, 0.0, 0.3))), 0.0);
+    // flat on the sac's side (z = 1 … 4): the sac sealed, but the neck line still in the parent's lumen — none of
+    // it cut off, none of it closed (a neck remnant);
+    const auto [closed_sac, cut_sac, ch_sac] = both(pinched(s, 2.5, 0.0));
+    EXPECT_LE(ch_sac, 0.01);
+    EXPECT_EQ(closed_sac, 0.0);
+    EXPECT_EQ(cut_sac, 0.0);
+    // flat on the parent's side (z = −4 … −1): the neck line's walls apart (closed 0), but all of it cut off.
+    const auto [closed_par, cut_par, ch_par] = both(pinched(s, -2.5, 0.0));
+    EXPECT_LE(ch_par, 0.01);
+    EXPECT_EQ(closed_par, 0.0);
+    EXPECT_DOUBLE_EQ(cut_par, 1.0);
+    // No parent's faces, no reach: not measured.
+    EXPECT_EQ(neck_cut_off_fraction(s, neck_occlusion(s, s.X, 0.05, wall), NeckChannel{}, 0.05), -1.0);
+}
+
+TEST(NeckChannel, WidestReachIsTheMaximinPathFromTheSourceFaces) {
+    // A strip of 6 faces in a row (a triangle strip), widths 3 2 5 1 4 6, the source the first: each face's reach is
+    // the smallest width on the way there.
+    Eigen::MatrixX3i F(6, 3);
+    for (int i = 0; i < 6; ++i) F.row(i) << i, i + 1, i + 2;
+    const std::vector<double> reach = widest_reach(F, {3, 2, 5, 1, 4, 6}, {1, 0, 0, 0, 0, 0});
+    const std::vector<double> want{3, 2, 2, 1, 1, 1};
+    for (int i = 0; i < 6; ++i) EXPECT_DOUBLE_EQ(reach[static_cast<size_t>(i)], want[static_cast<size_t>(i)]) << i;
+    // Sources at both ends: each face takes the wider way.
+    const std::vector<double> two = widest_reach(F, {3, 2, 5, 1, 4, 6}, {1, 0, 0, 0, 0, 1});
+    const std::vector<double> want2{3, 2, 2, 1, 4, 6};
+    for (int i = 0; i < 6; ++i) EXPECT_DOUBLE_EQ(two[static_cast<size_t>(i)], want2[static_cast<size_t>(i)]) << i;
+    // A face on another piece: 0.
+    Eigen::MatrixX3i G(2, 3);
+    G << 0, 1, 2, 10, 11, 12;
+    EXPECT_EQ(widest_reach(G, {1, 1}, {1, 0})[1], 0.0);
 }
 
 TEST(NeckChannel, APinchBesideTheNeckLeavesItOpen) {

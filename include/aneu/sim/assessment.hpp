@@ -53,7 +53,17 @@ struct NeckChannel {
     int face = -1;                                 ///< the face there (−1: none)
     int faces_measured = 0;                        ///< faces whose width was measured (the rest count as `cap_mm`)
     std::vector<double> face_width_mm;             ///< per lumen face: its width (`cap_mm` where not measured)
+    /// Per lumen face: the widest channel joining it to the parent's faces (widest_reach; 0 on a piece of lumen
+    /// without them). Blood reaches a face through a channel that wide: at most the tolerance, it is cut off.
+    std::vector<double> reach_mm;
 };
+
+/// The fraction of the neck line (by deformed length, over the same points as `occ`, measured on `lumen`) cut off
+/// from the parent: segments whose ends lie on faces that the parent's lumen reaches only through channels at most
+/// `gap_tol_mm` wide (NeckChannel::reach_mm) — their walls touch, or they lie on the sac's side of walls that touch.
+/// A clip across the neck cuts off all of it; one on the sac's side above it seals the sac but leaves the neck line
+/// reached (a neck remnant); one on the parent's side below it cuts it off with the sac. −1 without a reach.
+double neck_cut_off_fraction(const SimLumen& lumen, const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm);
 
 /// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
 /// largest ball inside the lumen that touches the wall there (the maximal inscribed sphere of VMTK's centrelines,
@@ -70,6 +80,11 @@ double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, c
 /// (bench/bench_fold.cpp).
 std::pair<double, int> widest_channel(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& a_side,
                                       const std::vector<char>& b_side);
+
+/// Per face of a triangle surface: the widest channel joining it to a face of `from` — the largest d such that
+/// faces of `width` ≥ d, joined across shared edges, connect the two (its own width at most; a maximin path, by a
+/// widest-first search from `from`); 0 for faces on pieces of the surface without a face of `from`.
+std::vector<double> widest_reach(const Eigen::MatrixX3i& F, const std::vector<double>& width, const std::vector<char>& from);
 
 /// The channel through the neck (NeckChannel) on the deformed lumen `y`; `sac_region` is the aneurysm's index in
 /// SimLumen::face_region. Faces farther than `measure_mm` from the neck line at rest are taken as `cap_mm` wide.

@@ -85,6 +85,12 @@ struct Assessment {
     /// Scene::neck_gap_mm.
     double neck_channel_mm = std::numeric_limits<double>::quiet_NaN();
     Eigen::Vector3d neck_channel_at = Eigen::Vector3d::Zero();
+    /// Fraction of the neck line (by length on the lumen, as neck_closed_fraction) cut off from the parent: its
+    /// widest channel to the parent's lumen (NeckChannel::reach_mm) at most Scene::neck_gap_mm, because its walls
+    /// touch there or because it lies on the sac's side of walls that touch. What stays open is the part of the neck
+    /// the parent's blood still reaches (a neck remnant); where the clip sits a little above the border on the sac's
+    /// side, the border there is cut off without its own walls touching. −1: not measured (no neck, or no parent).
+    double neck_cut_off_fraction = -1.0;
     /// The lumen's edge there at rest (its corner triangles': lumen_edges_mm, assessment.hpp): the resolution a fold's
     /// channel depends on (bench/bench_fold.cpp).
     double neck_channel_edge_mm = std::numeric_limits<double>::quiet_NaN();
