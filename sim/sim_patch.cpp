@@ -221,21 +221,48 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     if (old >= 0) {
         // Remade: the state carries over exactly (the old patch's whole displacement, restricted to the new one).
         PatchRun& O = patches[static_cast<size_t>(old)];
-        const Eigen::VectorXd full = O.pm->full_displacement(O.v.head(O.pm->dofs()));
-        P.v.head(pm.dofs()) = pm.restrict_to_patch(full);
-        P.v[pm.dofs()] = O.v[O.pm->dofs()];
+        const auto carry = [&](const Eigen::VectorXd& ov) {
+            Eigen::VectorXd nv(pm.dofs() + 1);
+            nv.head(pm.dofs()) = pm.restrict_to_patch(O.pm->full_displacement(ov.head(O.pm->dofs())));
+            nv[pm.dofs()] = ov[O.pm->dofs()];
+            return nv;
+        };
+        P.v = carry(O.v);
         P.kappa_wall = O.kappa_wall;
         P.kappa_blade = O.kappa_blade;
         // The grips carry over to the new patch's numbering (a node that is no longer a candidate lets go).
         std::vector<int> is_cand(static_cast<size_t>(np), 0);
         for (int a : P.cand) is_cand[static_cast<size_t>(a)] = 1;
-        for (fem::BladeGrip g : O.grips) {
-            const int a = pm.local(O.pm->nodes()[static_cast<size_t>(g.node)]);
-            if (a < 0 || !is_cand[static_cast<size_t>(a)]) continue;
-            g.node = a;
-            P.grips.push_back(g);
-        }
+        const auto carry_grips = [&](const std::vector<fem::BladeGrip>& from, std::vector<fem::BladeGrip>& to) {
+            for (fem::BladeGrip g : from) {
+                const int a = pm.local(O.pm->nodes()[static_cast<size_t>(g.node)]);
+                if (a < 0 || !is_cand[static_cast<size_t>(a)]) continue;
+                g.node = a;
+                to.push_back(g);
+            }
+        };
+        carry_grips(O.grips, P.grips);
         P.gripped = O.gripped;
+        // And the last converged state with the restart's bookkeeping: a patch remade after an unconverged frame
+        // still goes back to it. (Without this the sample's patch, remade at the frame after one that did not
+        // converge, took that frame's iterate for its start and went back to it.)
+        if (O.v_ok.size() == O.v.size()) {
+            P.v_ok = carry(O.v_ok);
+            carry_grips(O.grips_ok, P.grips_ok);
+            P.gripped_ok = O.gripped_ok;
+        }
+        P.loads_ok = O.loads_ok;
+        P.wall_min_ok = O.wall_min_ok;
+        P.touching_ok = O.touching_ok;
+        P.failed_in_row = O.failed_in_row;
+        P.theta_failed = O.theta_failed;
+        P.theta_step = O.theta_step;
+        // The spring's balance estimate and its secant (before, a remade patch began the approach again from where
+        // it stood: a held clip stood still for that frame).
+        P.theta_bal = O.theta_bal;
+        P.prev_theta = O.prev_theta;
+        P.prev_R = O.prev_R;
+        P.tissue_k = O.tissue_k;
         P.stats = O.stats;
         ++P.stats.builds;
         P.iterations_sum = O.iterations_sum;

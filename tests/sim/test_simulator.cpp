@@ -891,36 +891,45 @@ TEST(SimulatorPatch, FramesThatDoNotConvergeTwiceInARowRestartFromTheLastConverg
     // The flattening scene with only 8 Newton iterations a frame (the full frames take 9.3 on average): closing 2.9°
     // a frame onto the tube does not converge in 8 once the blades touch. A frame that does not converge is continued
     // by the next; a second in a row goes back to the last converged state and halves the opening's change a frame.
-    // (Measured: 58 frames, 33 not converged, 14 restarts, 0.4970 N at the end.) The clip still reaches the applier's opening
-    // (held longer), every frame at the end converges, and the end state is the one closing in full frames gives:
-    // walls apart, nothing behind a blade, the same blade force within 5 % (friction makes the path matter).
-    test::TempDir d("patchrestart");
-    const std::string bundle = tube_bundle(Precision::FLOAT64);
-    json j = flattening_scene(bundle, "patch", false);
-    j["model"]["newton_per_frame"] = 8;
-    const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
-    j["instruments"][0]["keyframes"].push_back(key(0.60, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
-    sim::Simulator s = make(j, d.file(""), "restart.json");
-    std::vector<std::string> msgs;
-    sim::RunOptions opt;
-    opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
-    const sim::Assessment a = sim::run_scene(s, opt);
-    ASSERT_EQ(a.patches.size(), 1u);
-    const auto& p = a.patches[0];
-    EXPECT_GT(p.unconverged_frames, 1);
-    EXPECT_GT(p.restarts, 0) << "no two unconverged frames in a row: the restart was not exercised";
-    EXPECT_LE(p.restarts, p.unconverged_frames / 2);
-    const sim::Clip& c = s.clips().at(0);
-    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
-    EXPECT_GT(p.wall_pairs_touching, 0);
-    EXPECT_GT(p.min_wall_distance_mm, -0.02);
-    const double worst = under_the_flat_blades(s.deformed_surface()).second;
-    EXPECT_GT(worst, -0.02);
-    constexpr double FROM_CLEAR_AIR_N = 0.4886;  // AClipFlatteningTheTube...'s blade force (40 iterations a frame)
-    EXPECT_NEAR(c.grip_force_n, FROM_CLEAR_AIR_N, 0.05 * FROM_CLEAR_AIR_N);
-    std::printf("8 Newton iterations a frame: %ld frames, %ld not converged, %ld restarts; end: %.3f deg, blade force %.4f N (40 a frame: %.4f N), "
-                "walls %.4f mm apart, deepest %.4f mm in front of a blade\n",
-                p.frames, p.unconverged_frames, p.restarts, c.opening_deg, c.grip_force_n, FROM_CLEAR_AIR_N, p.min_wall_distance_mm, worst);
+    // The clip still reaches the applier's opening (held longer), and the end state is the one closing in full
+    // frames gives: walls apart, nothing behind a blade, the same blade force within 5 % (friction makes the path
+    // matter). Measured: 58 frames, 33 not converged, 14 restarts, 0.4970 N. Then the same with the jaws sliding 2 mm
+    // along the tube as they close, out of their first patch: the patch is remade and carries the last converged
+    // state and the restart's bookkeeping over (measured: 2 builds, 14 restarts, 0.5105 N; the other path: 10 %).
+    for (const bool slide : {false, true}) {
+        test::TempDir d("patchrestart");
+        const std::string bundle = tube_bundle(Precision::FLOAT64);
+        json j = flattening_scene(bundle, "patch", false);
+        j["model"]["newton_per_frame"] = 8;
+        const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
+        if (slide) {
+            j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 2.0};
+            j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 2.0};
+        }
+        j["instruments"][0]["keyframes"].push_back(key(0.60, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
+        sim::Simulator s = make(j, d.file(""), "restart.json");
+        const sim::Assessment a = sim::run_scene(s, sim::RunOptions{});
+        ASSERT_EQ(a.patches.size(), 1u);
+        const auto& p = a.patches[0];
+        EXPECT_GT(p.unconverged_frames, 1);
+        EXPECT_GT(p.restarts, 0) << "no two unconverged frames in a row: the restart was not exercised";
+        EXPECT_LE(p.restarts, p.unconverged_frames / 2);
+        if (slide) {
+            EXPECT_GE(p.builds, 2) << "the sliding jaws did not leave their first patch";
+        }
+        const sim::Clip& c = s.clips().at(0);
+        EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+        EXPECT_GT(p.wall_pairs_touching, 0);
+        EXPECT_GT(p.min_wall_distance_mm, -0.02);
+        const double worst = under_the_flat_blades(s.deformed_surface()).second;
+        EXPECT_GT(worst, -0.02);
+        constexpr double FROM_CLEAR_AIR_N = 0.4886;  // AClipFlatteningTheTube...'s blade force (40 iterations a frame)
+        EXPECT_NEAR(c.grip_force_n, FROM_CLEAR_AIR_N, (slide ? 0.10 : 0.05) * FROM_CLEAR_AIR_N);
+        std::printf("8 Newton iterations a frame%s: %d builds, %ld frames, %ld not converged, %ld restarts; end: %.3f deg, blade force %.4f N "
+                    "(40 a frame: %.4f N), walls %.4f mm apart, deepest %.4f mm in front of a blade\n",
+                    slide ? ", jaws sliding" : "", p.builds, p.frames, p.unconverged_frames, p.restarts, c.opening_deg, c.grip_force_n, FROM_CLEAR_AIR_N,
+                    p.min_wall_distance_mm, worst);
+    }
 }
 
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
