@@ -243,26 +243,17 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
         };
         carry_grips(O.grips, P.grips);
         P.gripped = O.gripped;
-        // And the last converged state with the restart's bookkeeping: a patch remade after an unconverged frame
-        // still goes back to it. (Without this the sample's patch, remade at the frame after one that did not
-        // converge, took that frame's iterate for its start and went back to it.)
+        // And the last converged state: a patch remade after an unconverged frame still goes back to it. (Without
+        // this the sample's patch, remade at the frame after one that did not converge, took that frame's iterate
+        // for its start and went back to it.)
         if (O.v_ok.size() == O.v.size()) {
             P.v_ok = carry(O.v_ok);
             carry_grips(O.grips_ok, P.grips_ok);
             P.gripped_ok = O.gripped_ok;
         }
-        P.loads_ok = O.loads_ok;
-        P.wall_min_ok = O.wall_min_ok;
-        P.touching_ok = O.touching_ok;
-        P.failed_in_row = O.failed_in_row;
-        P.theta_failed = O.theta_failed;
-        P.theta_step = O.theta_step;
-        // The spring's balance estimate and its secant (before, a remade patch began the approach again from where
-        // it stood: a held clip stood still for that frame).
-        P.theta_bal = O.theta_bal;
-        P.prev_theta = O.prev_theta;
-        P.prev_R = O.prev_R;
-        P.tissue_k = O.tissue_k;
+        // So does the course: the restart's bookkeeping and the spring's balance estimate with its secant (before,
+        // a remade patch began the approach again from where it stood: a held clip stood still for that frame).
+        P.course = O.course;
         P.stats = O.stats;
         ++P.stats.builds;
         P.iterations_sum = O.iterations_sum;
@@ -311,11 +302,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const double theta_applier = std::clamp(c.forceps_deg, 0.0, cm.max_opening_deg) * DEG;
         // The opening this frame holds. Without a spring: the applier's (held) or the clip's own (deposited). With
         // one: the balance the frames approach (below), but never below what the applier holds open.
-        if (P.theta_bal < 0) P.theta_bal = P.v[nb];
+        if (P.course.theta_bal < 0) P.course.theta_bal = P.v[nb];
         const double theta_wanted = !cm.spring ? (held ? theta_applier : c.opening_deg * DEG)
-                                               : std::max(held ? theta_applier : 0.0, P.theta_bal);
+                                               : std::max(held ? theta_applier : 0.0, P.course.theta_bal);
         // After a restart (below) the opening moves at most theta_step a frame towards it.
-        const double theta_kept = P.v[nb] + std::clamp(theta_wanted - P.v[nb], -P.theta_step, P.theta_step);
+        const double theta_kept = P.v[nb] + std::clamp(theta_wanted - P.v[nb], -P.course.theta_step, P.course.theta_step);
         if (P.v_ok.size() != P.v.size()) {  // a new patch: its start is its last converged state
             P.v_ok = P.v;
             P.grips_ok = P.grips;
@@ -427,42 +418,42 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         Assessment::PatchEnd& st = P.stats;
         bool restarted = false;
         if (r.converged) {
-            P.failed_in_row = 0;
-            if (std::isfinite(P.theta_step) && (P.theta_step *= 2) > 1.0) P.theta_step = std::numeric_limits<double>::infinity();
+            P.course.failed_in_row = 0;
+            if (std::isfinite(P.course.theta_step) && (P.course.theta_step *= 2) > 1.0) P.course.theta_step = std::numeric_limits<double>::infinity();
             P.v_ok = r.u;
             P.grips_ok = grips;
             P.gripped_ok = true;
-            P.loads_ok = loads;
-            P.wall_min_ok = wall_min;
-            P.touching_ok = touching;
-        } else if (++P.failed_in_row == 1) {
-            P.theta_failed = theta_kept;
+            P.course.loads_ok = loads;
+            P.course.wall_min_ok = wall_min;
+            P.course.touching_ok = touching;
+        } else if (++P.course.failed_in_row == 1) {
+            P.course.theta_failed = theta_kept;
         } else {
-            P.theta_step = std::max(0.5 * std::min(P.theta_step, std::abs(P.theta_failed - P.v_ok[nb])), 0.01 * DEG);
-            P.failed_in_row = 0;
+            P.course.theta_step = std::max(0.5 * std::min(P.course.theta_step, std::abs(P.course.theta_failed - P.v_ok[nb])), 0.01 * DEG);
+            P.course.failed_in_row = 0;
             ++st.restarts;
             restarted = true;
             if (std::getenv("ANEU_PATCH_TRACE"))
                 std::fprintf(stderr, "patch t=%.4f: second unconverged frame in a row: back to the last converged state (%.3f deg), the opening now moves %.3f deg a frame at most\n",
-                             fr.t, P.v_ok[nb] / DEG, P.theta_step / DEG);
+                             fr.t, P.v_ok[nb] / DEG, P.course.theta_step / DEG);
             r.u = P.v_ok;
             grips = P.grips_ok;
-            loads = P.loads_ok;
-            wall_min = P.wall_min_ok;
-            touching = P.touching_ok;
+            loads = P.course.loads_ok;
+            wall_min = P.course.wall_min_ok;
+            touching = P.course.touching_ok;
         }
         // A frame whose solve did not converge leaves the balance's estimate as it was (its reaction is not the
         // tissue's; a held clip goes on following the applier).
         if (cm.spring && r.reaction.size() && r.converged) {
             const double R = r.reaction[0], th = r.u[nb];
-            double k = P.tissue_k;
-            if (P.prev_theta >= 0 && std::abs(th - P.prev_theta) > 1e-7) k = (R - P.prev_R) / (th - P.prev_theta);
+            double k = P.course.tissue_k;
+            if (P.course.prev_theta >= 0 && std::abs(th - P.course.prev_theta) > 1e-7) k = (R - P.course.prev_R) / (th - P.course.prev_theta);
             k = std::max(k, spring.k_nmm_per_rad);  // R grows with θ: the spring alone gives at least its k
-            P.tissue_k = k;
-            P.prev_theta = th;
-            P.prev_R = R;
+            P.course.tissue_k = k;
+            P.course.prev_theta = th;
+            P.course.prev_R = R;
             // (Held, the applier bounds it from below anyway.)
-            P.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0);
+            P.course.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0);
         }
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
@@ -480,7 +471,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         P.hinge_prev = blades.hinge;
         const double theta = r.u[nb];
         c.opening_deg = theta / DEG;
-        if (held && cm.spring) c.spring_deg = P.theta_bal / DEG;
+        if (held && cm.spring) c.spring_deg = P.course.theta_bal / DEG;
         c.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
         c.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
         c.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;

@@ -130,23 +130,27 @@ struct Simulator::Impl {
         double t_map = -1;                    // when the map vertices were last updated
         Eigen::Vector3d force = Eigen::Vector3d::Zero();  // the tissue's net force on the clip [N]
         int contacts = 0;                     // nodes pressing on the blades at the last solve
-        double theta_bal = -1;                // a spring clip: the opening the frames approach (−1: not yet)
-        double prev_theta = -1, prev_R = 0, tissue_k = 0;  // the last frame's θ and τ − M, the secant dR/dθ
         std::vector<fem::BladeGrip> grips;    // where patch nodes grip the blades after the last solve (with friction)
         bool gripped = false;                 // grips holds the last solve's (false: none solved yet)
-        /// The last converged frame's state (empty: none yet; the patch's start counts as one), its grips and what
-        /// it reported. Two frames in a row that do not converge go back to it (solve_patches).
+        /// The last converged frame's state (empty: none yet; the patch's start counts as one) and its grips. Two
+        /// frames in a row that do not converge go back to it (solve_patches).
         Eigen::VectorXd v_ok;
         std::vector<fem::BladeGrip> grips_ok;
         bool gripped_ok = false;
-        fem::BladeLoads loads_ok;
-        double wall_min_ok = std::numeric_limits<double>::infinity();
-        int touching_ok = 0;
-        int failed_in_row = 0;                // frames in a row that did not converge
-        double theta_failed = 0;              // the opening the first of them was asked for [rad]
-        /// The most the opening may change in a frame [rad]: unbounded until a restart sets it to half the change
-        /// that failed; doubled by every converged frame after that (unbounded again past 1 rad).
-        double theta_step = std::numeric_limits<double>::infinity();
+        /// The course of the frames, carried as it is when the patch is remade.
+        struct Course {
+            double theta_bal = -1;            // a spring clip: the opening the frames approach (−1: not yet)
+            double prev_theta = -1, prev_R = 0, tissue_k = 0;  // the last frame's θ and τ − M, the secant dR/dθ
+            // What the last converged frame reported (a restart reports it again).
+            fem::BladeLoads loads_ok;
+            double wall_min_ok = std::numeric_limits<double>::infinity();
+            int touching_ok = 0;
+            int failed_in_row = 0;            // frames in a row that did not converge
+            double theta_failed = 0;          // the opening the first of them was asked for [rad]
+            /// The most the opening may change in a frame [rad]: unbounded until a restart sets it to half the
+            /// change that failed; doubled by every converged frame after that (unbounded again past 1 rad).
+            double theta_step = std::numeric_limits<double>::infinity();
+        } course;
         bool alive = true;                    // false once its clip fell away
         Assessment::PatchEnd stats;
         double iterations_sum = 0, solve_ms_sum = 0;
