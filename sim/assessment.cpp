@@ -1,7 +1,6 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
-#include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
@@ -314,6 +313,9 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
         }
         out.gap_mm.push_back(g);
         out.points.push_back(at);
+        std::vector<int> faces(line.size());
+        for (size_t k = 0; k < line.size(); ++k) faces[k] = line[k].face;
+        out.faces.push_back(std::move(faces));
     }
     out.fraction = out.length_mm > 0 ? out.closed_mm / out.length_mm : 0.0;
     return out;
@@ -461,20 +463,19 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
 }
 
 
-double neck_cut_off_fraction(const SimLumen& lumen, const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm) {
+double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm) {
     if (channel.reach_mm.empty()) return -1.0;
     // Segments of the neck line (deformed lengths, as the occlusion's) whose two ends lie on faces the parent's
     // blood reaches only through channels at most the tolerance wide.
     double len = 0, cut = 0;
     for (size_t l = 0; l < occ.points.size(); ++l) {
-        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
         const auto& pts = occ.points[l];
-        if (line.size() != pts.size()) throw NumericalError("neck_cut_off_fraction: the occlusion was measured on another lumen");
+        const auto& faces = occ.faces[l];
         for (size_t k = 0; k < pts.size(); ++k) {
             const size_t m = (k + 1) % pts.size();
             const double seg_mm = (pts[m] - pts[k]).norm();
             len += seg_mm;
-            if (channel.reach_mm[static_cast<size_t>(line[k].face)] <= gap_tol_mm && channel.reach_mm[static_cast<size_t>(line[m].face)] <= gap_tol_mm)
+            if (channel.reach_mm[static_cast<size_t>(faces[k])] <= gap_tol_mm && channel.reach_mm[static_cast<size_t>(faces[m])] <= gap_tol_mm)
                 cut += seg_mm;
         }
     }
@@ -550,7 +551,7 @@ Assessment Simulator::Impl::assess() {
         out.neck_channel_mm = channel.width_mm;
         out.neck_channel_at = channel.at;
         if (channel.face >= 0) out.neck_channel_edge_mm = lumen_edges_mm(lumen)[split ? channel.face / 4 : channel.face];
-        out.neck_cut_off_fraction = neck_cut_off_fraction(measured, occ, channel, scene.neck_gap_mm);
+        out.neck_cut_off_fraction = neck_cut_off_fraction(occ, channel, scene.neck_gap_mm);
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});

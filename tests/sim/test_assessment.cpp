@@ -312,7 +312,7 @@ TEST(NeckChannel, TheNeckLineCutOffFromTheParentIsWhatItsBloodNoLongerReaches) {
     auto both = [&](const Eigen::MatrixX3d& y) {
         const NeckOcclusion occ = neck_occlusion(s, y, 0.05, wall);
         const NeckChannel ch = neck_channel(s, y, 1);
-        return std::make_tuple(occ.fraction, neck_cut_off_fraction(s, occ, ch, 0.05), ch.width_mm);
+        return std::make_tuple(occ.fraction, neck_cut_off_fraction(occ, ch, 0.05), ch.width_mm);
     };
     // open: none of it cut off;
     EXPECT_EQ(std::get<1>(both(s.X)), 0.0);
@@ -334,7 +334,7 @@ TEST(NeckChannel, TheNeckLineCutOffFromTheParentIsWhatItsBloodNoLongerReaches) {
     EXPECT_EQ(closed_par, 0.0);
     EXPECT_DOUBLE_EQ(cut_par, 1.0);
     // No parent's faces, no reach: not measured.
-    EXPECT_EQ(neck_cut_off_fraction(s, neck_occlusion(s, s.X, 0.05, wall), NeckChannel{}, 0.05), -1.0);
+    EXPECT_EQ(neck_cut_off_fraction(neck_occlusion(s, s.X, 0.05, wall), NeckChannel{}, 0.05), -1.0);
 }
 
 TEST(NeckChannel, WidestReachIsTheMaximinPathFromTheSourceFaces) {

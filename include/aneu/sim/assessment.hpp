@@ -23,6 +23,7 @@ struct NeckOcclusion {
     /// report can say where along the neck line it stays open.
     std::vector<std::vector<double>> gap_mm;
     std::vector<std::vector<Eigen::Vector3d>> points;  ///< the neck line's points on the deformed lumen, per loop
+    std::vector<std::vector<int>> faces;               ///< the lumen face each point lies on
 };
 
 /// Neck occlusion on the deformed lumen `y` (#L×3, SimLumen::deformed). The neck line is the sac's border on
@@ -58,12 +59,12 @@ struct NeckChannel {
     std::vector<double> reach_mm;
 };
 
-/// The fraction of the neck line (by deformed length, over the same points as `occ`, measured on `lumen`) cut off
+/// The fraction of the neck line (by deformed length, over the points `occ` measured on `lumen`) cut off
 /// from the parent: segments whose ends lie on faces that the parent's lumen reaches only through channels at most
 /// `gap_tol_mm` wide (NeckChannel::reach_mm) — their walls touch, or they lie on the sac's side of walls that touch.
 /// A clip across the neck cuts off all of it; one on the sac's side above it seals the sac but leaves the neck line
 /// reached (a neck remnant); one on the parent's side below it cuts it off with the sac. −1 without a reach.
-double neck_cut_off_fraction(const SimLumen& lumen, const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm);
+double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm);
 
 /// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
 /// largest ball inside the lumen that touches the wall there (the maximal inscribed sphere of VMTK's centrelines,
