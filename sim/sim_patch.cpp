@@ -113,15 +113,42 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     const SimSurface& sf = model.surface;
     const VolumeData& vol = *model.volume;
     const FemData& fem = *model.fem;
+    const int old = patch_of_clip[static_cast<size_t>(clip)];
+    // The tetrahedra with a corner within radius_mm of the wedge, at rest or where it is now: the surface's vertices
+    // where they are displaced to, the old patch's nodes where it holds them. (At rest alone, a remade patch missed
+    // tissue the closing jaws had drawn in from beyond the radius, and the next frame's check found it uncovered
+    // within half the radius: the sample's patch was remade every second frame as it closed.)
+    std::vector<Eigen::Vector3d> now;
+    std::vector<char> moved;
+    if (old >= 0 || d.rows() == S) {
+        now.resize(static_cast<size_t>(vol.nodes.rows()));
+        moved.assign(now.size(), 0);
+        if (d.rows() == S)
+            for (Eigen::Index v = 0; v < S; ++v) {
+                const auto n = static_cast<size_t>(sf.node[v]);
+                now[n] = vol.nodes.row(sf.node[v]).transpose() + d.row(v).transpose();
+                moved[n] = 1;
+            }
+        if (old >= 0) {
+            const PatchRun& O = patches[static_cast<size_t>(old)];
+            for (size_t a = 0; a < O.pm->nodes().size(); ++a) {
+                const auto n = static_cast<size_t>(O.pm->nodes()[a]);
+                now[n] = O.X.row(static_cast<Eigen::Index>(a)).transpose() + O.v.segment<3>(3 * static_cast<Eigen::Index>(a));
+                moved[n] = 1;
+            }
+        }
+    }
     std::vector<int> tets;
     for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
-        for (int k = 0; k < 4; ++k)
-            if (blades.near_wedge(theta, vol.nodes.row(vol.tets(t, k)).transpose(), scene.patch.radius_mm)) {
+        for (int k = 0; k < 4; ++k) {
+            const int n = vol.tets(t, k);
+            if (blades.near_wedge(theta, vol.nodes.row(n).transpose(), scene.patch.radius_mm) ||
+                (!moved.empty() && moved[static_cast<size_t>(n)] && blades.near_wedge(theta, now[static_cast<size_t>(n)], scene.patch.radius_mm))) {
                 tets.push_back(static_cast<int>(t));
                 break;
             }
+        }
     if (tets.empty()) return;
-    const int old = patch_of_clip[static_cast<size_t>(clip)];
     // The visible surface the patch moves: in-region vertices (their displacement from the interface).
     std::vector<int> map_vertex, map_nodes;
     for (Eigen::Index v = 0; v < S; ++v)
