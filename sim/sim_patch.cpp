@@ -95,20 +95,30 @@ void Simulator::Impl::make_patches(Frame& fr) {
             }
         }
         grid.query(box.grown(reach + b.thickness_mm), cand);
-        bool near = false, uncovered = false;
+        bool near = false;
+        int uncovered = -1;
         for (int v : cand) {
             const Eigen::Vector3d p = x_grid.row(v).transpose();
             if (!b.near_wedge(theta, p, reach)) continue;
             near = true;
-            if (have >= 0 && patches[static_cast<size_t>(have)].pm->local(sf.node[v]) < 0) uncovered = true;
+            if (have >= 0 && uncovered < 0 && patches[static_cast<size_t>(have)].pm->local(sf.node[v]) < 0) uncovered = v;
         }
-        if ((have < 0 && near) || uncovered) build_patch(cid, b, theta, fr.mx);
+        std::string why;
+        if (uncovered >= 0) {
+            // Why (for the log): the jaws moved to it, or it moved to them.
+            const Eigen::Vector3d x0 = sf.X.row(uncovered).transpose();
+            char w[200];
+            std::snprintf(w, sizeof w, "; surface vertex %d, %.3f mm from rest, lay within %.2f mm of the jaws outside the patch (at rest: %s)", uncovered,
+                          (x_grid.row(uncovered).transpose() - x0).norm(), reach, b.near_wedge(theta, x0, reach) ? "within" : "not within");
+            why = w;
+        }
+        if ((have < 0 && near) || uncovered >= 0) build_patch(cid, b, theta, fr.mx, why);
     }
 }
 
 // Made without the lock (the factorisation and interface solves take seconds); what the other threads read is
 // changed under it.
-void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx) {
+void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx, const std::string& why) {
     const Stopwatch sw;
     const SimSurface& sf = model.surface;
     const VolumeData& vol = *model.volume;
@@ -302,7 +312,7 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     std::snprintf(b, sizeof b, "clip %d: nonlinear patch %s at t=%.3f s: %d tetrahedra, %lld nodes (%lld on the interface), made in %.2f s", clip,
                   old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
                   sw.seconds());
-    warn(b);
+    warn(b + why);
     if (inside > 0 && cleared) {
         std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lay inside the blades at %.2f deg: the patch's blades start at %.2f deg and close from there",
                       clip, inside, theta / DEG, N.v[N.pm->dofs()] / DEG);

@@ -219,7 +219,7 @@ struct Simulator::Impl {
     // solve_patches: each patch's Newton solve with the clip's blades, spring and wall contact, then d.
     bool patch_holds_instrument(size_t i) const;
     void make_patches(Frame& fr);
-    void build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx);
+    void build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx, const std::string& why = {});
     void solve_patches(Frame& fr);
     void set_patch_part(Eigen::Index v, const Eigen::Vector3d& value);
     void drop_patch(int index);  // its clip fell away: the wall returns to what the linear model gives
