@@ -501,6 +501,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
                          loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
                          1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back);
+        if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
         if (fr.mx) fr.lock.lock();
         P.v = r.u;
         P.grips = std::move(grips);

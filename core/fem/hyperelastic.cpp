@@ -540,6 +540,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             if (budget_spent) {
                 out.converged = false;
                 out.load_fraction = s1;
+                out.failure = last_failure;
                 break;
             }
             s = s1;
@@ -550,6 +551,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 if (opt.keep_going) {
                     out.converged = false;
                     out.load_fraction = s;
+                    out.failure = last_failure;
                     break;
                 }
                 throw NumericalError("neo-Hookean solve: no convergence at load fraction " + std::to_string(s1) + " with the step " +

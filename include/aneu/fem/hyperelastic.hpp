@@ -119,6 +119,7 @@ struct NewtonResult {
     double min_J = 1;           ///< smallest det F at the end
     bool converged = true;      ///< false only with NewtonOptions::keep_going
     double load_fraction = 1;   ///< of the prescribed increment reached (< 1 only when not converged)
+    std::string failure;        ///< why the last attempt failed, when not converged (for logs)
     int factorisations = 0;     ///< numeric Cholesky factorisations (predictors, iterations, shifted retries)
     /// Wall-clock seconds of the call's parts: the free tangent's pattern and CHOLMOD's ordering and analysis (once,
     /// at the first linearised solve; none when the call starts converged), tangent assembly, numeric
