@@ -540,7 +540,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             if (budget_spent) {
                 out.converged = false;
                 out.load_fraction = s1;
-                out.failure = last_failure;
+                out.failure = "the iteration budget (" + std::to_string(opt.max_total_iterations) + ") ran out";
                 break;
             }
             s = s1;

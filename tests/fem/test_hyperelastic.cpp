@@ -237,6 +237,20 @@ TEST(NeoHookean, RefusesWhatItCannotSolve) {
     } catch (const NumericalError& e) {
         EXPECT_NE(std::string(e.what()).find("no convergence at load fraction"), std::string::npos) << e.what();
     }
+    // With keep_going (the simulator's frames) the same solve returns where it got and says why it stopped.
+    fem::NewtonOptions go;
+    go.keep_going = true;
+    const fem::NewtonResult r = fem::solve_neo_hookean(solid, fixed, through, Eigen::VectorXd::Zero(12), go);
+    EXPECT_FALSE(r.converged);
+    EXPECT_LT(r.load_fraction, 1.0);
+    EXPECT_GT(r.min_J, 0.0);
+    EXPECT_FALSE(r.failure.empty());
+    EXPECT_TRUE(r.failure.find("inverts elements") != std::string::npos || r.failure.find("line search") != std::string::npos ||
+                r.failure.find("no convergence") != std::string::npos)
+        << r.failure;
+    const fem::NewtonResult ok = fem::solve_neo_hookean(solid, fixed, {{11, -0.1}}, Eigen::VectorXd::Zero(12), go);
+    EXPECT_TRUE(ok.converged);
+    EXPECT_TRUE(ok.failure.empty());
     EXPECT_THROW(fem::solve_neo_hookean(solid, fixed, {{12, 0.1}}, Eigen::VectorXd::Zero(12)), InputError);
     EXPECT_THROW(fem::solve_neo_hookean(solid, fixed, {{3, 0.1}}, Eigen::VectorXd::Zero(12)), InputError);
     Eigen::VectorXd inverted = Eigen::VectorXd::Zero(12);
