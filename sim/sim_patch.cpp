@@ -362,13 +362,14 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         o.max_halvings = 3;
         o.keep_going = true;
         o.force_scale = 1e-3;  // N: a released clip's free problem has no reaction to measure the residual by
+        o.workspace = P.newton;
         // θ is prescribed in every frame's solve (a free θ against a stiff, buckling, pressed-together wall makes
         // Newton crawl); the solve's reaction on it is R = τ(θ) − M(θ), the spring's torque less the tissue's
         // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
         // frame), as the applier lets it close or once it is released.
         double t_wall = 0, t_clip = 0;
         int its = 0;  // Newton iterations over the frame's solves
-        int factorisations = 0;
+        int factorisations = 0, reused = 0, unsolved = 0;  // analyses reused, substeps without a linear solve
         double t_setup = 0, t_tangent = 0, t_factor = 0, t_back = 0;  // over the frame's solves (NewtonResult)
         bool at_rest = false;
         fem::BladeLoads loads;
@@ -399,6 +400,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             }
             its += res.iterations;
             factorisations += res.factorisations;
+            reused += res.analysis_reused ? 1 : 0;
+            unsolved += res.unsolved_substeps;
             t_setup += res.setup_s;
             t_tangent += res.tangent_s;
             t_factor += res.factorise_s;
@@ -496,11 +499,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
         if (std::getenv("ANEU_PATCH_TRACE"))
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f, tangent %.1f, %d factorisations %.1f, back %.1f)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s, tangent %.1f, %d factorisations %.1f, back %.1f%s)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
                          loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
-                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back);
+                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back,
+                         unsolved ? ", in equilibrium without a solve" : "");
         if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
         if (fr.mx) fr.lock.lock();
         P.v = r.u;

@@ -122,6 +122,8 @@ struct Simulator::Impl {
                                               // their mid-edge nodes), normals into the lumen
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
         Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
+        /// The Newton solves' analysis of the patch's tangent, kept from frame to frame while its pattern stays
+        std::shared_ptr<fem::NewtonWorkspace> newton = fem::make_newton_workspace();
         double kappa_wall = 0, kappa_blade = 0;
         /// Inner-wall vertices paired with every face near them (a frame's solve took them through a face their
         /// ordinary pairs left out): carried to the following frames (fem::CrossingFreeSolve::close_vertices).

@@ -315,6 +315,20 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> NeoHookeanSolid::tangent(const Eige
     return K;
 }
 
+struct NewtonWorkspace {
+    using Index = Eigen::SparseMatrix<double, Eigen::RowMajor>::StorageIndex;
+    bool valid = false;                  // analysed for the pattern below
+    std::vector<Index> outer, inner;     // the body's tangent pattern it was analysed for
+    std::vector<int> free_index;         // and its free DOFs (−1: fixed or prescribed)
+    Eigen::SparseMatrix<double> Kff;     // the free block's upper triangle
+    std::vector<std::int64_t> to_ff;     // tangent entry → Kff entry (−1: not free)
+    std::vector<Eigen::Index> diag_pos;  // Kff's diagonal entries
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    NewtonWorkspace() { llt.cholmod().print = 0; }  // a tangent that is not positive definite is expected (buckling)
+};
+
+std::shared_ptr<NewtonWorkspace> make_newton_workspace() { return std::make_shared<NewtonWorkspace>(); }
+
 NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& fixed_dofs,
                                const std::vector<std::pair<int, double>>& prescribed, const Eigen::VectorXd& u0,
                                const NewtonOptions& opt) {
@@ -338,34 +352,53 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         return std::sqrt(s);
     };
     // The free block of the tangent: its pattern (upper triangle) and where each tangent entry goes, built once,
-    // so that CHOLMOD orders and analyses it once per call and only refactorises in the iterations. Built at the
-    // first linearised solve: a call that starts converged (a simulator frame where nothing moved) needs none of it
-    // (on the sample's patch, its dense interface block makes it 3.6 s).
+    // so that CHOLMOD orders and analyses it once per call (or once for many calls: NewtonOptions::workspace) and
+    // only refactorises in the iterations. Built at the first linearised solve: a call that starts converged (a
+    // simulator frame where nothing moved) needs none of it (on the sample's patch, its dense interface block makes
+    // it 2.7-3.6 s).
     std::vector<int> free_index(static_cast<size_t>(n), -1);
     Eigen::Index m = 0;
     for (Eigen::Index i = 0; i < n; ++i)
         if (!constrained[static_cast<size_t>(i)]) free_index[static_cast<size_t>(i)] = static_cast<int>(m++);
     Eigen::SparseMatrix<double, Eigen::RowMajor> K;
-    Eigen::SparseMatrix<double> Kff(m, m);
-    std::vector<std::int64_t> to_ff;
-    std::vector<Eigen::Index> diag_pos;
-    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
-    llt.cholmod().print = 0;  // a tangent that is not positive definite is expected (buckling) and handled below
+    const std::shared_ptr<NewtonWorkspace> ws = opt.workspace ? opt.workspace : make_newton_workspace();
+    Eigen::SparseMatrix<double>& Kff = ws->Kff;
+    std::vector<std::int64_t>& to_ff = ws->to_ff;
+    std::vector<Eigen::Index>& diag_pos = ws->diag_pos;
+    auto& llt = ws->llt;
     NewtonResult out;
     bool analysed = false;
     auto analyse = [&] {
         const Stopwatch sw;
         const Eigen::SparseMatrix<double, Eigen::RowMajor>& P = solid.pattern();
-        // Kff's upper triangle from the rows' entries right of the diagonal (as they are assembled; the tangent's
-        // two triangles need not agree to the last bit), scattered into columns: a count, then a fill row by row
-        // (ascending rows: each column's row indices come out sorted). Two linear passes, no sort.
-        Kff = detail::free_upper(P, free_index, m, &to_ff);
-        diag_pos.assign(static_cast<size_t>(m), 0);
-        for (Eigen::Index b = 0; b < m; ++b) {  // a column's rows ascend to its diagonal
-            const std::int64_t last = static_cast<std::int64_t>(Kff.outerIndexPtr()[b + 1]) - 1;
-            if (last >= Kff.outerIndexPtr()[b] && Kff.innerIndexPtr()[last] == b) diag_pos[static_cast<size_t>(b)] = last;
+        const auto* po = P.outerIndexPtr();
+        const auto* pi = P.innerIndexPtr();
+        const size_t nnz = static_cast<size_t>(P.nonZeros());
+        // The last call's analysis holds when the free tangent's pattern is the same: the body's pattern and the
+        // free DOFs (a compressed pattern compared entry by entry: milliseconds against seconds of analysis).
+        const bool same = ws->valid && P.isCompressed() && ws->free_index == free_index && ws->outer.size() == static_cast<size_t>(P.outerSize()) + 1 &&
+                          ws->inner.size() == nnz && std::equal(ws->outer.begin(), ws->outer.end(), po) && std::equal(ws->inner.begin(), ws->inner.end(), pi);
+        if (same) {
+            out.analysis_reused = true;
+        } else {
+            ws->valid = false;
+            // Kff's upper triangle from the rows' entries right of the diagonal (as they are assembled; the tangent's
+            // two triangles need not agree to the last bit), scattered into columns: a count, then a fill row by row
+            // (ascending rows: each column's row indices come out sorted). Two linear passes, no sort.
+            Kff = detail::free_upper(P, free_index, m, &to_ff);
+            diag_pos.assign(static_cast<size_t>(m), 0);
+            for (Eigen::Index b = 0; b < m; ++b) {  // a column's rows ascend to its diagonal
+                const std::int64_t last = static_cast<std::int64_t>(Kff.outerIndexPtr()[b + 1]) - 1;
+                if (last >= Kff.outerIndexPtr()[b] && Kff.innerIndexPtr()[last] == b) diag_pos[static_cast<size_t>(b)] = last;
+            }
+            if (m > 0) llt.analyzePattern(Kff);
+            if (P.isCompressed()) {
+                ws->outer.assign(po, po + P.outerSize() + 1);
+                ws->inner.assign(pi, pi + nnz);
+                ws->free_index = free_index;
+                ws->valid = true;
+            }
         }
-        if (m > 0) llt.analyzePattern(Kff);
         analysed = true;
         out.setup_s += sw.seconds();
     };
@@ -450,6 +483,24 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         const bool moves = dp.cwiseAbs().maxCoeff() > 0;
         bool shortened = false;  // by a contact: a way point, solved loosely (below)
         Eigen::VectorXd v = u;
+        if (moves && solid.max_step(u, dp) >= 1) {
+            // The prescribed DOFs moved alone, the free ones where they are: already in equilibrium when the move is
+            // small enough (a held clip's opening moved by rounding, by 1e-9 rad: the sample's held frames each
+            // analysed and factorised the patch's tangent for a predictor that moved nothing, 6 s a frame). No
+            // linear solve then; a contact the move would pass (max_step < 1) or a residual above the tolerance
+            // takes the predictor below.
+            const Eigen::VectorXd w = u + dp;
+            if (std::isfinite(solid.energy(w))) {
+                const Eigen::VectorXd gw = solid.internal_force(w);
+                const double r = free_norm(gw), scale = std::max(gw.norm(), opt.force_scale);
+                if (r <= opt.tolerance * scale + 1e-14) {
+                    out.residual = scale > 0 ? r / scale : 0;
+                    ++out.unsolved_substeps;
+                    u = w;
+                    return true;
+                }
+            }
+        }
         if (moves) {
             // A contact may cut the predictor short (max_step): the prescribed DOFs still move all the way, the
             // free ones as far as admitted. Where that still runs into a contact (a prescribed DOF that moves

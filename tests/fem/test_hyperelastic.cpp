@@ -4,6 +4,7 @@
 // model at small loads, and it refuses what it cannot solve.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -258,6 +259,66 @@ TEST(NeoHookean, RefusesWhatItCannotSolve) {
     EXPECT_TRUE(std::isinf(solid.energy(inverted)));
     EXPECT_THROW(solid.internal_force(inverted), NumericalError);
     EXPECT_THROW(fem::NeoHookeanSolid(V, T, region, {{"r", 1.0, 0.5}}), InputError);
+}
+
+TEST(NeoHookean, AWorkspaceKeepsTheAnalysisWhileThePatternStaysAndAMoveInEquilibriumNeedsNoSolve) {
+    // The box clamped at its base, its top pressed down 0.2 mm (10 %): three calls in a row as a simulator's frames
+    // make them, on one workspace.
+    const Model m = box_model(2);
+    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
+    std::vector<int> fd;
+    std::vector<int> top;
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+        if (m.V(i, 2) < 1e-9)
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        if (m.V(i, 2) > 2 - 1e-9) top.push_back(static_cast<int>(3 * i + 2));
+    }
+    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    auto pressed = [&](double d) {
+        std::vector<std::pair<int, double>> p;
+        for (const int dof : top) p.emplace_back(dof, -d);
+        return p;
+    };
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(solid.dofs());
+    fem::NewtonOptions o;
+    o.workspace = fem::make_newton_workspace();
+    const fem::NewtonResult fresh = fem::solve_neo_hookean(solid, fixed, pressed(0.2), zero);
+    const fem::NewtonResult first = fem::solve_neo_hookean(solid, fixed, pressed(0.2), zero, o);
+    EXPECT_FALSE(first.analysis_reused);
+    EXPECT_GT(first.factorisations, 0);
+    // Same pattern, same free DOFs: the analysis is reused and the answer is the fresh solve's, bit for bit.
+    const fem::NewtonResult again = fem::solve_neo_hookean(solid, fixed, pressed(0.2), zero, o);
+    EXPECT_TRUE(again.analysis_reused);
+    EXPECT_EQ(again.iterations, fresh.iterations);
+    EXPECT_EQ((again.u - fresh.u).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_EQ((first.u - fresh.u).cwiseAbs().maxCoeff(), 0.0);
+    // From the converged state, the top moved by 1e-13 mm: in equilibrium as it stands, no linear solve.
+    const fem::NewtonResult nudged = fem::solve_neo_hookean(solid, fixed, pressed(0.2 + 1e-13), first.u, o);
+    EXPECT_TRUE(nudged.converged);
+    EXPECT_EQ(nudged.unsolved_substeps, 1);
+    EXPECT_EQ(nudged.factorisations, 0);
+    EXPECT_LE(nudged.residual, 1e-9);
+    for (Eigen::Index i = 0; i < solid.dofs(); ++i) {
+        if (std::find(top.begin(), top.end(), static_cast<int>(i)) == top.end()) {
+            EXPECT_EQ(nudged.u[i], first.u[i]) << i;
+        }
+    }
+    for (const int dof : top) EXPECT_DOUBLE_EQ(nudged.u[dof], -0.2 - 1e-13);
+    // Pressed 0.01 mm further: not in equilibrium without a solve; the reused analysis gives the fresh answer.
+    const fem::NewtonResult further = fem::solve_neo_hookean(solid, fixed, pressed(0.21), first.u, o);
+    EXPECT_EQ(further.unsolved_substeps, 0);
+    EXPECT_GT(further.factorisations, 0);
+    EXPECT_TRUE(further.analysis_reused);
+    const fem::NewtonResult further_fresh = fem::solve_neo_hookean(solid, fixed, pressed(0.21), first.u);
+    EXPECT_EQ((further.u - further_fresh.u).cwiseAbs().maxCoeff(), 0.0);
+    // Other free DOFs (the top's sideways DOFs held too): analysed again, and right.
+    auto held = pressed(0.2);
+    for (const int dof : top) held.emplace_back(dof - 1, 0.0);
+    const fem::NewtonResult other = fem::solve_neo_hookean(solid, fixed, held, zero, o);
+    EXPECT_FALSE(other.analysis_reused);
+    const fem::NewtonResult other_fresh = fem::solve_neo_hookean(solid, fixed, held, zero);
+    EXPECT_EQ((other.u - other_fresh.u).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_GT((other.u - first.u).cwiseAbs().maxCoeff(), 1e-4);  // a different problem
 }
 
 }  // namespace
