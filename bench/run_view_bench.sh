@@ -29,10 +29,12 @@ echo
 echo "\`bash bench/run_view_bench.sh\` ($(date -u +%F), $(nproc) cores, Xvfb with Mesa's llvmpipe software renderer; scene: $scene made live)."
 echo "aneuview steers the suction tube 3 mm into the vessel (12 key presses) while \`aneusim serve\` streams 30 surfaces/s;"
 echo "frame rate: every rendered frame from the viewer's start (window, connection, the server loading the bundle) to the 300th"
-echo "surface; steady: from the first frame that showed a surface to the 300th; render = time in Render()."
+echo "surface; steady: from the first frame that showed a surface to the 300th (both rates end at the last frame rendered: the"
+echo "screenshot written after it is not counted); render = time in Render(); interval = between the steady frames' ends; with"
+echo "--max-fps 60, the periods of a 60 Hz display that got no new frame (an interval of k periods leaves k - 1 without one)."
 echo
-echo "| window | --max-fps | surfaces | frames | frame rate (Hz) | steady (Hz) | render mean (ms) |"
-echo "|---|---|---|---|---|---|---|"
+echo "| window | --max-fps | surfaces | frames | frame rate (Hz) | steady (Hz) | render mean (ms) | interval p50 / p99 / max (ms) | display periods missed |"
+echo "|---|---|---|---|---|---|---|---|---|"
 } > "$out.tmp"
 for size in 600,500 900,700 1280,800; do
     for fps in 60 0; do
@@ -43,7 +45,8 @@ for size in 600,500 900,700 1280,800; do
             --screenshot "$w/view.png" --after-surfaces 300 --size $size --max-fps $fps > "$w/view.out"
         wait $server || true
         v() { awk -v k="$1" '$1 == k {print $2}' "$w/view.out"; }
-        echo "| ${size/,/ x } | $fps | $(v surfaces_received) | $(v frames_rendered) | $(v frame_rate_hz) | $(v frame_rate_steady_hz) | $(v render_ms_mean) |" | tee -a "$out.tmp"
+        missed=$( [ "$fps" = 0 ] && echo "-" || echo "$(v display_periods_missed) of $(v display_periods)" )
+        echo "| ${size/,/ x } | $fps | $(v surfaces_received) | $(v frames_rendered) | $(v frame_rate_hz) | $(v frame_rate_steady_hz) | $(v render_ms_mean) | $(v frame_interval_ms_p50) / $(v frame_interval_ms_p99) / $(v frame_interval_ms_max) | $missed |" | tee -a "$out.tmp"
     done
 done
 mv "$out.tmp" "$out"

@@ -165,6 +165,9 @@ struct View {
     /// server loading its bundle) and the frames rendered up to it.
     std::chrono::steady_clock::time_point steady_start;
     long steady_from = -1;
+    /// When each frame since the steady start finished rendering (the rates and the intervals end at the last
+    /// frame: the screenshot's PNG and the exit after it are not frames).
+    std::vector<std::chrono::steady_clock::time_point> frame_ends;
     // Steering one instrument from the keyboard (without a haptic device).
     igtl::ClientSocket* sock = nullptr;
     std::string steer, clip_model;
@@ -456,6 +459,7 @@ void update(View& v) {
         v.steady_start = std::chrono::steady_clock::now();
         v.steady_from = v.renders;
     }
+    if (v.steady_from >= 0) v.frame_ends.push_back(std::chrono::steady_clock::now());
     if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0 && v.next_key >= v.keys.size()) {
         write_png(v.win, v.screenshot);
         if (!v.points_out.empty()) {
@@ -698,11 +702,27 @@ int main(int argc, char** argv) {
     iren->CreateRepeatingTimer(1);
     win->Render();
     iren->Start();
-    const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - v.start).count();
-    const double steady_s = v.steady_from < 0 ? 0.0 : std::chrono::duration<double>(std::chrono::steady_clock::now() - v.steady_start).count();
+    // The rates up to the last frame rendered (not the screenshot written after it, nor the exit).
+    const auto last = v.frame_ends.empty() ? std::chrono::steady_clock::now() : v.frame_ends.back();
+    const double secs = std::chrono::duration<double>(last - v.start).count();
+    const double steady_s = v.steady_from < 0 ? 0.0 : std::chrono::duration<double>(last - v.steady_start).count();
     std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nframe_rate_steady_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
                 secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, steady_s > 0 ? static_cast<double>(v.renders - v.steady_from) / steady_s : 0.0,
                 v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
+    // The steady frames' intervals: median, 99th percentile, longest, and with --max-fps the display periods that
+    // got no new frame (an interval of k periods, rounded, leaves k - 1 of them without one).
+    std::vector<double> gaps;
+    for (size_t k = 1; k < v.frame_ends.size(); ++k) gaps.push_back(std::chrono::duration<double>(v.frame_ends[k] - v.frame_ends[k - 1]).count());
+    if (!gaps.empty()) {
+        long missed = 0;
+        if (v.min_period > 0)
+            for (const double g : gaps) missed += std::max(0L, std::lround(g / v.min_period) - 1);
+        const double longest = *std::max_element(gaps.begin(), gaps.end());
+        std::sort(gaps.begin(), gaps.end());
+        const auto q = [&](double p) { return gaps[std::min(gaps.size() - 1, static_cast<size_t>(p * static_cast<double>(gaps.size())))]; };
+        std::printf("frame_interval_ms_p50 %.2f\nframe_interval_ms_p99 %.2f\nframe_interval_ms_max %.2f\n", 1e3 * q(0.5), 1e3 * q(0.99), 1e3 * longest);
+        if (v.min_period > 0) std::printf("display_periods %ld\ndisplay_periods_missed %ld\n", static_cast<long>(gaps.size()) + missed, missed);
+    }
     sh.done = true;
     sock->CloseSocket();
     net.join();

@@ -57,6 +57,16 @@ PY
 # The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
 xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
+# The frame statistics are consistent (no speed is asserted): intervals ordered, and every steady interval spans at
+# least one period of the 60 Hz pacing, the missed ones counted apart.
+python3 - "$w/view2.out" <<'PY'
+import sys
+v = dict((l.split()[0], float(l.split()[1])) for l in open(sys.argv[1]) if len(l.split()) == 2)
+for k in ('frame_interval_ms_p50', 'frame_interval_ms_p99', 'frame_interval_ms_max', 'display_periods', 'display_periods_missed'):
+    assert k in v, 'aneuview did not report ' + k
+assert 0 < v['frame_interval_ms_p50'] <= v['frame_interval_ms_p99'] <= v['frame_interval_ms_max'], v
+assert 0 <= v['display_periods_missed'] < v['display_periods'] and v['display_periods'] < v['frames_rendered'] + v['display_periods_missed'], v
+PY
 # Stereo, side by side: both halves show the vessel, the same size (one eye each).
 xvfb-run -a "$view" --port $port --stereo side-by-side --screenshot "$w/stereo.png" --after-surfaces 3 --size 800,400 > "$w/stereo.out"
 python3 - "$w/stereo.png" "$here" <<'PY'
