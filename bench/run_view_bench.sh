@@ -31,7 +31,7 @@ echo "aneuview steers the suction tube 3 mm into the vessel (12 key presses) whi
 echo "frame rate: every rendered frame from the viewer's start (window, connection, the server loading the bundle) to the 300th"
 echo "surface; steady: from the first frame that showed a surface to the 300th (both rates end at the last frame rendered: the"
 echo "screenshot written after it is not counted); render = time in Render(); interval = between the steady frames' ends; with"
-echo "--max-fps 60, the periods of a 60 Hz display that got no new frame (an interval of k periods leaves k - 1 without one)."
+echo "--max-fps 60, the periods of a 60 Hz display over the steady span that got no new frame (periods less frames)."
 echo
 echo "| window | --max-fps | surfaces | frames | frame rate (Hz) | steady (Hz) | render mean (ms) | interval p50 / p99 / max (ms) | display periods missed |"
 echo "|---|---|---|---|---|---|---|---|---|"

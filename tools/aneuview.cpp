@@ -709,14 +709,16 @@ int main(int argc, char** argv) {
     std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nframe_rate_steady_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
                 secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, steady_s > 0 ? static_cast<double>(v.renders - v.steady_from) / steady_s : 0.0,
                 v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
-    // The steady frames' intervals: median, 99th percentile, longest, and with --max-fps the display periods that
-    // got no new frame (an interval of k periods, rounded, leaves k - 1 of them without one).
+    // The steady frames' intervals: median, 99th percentile, longest, and with --max-fps the periods of a display at
+    // that rate over the steady span and how many of them got no new frame (periods less frames: as the steady rate).
     std::vector<double> gaps;
     for (size_t k = 1; k < v.frame_ends.size(); ++k) gaps.push_back(std::chrono::duration<double>(v.frame_ends[k] - v.frame_ends[k - 1]).count());
     if (!gaps.empty()) {
         long missed = 0;
-        if (v.min_period > 0)
-            for (const double g : gaps) missed += std::max(0L, std::lround(g / v.min_period) - 1);
+        if (v.min_period > 0) {
+            const double span = std::chrono::duration<double>(v.frame_ends.back() - v.frame_ends.front()).count();
+            missed = std::max(0L, std::lround(span / v.min_period) - static_cast<long>(gaps.size()));
+        }
         const double longest = *std::max_element(gaps.begin(), gaps.end());
         std::sort(gaps.begin(), gaps.end());
         const auto q = [&](double p) { return gaps[std::min(gaps.size() - 1, static_cast<size_t>(p * static_cast<double>(gaps.size())))]; };

@@ -57,8 +57,8 @@ PY
 # The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
 xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
-# The frame statistics are consistent (no speed is asserted): intervals ordered, and every steady interval spans at
-# least one period of the 60 Hz pacing, the missed ones counted apart.
+# The frame statistics are consistent (no speed is asserted): intervals ordered, and the 60 Hz display's periods over
+# the steady span are the steady frames plus the periods that got none.
 python3 - "$w/view2.out" <<'PY'
 import sys
 v = dict((l.split()[0], float(l.split()[1])) for l in open(sys.argv[1]) if len(l.split()) == 2)
