@@ -56,6 +56,8 @@
 #include <vtkTransform.h>
 #include <vtkWindowToImageFilter.h>
 
+#include "aneu/core/common.hpp"
+
 namespace {
 
 const double ARTERY[3] = {0.85, 0.33, 0.27}, ANEURYSM[3] = {0.95, 0.80, 0.35};  // the snapshot's palette
@@ -161,12 +163,9 @@ struct View {
     std::chrono::steady_clock::time_point start = std::chrono::steady_clock::now();
     long renders = 0;
     double render_s = 0;  // time in Render()
-    /// The steady rate's start: the first frame that showed a surface (before it: the window, the connection, the
-    /// server loading its bundle) and the frames rendered up to it.
-    std::chrono::steady_clock::time_point steady_start;
-    long steady_from = -1;
-    /// When each frame since the steady start finished rendering (the rates and the intervals end at the last
-    /// frame: the screenshot's PNG and the exit after it are not frames).
+    /// When each steady frame finished rendering: from the first frame that showed a surface (before it: the window,
+    /// the connection, the server loading its bundle). The rates and intervals end at the last frame: the
+    /// screenshot's PNG and the exit after it are not frames.
     std::vector<std::chrono::steady_clock::time_point> frame_ends;
     // Steering one instrument from the keyboard (without a haptic device).
     igtl::ClientSocket* sock = nullptr;
@@ -455,11 +454,7 @@ void update(View& v) {
     v.win->Render();
     v.render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - r0).count();
     ++v.renders;
-    if (v.steady_from < 0 && v.shown > 0) {
-        v.steady_start = std::chrono::steady_clock::now();
-        v.steady_from = v.renders;
-    }
-    if (v.steady_from >= 0) v.frame_ends.push_back(std::chrono::steady_clock::now());
+    if (v.shown > 0) v.frame_ends.push_back(std::chrono::steady_clock::now());
     if (!v.screenshot.empty() && !v.finished && v.shown >= v.after_surfaces && v.shown > 0 && v.next_key >= v.keys.size()) {
         write_png(v.win, v.screenshot);
         if (!v.points_out.empty()) {
@@ -705,24 +700,18 @@ int main(int argc, char** argv) {
     // The rates up to the last frame rendered (not the screenshot written after it, nor the exit).
     const auto last = v.frame_ends.empty() ? std::chrono::steady_clock::now() : v.frame_ends.back();
     const double secs = std::chrono::duration<double>(last - v.start).count();
-    const double steady_s = v.steady_from < 0 ? 0.0 : std::chrono::duration<double>(last - v.steady_start).count();
+    std::vector<double> gaps;  // the steady frames' intervals
+    for (size_t k = 1; k < v.frame_ends.size(); ++k) gaps.push_back(std::chrono::duration<double>(v.frame_ends[k] - v.frame_ends[k - 1]).count());
+    const double steady_s = gaps.empty() ? 0.0 : std::chrono::duration<double>(last - v.frame_ends.front()).count();
     std::printf("surfaces_received %ld\nframes_rendered %ld\nframe_rate_hz %.1f\nframe_rate_steady_hz %.1f\nrender_ms_mean %.2f\n", sh.surfaces, v.renders,
-                secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, steady_s > 0 ? static_cast<double>(v.renders - v.steady_from) / steady_s : 0.0,
+                secs > 0 ? static_cast<double>(v.renders) / secs : 0.0, steady_s > 0 ? static_cast<double>(gaps.size()) / steady_s : 0.0,
                 v.renders > 0 ? 1e3 * v.render_s / static_cast<double>(v.renders) : 0.0);
     // The steady frames' intervals: median, 99th percentile, longest, and with --max-fps the periods of a display at
     // that rate over the steady span and how many of them got no new frame (periods less frames: as the steady rate).
-    std::vector<double> gaps;
-    for (size_t k = 1; k < v.frame_ends.size(); ++k) gaps.push_back(std::chrono::duration<double>(v.frame_ends[k] - v.frame_ends[k - 1]).count());
     if (!gaps.empty()) {
-        long missed = 0;
-        if (v.min_period > 0) {
-            const double span = std::chrono::duration<double>(v.frame_ends.back() - v.frame_ends.front()).count();
-            missed = std::max(0L, std::lround(span / v.min_period) - static_cast<long>(gaps.size()));
-        }
-        const double longest = *std::max_element(gaps.begin(), gaps.end());
-        std::sort(gaps.begin(), gaps.end());
-        const auto q = [&](double p) { return gaps[std::min(gaps.size() - 1, static_cast<size_t>(p * static_cast<double>(gaps.size())))]; };
-        std::printf("frame_interval_ms_p50 %.2f\nframe_interval_ms_p99 %.2f\nframe_interval_ms_max %.2f\n", 1e3 * q(0.5), 1e3 * q(0.99), 1e3 * longest);
+        const long missed = v.min_period > 0 ? std::max(0L, std::lround(steady_s / v.min_period) - static_cast<long>(gaps.size())) : 0;
+        std::printf("frame_interval_ms_p50 %.2f\nframe_interval_ms_p99 %.2f\nframe_interval_ms_max %.2f\n", 1e3 * aneu::percentile(gaps, 0.5),
+                    1e3 * aneu::percentile(gaps, 0.99), 1e3 * aneu::percentile(gaps, 1.0));
         if (v.min_period > 0) std::printf("display_periods %ld\ndisplay_periods_missed %ld\n", static_cast<long>(gaps.size()) + missed, missed);
     }
     sh.done = true;

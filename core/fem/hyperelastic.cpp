@@ -485,7 +485,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         Eigen::VectorXd v = u;
         if (moves && solid.max_step(u, dp) >= 1) {
             // The prescribed DOFs moved alone, the free ones where they are: already in equilibrium when the move is
-            // small enough (a held clip's opening moved by rounding, by 1e-9 rad: the sample's held frames each
+            // small enough (a held clip's opening moved by less than the trace's 0.001°: the sample's held frames each
             // analysed and factorised the patch's tangent for a predictor that moved nothing, 6 s a frame). No
             // linear solve then; a contact the move would pass (max_step < 1) or a residual above the tolerance
             // takes the predictor below.
