@@ -3,7 +3,7 @@
 # joining the sac to the parent (black), and the closed clip's blades (blue: the hinge line and the jaws' two edges),
 # seen along the clip's closing and down its jaws. The OBJ is what `ANEU_LUMEN_OBJ=F aneusim run ...` writes (widths
 # and channel as comments). System python3 with python3-vtk9 (bench only):
-#   xvfb-run -a /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG
+#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG
 # HINGE, AXIS (along the jaws) and CLOSING (the scene's "up": the direction the jaws close across) as x,y,z.
 import math, sys, vtk
 obj, out, title = sys.argv[1], sys.argv[2], sys.argv[3]

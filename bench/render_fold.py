@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: MIT
-# usage: ZCUT=3.0 xvfb-run -a /usr/bin/python3 bench/render_fold.py OUT.png LUMEN_0.70.obj=TITLE [...]  (OBJs from aneu_bench_fold --obj)
+# usage: ZCUT=3.0 bash scripts/xvfb.sh /usr/bin/python3 bench/render_fold.py OUT.png LUMEN_0.70.obj=TITLE [...]  (OBJs from aneu_bench_fold --obj)
 # The fold of a flattened tube (aneu_bench_fold --obj): the mid cross-section z = 3 seen down the tube, zoomed on
 # the channel's narrowest place, for several OBJs side by side.
 import sys, vtk

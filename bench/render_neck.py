@@ -1,5 +1,5 @@
 # The deformed lumen at a run's end (aneusim with ANEU_LUMEN_OBJ=FILE) with its neck points coloured by gap.
-#   xvfb-run -a /usr/bin/python3 bench/render_neck.py lumen_end.obj OUT.png TITLE GAP_TOL_MM AXIS(x,y,z) UP(x,y,z)
+#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_neck.py lumen_end.obj OUT.png TITLE GAP_TOL_MM AXIS(x,y,z) UP(x,y,z)
 import sys, vtk
 obj, out, title, tol = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
 axis = [float(x) for x in sys.argv[5].split(",")]; up = [float(x) for x in sys.argv[6].split(",")]

@@ -1,7 +1,7 @@
 # Renders a planned scene (aneusim plan) on the case's lumen: the closed clip's two jaws (blue, green) on the
 # lumen (sac orange, vessel grey), along the closing and down the jaws. System python3 with python3-vtk9 (apt-get install python3-vtk9; bench only):
 #   aneuprep export CASE/surface.h5 --format vtp --surface lumen -o lumen.vtp
-#   xvfb-run -a /usr/bin/python3 bench/render_plan.py lumen.vtp SCENE.json OUT.png "TITLE"
+#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_plan.py lumen.vtp SCENE.json OUT.png "TITLE"
 import json, re, sys
 class V(tuple):
     def __new__(c, x): return tuple.__new__(c, [float(a) for a in x])

@@ -28,10 +28,10 @@ h=$(python3 -c "import json; d=json.load(open('$w/sample_default.json')); print(
 run sample_fine "$w/sample/surface.h5" --cell-mm "$h"
 run C0096_default "$c96"
 mkdir -p bench/results/flow/pictures
-xvfb-run -a "$P" snapshot "$w/sample_default.h5" --streamlines -o bench/results/flow/pictures/sample_pre_clip_streamlines.png -q || true
-xvfb-run -a "$P" snapshot "$w/C0096_default.h5" --streamlines -o bench/results/flow/pictures/C0096_basilar_tip_streamlines.png -q || true
+bash scripts/xvfb.sh "$P" snapshot "$w/sample_default.h5" --streamlines -o bench/results/flow/pictures/sample_pre_clip_streamlines.png -q || true
+bash scripts/xvfb.sh "$P" snapshot "$w/C0096_default.h5" --streamlines -o bench/results/flow/pictures/C0096_basilar_tip_streamlines.png -q || true
 for f in wall_shear_stress_pa:wss pressure_pa:pressure; do
-  xvfb-run -a "$P" snapshot "$w/C0096_default.h5" --surface blood --color-by "${f%%:*}" -o "bench/results/flow/pictures/C0096_basilar_tip_${f##*:}.png" -q || true
+  bash scripts/xvfb.sh "$P" snapshot "$w/C0096_default.h5" --surface blood --color-by "${f%%:*}" -o "bench/results/flow/pictures/C0096_basilar_tip_${f##*:}.png" -q || true
 done
 python3 - "$w" <<'PY'
 import json, sys

@@ -41,11 +41,11 @@ for scene in closing half; do
 done
 mkdir -p bench/results/flow/pictures
 for scene in closing half; do
-  xvfb-run -a "$P" snapshot "$w/$scene.flow.h5" --surface blood --color-by wall_shear_stress_pa -o "bench/results/flow/pictures/sample_${scene}_clip_wss.png" -q || true
-  xvfb-run -a "$P" snapshot "$w/$scene.flow.h5" --surface lumen_deformed -o "bench/results/flow/pictures/sample_${scene}_clip_lumen.png" -q || true
-  xvfb-run -a "$P" snapshot "$w/$scene.flow.h5" --streamlines -o "bench/results/flow/pictures/sample_${scene}_clip_streamlines.png" -q || true
+  bash scripts/xvfb.sh "$P" snapshot "$w/$scene.flow.h5" --surface blood --color-by wall_shear_stress_pa -o "bench/results/flow/pictures/sample_${scene}_clip_wss.png" -q || true
+  bash scripts/xvfb.sh "$P" snapshot "$w/$scene.flow.h5" --surface lumen_deformed -o "bench/results/flow/pictures/sample_${scene}_clip_lumen.png" -q || true
+  bash scripts/xvfb.sh "$P" snapshot "$w/$scene.flow.h5" --streamlines -o "bench/results/flow/pictures/sample_${scene}_clip_streamlines.png" -q || true
 done
-xvfb-run -a "$P" snapshot "$w/closing.flow.h5" --surface blood_pre_clip --color-by wall_shear_stress_pa -o "bench/results/flow/pictures/sample_pre_clip_wss.png" -q || true
+bash scripts/xvfb.sh "$P" snapshot "$w/closing.flow.h5" --surface blood_pre_clip --color-by wall_shear_stress_pa -o "bench/results/flow/pictures/sample_pre_clip_wss.png" -q || true
 python3 - "$w" <<'PY'
 import json, sys
 w = sys.argv[1]

@@ -8,7 +8,7 @@
 # usage: bash bench/run_patch_case.sh CASE.toml|CASE_DIR OUT_DIR [SPRING_SCALE]
 #   CASE.toml: built with `aneuprep run` into OUT_DIR; CASE_DIR: a directory holding case.h5 and fem.h5.
 #   SPRING_SCALE: multiplies the planned clip's two spring forces (an experiment; the line says so) [1].
-# Build first (bash scripts/build.sh); the picture needs xvfb-run and the system python3 with python3-vtk9.
+# Build first (bash scripts/build.sh); the picture needs Xvfb and the system python3 with python3-vtk9.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 src=$1 out=$2 scale=${3:-1}
@@ -44,7 +44,7 @@ start=$(date +%s)
   ./aneusim --log-file trace.log run --deterministic scene.json --report report.json > run.log 2>&1) || true
 secs=$(( $(date +%s) - start ))
 python3 "$root/bench/patch_case_summary.py" "$out" "$secs" "$scale" | tee -a "$out/../patch_cases.tsv"
-if command -v xvfb-run > /dev/null && [ -f "$out/lumen_end.obj" ]; then
+if command -v Xvfb > /dev/null && [ -f "$out/lumen_end.obj" ]; then
   args=$(python3 "$root/bench/patch_case_summary.py" "$out" --render-args)
-  eval "xvfb-run -a /usr/bin/python3 $root/bench/render_channel.py $out/lumen_end.obj $out/channel.png $args" || true
+  eval "bash $root/scripts/xvfb.sh /usr/bin/python3 $root/bench/render_channel.py $out/lumen_end.obj $out/channel.png $args" || true
 fi

@@ -3,7 +3,7 @@
 # The real-data corpus (configs/real/*.toml) through `aneuprep run`, case by case: time per stage, peak memory,
 # the standards (tests/cli/test_real_corpus.sh), and two pictures per case (the lumen coloured by the automatic
 # artery/aneurysm label, the wall by region). Writes bench/results/real/corpus.md and pictures/.
-# usage: bash bench/run_real_corpus.sh   (build first: bash scripts/build.sh; pictures need xvfb-run)
+# usage: bash bench/run_real_corpus.sh   (build first: bash scripts/build.sh; pictures need Xvfb)
 set -uo pipefail
 shopt -s nullglob
 cd "$(dirname "$0")/.."
@@ -47,9 +47,9 @@ print("| %s | %s | %s | %s | %s / %s | %s | %s | %s | %s | %.0f | %s |" % (f[0],
       sys.argv[5], kv["thick_artery"], kv["thick_sac"], kv["min_dihedral"], kv["ends_moved"], kv["fallback"], times.replace("=", " "), float(sys.argv[3]), sys.argv[4]))
 PY
   d=$w/real/$id
-  if command -v xvfb-run >/dev/null; then
-    xvfb-run -a "$prep" snapshot "$d/surface.h5" --surface lumen -o "$res/pictures/${id}_lumen.png" -q || true
-    xvfb-run -a "$prep" snapshot "$d/wall.h5" --color-by region -o "$res/pictures/${id}_wall.png" -q || true
+  if command -v Xvfb >/dev/null; then
+    bash scripts/xvfb.sh "$prep" snapshot "$d/surface.h5" --surface lumen -o "$res/pictures/${id}_lumen.png" -q || true
+    bash scripts/xvfb.sh "$prep" snapshot "$d/wall.h5" --color-by region -o "$res/pictures/${id}_wall.png" -q || true
   fi
 done
 echo >> "$md"

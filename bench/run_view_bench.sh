@@ -41,7 +41,7 @@ for size in 600,500 900,700 1280,800; do
         port=$(( 20000 + RANDOM % 20000 ))
         build/tools/aneusim serve "$w/live.json" --port $port --max-seconds 120 --idle-seconds 3 > "$w/serve.out" 2>&1 &
         server=$!
-        xvfb-run -a -s "-screen 0 1600x1000x24" build/tools/aneuview --port $port --wait-seconds 60 --steer suction --keys "${keys%,}" \
+        bash scripts/xvfb.sh -s "-screen 0 1600x1000x24" build/tools/aneuview --port $port --wait-seconds 60 --steer suction --keys "${keys%,}" \
             --screenshot "$w/view.png" --after-surfaces 300 --size $size --max-fps $fps > "$w/view.out"
         wait $server || true
         v() { awk -v k="$1" '$1 == k {print $2}' "$w/view.out"; }

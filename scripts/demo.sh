@@ -24,7 +24,7 @@ echo "== inspect $out/phantom/truth.h5"
 echo "== the sample case, every stage (segment, surface, wall, tetmesh, assemble, condense): aneuprep run $case"
 "$prep" run "$case" --out-dir "$out/sample"
 echo "== QA report of the sample case (pictures by VTK off screen)"
-xvfb-run -a "$prep" report "$case" --out-dir "$out/sample" -q || xvfb-run -a "$prep" report "$case" --out-dir "$out/sample" -q  # xvfb-run start race
+bash scripts/xvfb.sh "$prep" report "$case" --out-dir "$out/sample" -q
 echo "   open $out/sample/report.html in a browser (self-contained)"
 echo "== export for ParaView (VTU) and CalculiX (.inp with 120 mmHg on the inner wall)"
 "$prep" export "$out/sample/fem.h5" --format vtu -o "$out/sample/volume.vtu" -q

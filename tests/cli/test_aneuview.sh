@@ -28,7 +28,7 @@ port=$(( 20000 + RANDOM % 20000 ))
 "$sim" serve "$w/scene.json" --port $port --max-seconds 120 --idle-seconds 10 --report "$w/report.json" > "$w/serve.out" 2> "$w/serve.err" &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
-xvfb-run -a "$view" --port $port --screenshot "$w/view.png" --after-surfaces 3 --points "$w/points.txt" --size 600,500 > "$w/view.out"
+bash "$here/../../scripts/xvfb.sh" "$view" --port $port --screenshot "$w/view.png" --after-surfaces 3 --points "$w/points.txt" --size 600,500 > "$w/view.out"
 python3 - "$w/view.png" "$w/points.txt" "$here" <<'PY'
 import sys
 sys.path.insert(0, sys.argv[3])
@@ -55,7 +55,7 @@ assert good[1] >= 0.8 * total[1], 'sac vertices not yellow where they land'
 assert min(corner) > 240, 'background not white'
 PY
 # The frame rate while the server streams: render for 3 s (screenshot after the 90th surface).
-xvfb-run -a "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
+bash "$here/../../scripts/xvfb.sh" "$view" --port $port --screenshot "$w/view2.png" --after-surfaces 90 --size 600,500 | tee "$w/view2.out"
 echo "aneuview frame rate: $(grep frame_rate_hz "$w/view2.out")"
 # The frame statistics are consistent (no speed is asserted): intervals ordered, and the 60 Hz display's periods over
 # the steady span are the steady frames plus the periods that got none.
@@ -68,7 +68,7 @@ assert 0 < v['frame_interval_ms_p50'] <= v['frame_interval_ms_p99'] <= v['frame_
 assert 0 <= v['display_periods_missed'] < v['display_periods'] and v['display_periods'] < v['frames_rendered'] + v['display_periods_missed'], v
 PY
 # Stereo, side by side: both halves show the vessel, the same size (one eye each).
-xvfb-run -a "$view" --port $port --stereo side-by-side --screenshot "$w/stereo.png" --after-surfaces 3 --size 800,400 > "$w/stereo.out"
+bash "$here/../../scripts/xvfb.sh" "$view" --port $port --stereo side-by-side --screenshot "$w/stereo.png" --after-surfaces 3 --size 800,400 > "$w/stereo.out"
 python3 - "$w/stereo.png" "$here" <<'PY'
 import sys
 sys.path.insert(0, sys.argv[2])
@@ -82,11 +82,11 @@ assert abs(left - right) < 0.25 * max(left, right), 'the two views are alike'
 PY
 # Steering: 20 presses of 'i' move the suction tube 5 mm along its axis, through the wall in front of it.
 keys=$(printf 'i,%.0s' $(seq 20))
-xvfb-run -a "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
+bash "$here/../../scripts/xvfb.sh" "$view" --port $port --steer suction --keys "${keys%,}" --screenshot "$w/steer.png" --after-surfaces 60 --size 600,500 > "$w/steer.out"
 # The clip: l, a Shift+drag 70 pixels left (away from where the suction tube stays), 8 x i (2 mm in), 8 x c
 # (40 deg to 0), r, 20 x k (5 mm back), 20 x Up (5 mm aside: the tool off the clip).
 keys="l,drag:-70:0,$(printf 'i,%.0s' $(seq 8))$(printf 'c,%.0s' $(seq 8))r,$(printf 'k,%.0s' $(seq 20))$(printf 'Up,%.0s' $(seq 20))"
-xvfb-run -a "$view" --port $port --steer applier --clip-model straight --keys "${keys%,}" --screenshot "$w/clip.png" --after-surfaces 10 \
+bash "$here/../../scripts/xvfb.sh" "$view" --port $port --steer applier --clip-model straight --keys "${keys%,}" --screenshot "$w/clip.png" --after-surfaces 10 \
     --points "$w/clip_points.txt" --size 600,500 > "$w/clip.out"
 python3 - "$w/clip.png" "$w/clip_points.txt" "$here" <<'PY'
 import sys

@@ -75,8 +75,8 @@ done
 valid_bundles
 
 echo "== 6. the QA report of the sample case renders in headless Chromium with every picture"
-report() { xvfb-run -a "$prep" report "$w/cases/sample.toml" --out-dir "$w/out/sample" -q; }
-report >"$w/log7" 2>&1 || report >"$w/log7" 2>&1 || { cat "$w/log7"; fail "aneuprep report failed"; }
+report() { bash "$root/scripts/xvfb.sh" "$prep" report "$w/cases/sample.toml" --out-dir "$w/out/sample" -q; }
+report >"$w/log7" 2>&1 || { cat "$w/log7"; fail "aneuprep report failed"; }
 html="$w/out/sample/report.html"
 grep -q 'Dice of the lumen against the phantom' "$html" || fail "report: no Dice figure"
 grep -q 'thickness_aneurysm_median_mm' "$html" || fail "report: no thickness per region"
