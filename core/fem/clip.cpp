@@ -354,11 +354,28 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
 Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::VectorXd& v, bool project) const {
     build_pattern();
     RowSparse K = m_pattern;
-    double* val = K.valuePtr();
-    m_body.add_tangent(v.head(m_body.dofs()), project, val, m_body_to_pattern.data());
+    m_body.add_tangent(v.head(m_body.dofs()), project, K.valuePtr(), m_body_to_pattern.data());
+    add_own_tangent(v, project, K.valuePtr(), nullptr);
+    return K;
+}
+
+void ClipBody::add_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const {
+    build_pattern();
+    {
+        // The body's entries go to where[m_body_to_pattern[p]] (composed each call into a kept buffer).
+        const std::lock_guard<std::mutex> lock(m_compose_mutex);
+        m_compose.resize(m_body_to_pattern.size());
+        for (size_t p = 0; p < m_body_to_pattern.size(); ++p) m_compose[p] = where[m_body_to_pattern[p]];
+        m_body.add_tangent(v.head(m_body.dofs()), project, values, m_compose.data());
+    }
+    add_own_tangent(v, project, values, where);
+}
+
+void ClipBody::add_own_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const {
+    auto at = [&](std::int64_t slot) -> double& { return values[where ? where[slot] : slot]; };
     const double theta = v[theta_dof()];
     const auto th = theta_dof();
-    val[m_pattern.outerIndexPtr()[th + 1] - 1] += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
+    at(m_pattern.outerIndexPtr()[th + 1] - 1) += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
     auto tc = touches(v);
     double ek;
     Eigen::Vector4d gk;
@@ -368,13 +385,12 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
             if (pair_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project)) {
                 if (!std::isfinite(ek)) throw NumericalError("clip: node " + std::to_string(m_nodes[k]) + " lies on or behind a blade's face");
                 for (int i = 0; i < 4; ++i)
-                    for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
+                    for (int j = 0; j < 4; ++j) at(m_slots[k][static_cast<size_t>(4 * i + j)]) += H(i, j);
             }
             if (grip_terms(v, k, s, tc[s > 0 ? 0 : 1], ek, gk, &H, project))
                 for (int i = 0; i < 4; ++i)
-                    for (int j = 0; j < 4; ++j) val[m_slots[k][static_cast<size_t>(4 * i + j)]] += H(i, j);
+                    for (int j = 0; j < 4; ++j) at(m_slots[k][static_cast<size_t>(4 * i + j)]) += H(i, j);
         }
-    return K;
 }
 
 double ClipBody::max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const {

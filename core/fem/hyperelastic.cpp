@@ -323,6 +323,14 @@ struct NewtonWorkspace {
     Eigen::SparseMatrix<double> Kff;     // the free block's upper triangle
     std::vector<std::int64_t> to_ff;     // tangent entry → Kff entry (−1: not free)
     std::vector<Eigen::Index> diag_pos;  // Kff's diagonal entries
+    // The body adds its tangent straight into `acc` (ElasticBody::add_tangent): tangent entry p goes to
+    // acc[where[p]]: Kff's entries first (to_ff), then the entries of free rows in constrained columns (K_fp, in
+    // row order: (fp_row, fp_col)), then one slot that takes everything else (fixed rows, the free lower triangle).
+    // No full tangent is made per iteration (a patch's has ~10⁷ entries, its dense exterior block: allocating and
+    // copying it was a third of a frame).
+    std::vector<std::int64_t> where;
+    std::vector<int> fp_row, fp_col;     // free index of the row, DOF of the column
+    std::vector<double> acc;
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
     NewtonWorkspace() { llt.cholmod().print = 0; }  // a tangent that is not positive definite is expected (buckling)
 };
@@ -360,7 +368,6 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     Eigen::Index m = 0;
     for (Eigen::Index i = 0; i < n; ++i)
         if (!constrained[static_cast<size_t>(i)]) free_index[static_cast<size_t>(i)] = static_cast<int>(m++);
-    Eigen::SparseMatrix<double, Eigen::RowMajor> K;
     const std::shared_ptr<NewtonWorkspace> ws = opt.workspace ? opt.workspace : make_newton_workspace();
     Eigen::SparseMatrix<double>& Kff = ws->Kff;
     std::vector<std::int64_t>& to_ff = ws->to_ff;
@@ -391,6 +398,29 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 const std::int64_t last = static_cast<std::int64_t>(Kff.outerIndexPtr()[b + 1]) - 1;
                 if (last >= Kff.outerIndexPtr()[b] && Kff.innerIndexPtr()[last] == b) diag_pos[static_cast<size_t>(b)] = last;
             }
+            // Where each tangent entry goes in acc (see NewtonWorkspace).
+            const auto nff = static_cast<std::int64_t>(Kff.nonZeros());
+            ws->where.assign(nnz, -1);
+            ws->fp_row.clear();
+            ws->fp_col.clear();
+            for (Eigen::Index r = 0; r < P.outerSize(); ++r) {
+                const int a = free_index[static_cast<size_t>(r)];
+                if (a < 0) continue;
+                const std::int64_t end = P.isCompressed() ? po[r + 1] : po[r] + P.innerNonZeroPtr()[r];
+                for (std::int64_t p = po[r]; p < end; ++p) {
+                    if (to_ff[static_cast<size_t>(p)] >= 0) {
+                        ws->where[static_cast<size_t>(p)] = to_ff[static_cast<size_t>(p)];
+                    } else if (free_index[static_cast<size_t>(pi[p])] < 0) {
+                        ws->where[static_cast<size_t>(p)] = nff + static_cast<std::int64_t>(ws->fp_row.size());
+                        ws->fp_row.push_back(a);
+                        ws->fp_col.push_back(pi[p]);
+                    }
+                }
+            }
+            const std::int64_t rest = nff + static_cast<std::int64_t>(ws->fp_row.size());
+            for (std::int64_t& w : ws->where)
+                if (w < 0) w = rest;
+            ws->acc.assign(static_cast<size_t>(rest) + 1, 0.0);
             if (m > 0) llt.analyzePattern(Kff);
             if (P.isCompressed()) {
                 ws->outer.assign(po, po + P.outerSize() + 1);
@@ -405,28 +435,26 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const Eigen::VectorXd* dp) {
         if (!analysed) analyse();
         Stopwatch sw;
-        K = solid.tangent(u);
-        out.tangent_s += sw.lap();
-        Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
-        auto fill_free = [&] {
-            std::fill(Kff.valuePtr(), Kff.valuePtr() + Kff.nonZeros(), 0.0);
-            for (size_t p = 0; p < to_ff.size(); ++p)
-                if (to_ff[p] >= 0) Kff.valuePtr()[to_ff[p]] = K.valuePtr()[p];
+        std::vector<double>& acc = ws->acc;
+        const auto nff = static_cast<size_t>(Kff.nonZeros());
+        // The body's tangent at u into acc, its free upper block into Kff.
+        auto assemble = [&](bool project) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            solid.add_tangent(u, project, acc.data(), ws->where.data());
+            std::copy(acc.begin(), acc.begin() + static_cast<std::ptrdiff_t>(nff), Kff.valuePtr());
         };
+        assemble(false);
+        Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
         if (dp) du = *dp;
         Eigen::VectorXd rhs(m);
         for (Eigen::Index r = 0; r < n; ++r) {
             const int a = free_index[static_cast<size_t>(r)];
-            if (a < 0) continue;
-            double v = -g[r];
-            if (dp)
-                for (Eigen::SparseMatrix<double, Eigen::RowMajor>::InnerIterator it(K, r); it; ++it)
-                    if (free_index[static_cast<size_t>(it.col())] < 0) v -= it.value() * (*dp)[it.col()];
-            rhs[a] = v;
+            if (a >= 0) rhs[a] = -g[r];
         }
-        if (m == 0) return du;
-        fill_free();
+        if (dp)  // − K_fp Δp, each row's terms in column order
+            for (size_t k = 0; k < ws->fp_row.size(); ++k) rhs[ws->fp_row[k]] -= acc[nff + k] * (*dp)[ws->fp_col[k]];
         out.tangent_s += sw.lap();
+        if (m == 0) return du;
         llt.factorize(Kff);
         ++out.factorisations;
         bool factored = llt.info() == Eigen::Success;
@@ -435,8 +463,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             // The predictor keeps the true tangent's K_fp in its right-hand side, computed above.
             ++out.shifted;
             out.factorise_s += sw.lap();
-            K = solid.tangent(u, true);
-            fill_free();
+            assemble(true);
             out.tangent_s += sw.lap();
         }
         Eigen::VectorXd diag(m);

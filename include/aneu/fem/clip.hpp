@@ -143,6 +143,7 @@ public:
         build_pattern();
         return m_pattern;
     }
+    void add_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const override;
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
     /// The largest fraction of the step dv that keeps every node in front of the blades it faces (and the body's
     /// own bound): continuous collision detection of the nodes' and the blades' motion.
@@ -210,6 +211,11 @@ private:
     mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
     mutable std::vector<std::int64_t> m_body_to_pattern;
     mutable std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
+    // add_tangent into a caller's matrix: the body's entries' places there (a buffer kept between calls).
+    mutable std::mutex m_compose_mutex;
+    mutable std::vector<std::int64_t> m_compose;
+    /// The spring's and the blades' terms at v, added into values at where[slot] (where null: the slots themselves).
+    void add_own_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const;
 };
 
 /// A linear elastic body: Ψ = ½ uᵀ K u (K symmetric, both triangles). The linear model in the same contact
