@@ -356,6 +356,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         fem::ClipContactParams bp;
         bp.stiffness = P.kappa_blade;
         bp.friction = scene.patch.blade_friction;
+        bp.pattern_cache = P.clip_patterns;
+        const int merges_before = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first;
         fem::NewtonOptions o;
         o.tolerance = scene.patch.tolerance;
         o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
@@ -418,6 +420,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         if (scene.patch.wall_contact && P.inner.rows() > 0) {
             fem::ContactParams cp;
             cp.stiffness = P.kappa_wall;
+            cp.pattern_cache = P.wall_patterns;
             // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
             // walls between them close by up to the jaws' own motion). A vertex the solve still takes through a
             // face its pairs left out is caught after it, and the frame solved again with it paired with every
@@ -498,12 +501,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
+        const int merges = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first - merges_before;
         if (std::getenv("ANEU_PATCH_TRACE"))
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s, tangent %.1f, %d factorisations %.1f, back %.1f%s)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s%s, tangent %.1f, %d factorisations %.1f, back %.1f%s)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
                          loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
-                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back,
+                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", merges ? (" (patterns merged: " + std::to_string(merges) + ")").c_str() : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back,
                          unsolved ? ", in equilibrium without a solve" : "");
         if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
         if (fr.mx) fr.lock.lock();

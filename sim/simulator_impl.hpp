@@ -124,6 +124,9 @@ struct Simulator::Impl {
         Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
         /// The Newton solves' analysis of the patch's tangent, kept from frame to frame while its pattern stays
         std::shared_ptr<fem::NewtonWorkspace> newton = fem::make_newton_workspace();
+        /// The wall contact's and the blades' merged tangent patterns, kept from frame to frame while they hold
+        /// every pair the frame needs (fem::PatternCache)
+        std::shared_ptr<fem::PatternCache> wall_patterns = fem::make_pattern_cache(), clip_patterns = fem::make_pattern_cache();
         double kappa_wall = 0, kappa_blade = 0;
         /// Inner-wall vertices paired with every face near them (a frame's solve took them through a face their
         /// ordinary pairs left out): carried to the following frames (fem::CrossingFreeSolve::close_vertices).

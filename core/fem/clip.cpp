@@ -131,11 +131,14 @@ void ClipBody::build_pattern() const {
         groups.reserve(m_nodes.size() + 1);
         for (int c : m_nodes) groups.push_back({3 * c, 3 * c + 1, 3 * c + 2, th});
         groups.push_back({th, th, th, th});  // (θ, θ) even without candidates
-        detail::MergedPattern mp = detail::merge_pattern(m_body.pattern(), dofs(), groups);
-        for (size_t k = 0; k < m_nodes.size(); ++k) m_slots.push_back(mp.block(groups[k]));
-        m_pattern = std::move(mp.pattern);
-        m_body_to_pattern = std::move(mp.body_to_pattern);
+        m_merged = detail::merge_pattern_cached(m_p.pattern_cache.get(), m_body.pattern(), dofs(), groups);
+        for (size_t k = 0; k < m_nodes.size(); ++k) m_slots.push_back(m_merged->block(groups[k]));
     });
+}
+
+const Eigen::SparseMatrix<double, Eigen::RowMajor>& ClipBody::pattern() const {
+    build_pattern();
+    return m_merged->pattern;
 }
 
 std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const {
@@ -353,8 +356,8 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::VectorXd& v, bool project) const {
     build_pattern();
-    RowSparse K = m_pattern;
-    m_body.add_tangent(v.head(m_body.dofs()), project, K.valuePtr(), m_body_to_pattern.data());
+    RowSparse K = m_merged->pattern;
+    m_body.add_tangent(v.head(m_body.dofs()), project, K.valuePtr(), m_merged->body_to_pattern.data());
     add_own_tangent(v, project, K.valuePtr(), nullptr);
     return K;
 }
@@ -362,10 +365,11 @@ Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::Vect
 void ClipBody::add_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const {
     build_pattern();
     {
-        // The body's entries go to where[m_body_to_pattern[p]] (composed each call into a kept buffer).
+        // The body's entries go to where[body_to_pattern[p]] (composed each call into a kept buffer).
         const std::lock_guard<std::mutex> lock(m_compose_mutex);
-        m_compose.resize(m_body_to_pattern.size());
-        for (size_t p = 0; p < m_body_to_pattern.size(); ++p) m_compose[p] = where[m_body_to_pattern[p]];
+        const std::vector<std::int64_t>& b2p = m_merged->body_to_pattern;
+        m_compose.resize(b2p.size());
+        for (size_t p = 0; p < b2p.size(); ++p) m_compose[p] = where[b2p[p]];
         m_body.add_tangent(v.head(m_body.dofs()), project, values, m_compose.data());
     }
     add_own_tangent(v, project, values, where);
@@ -375,7 +379,7 @@ void ClipBody::add_own_tangent(const Eigen::VectorXd& v, bool project, double* v
     auto at = [&](std::int64_t slot) -> double& { return values[where ? where[slot] : slot]; };
     const double theta = v[theta_dof()];
     const auto th = theta_dof();
-    at(m_pattern.outerIndexPtr()[th + 1] - 1) += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
+    at(m_merged->pattern.outerIndexPtr()[th + 1] - 1) += m_spring.k_nmm_per_rad + (theta < 0 ? m_stop : 0.0);  // (θ, θ): last in its row
     auto tc = touches(v);
     double ek;
     Eigen::Vector4d gk;

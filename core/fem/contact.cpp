@@ -49,12 +49,19 @@ void ContactBody::build_pattern() const {
         std::vector<std::array<int, 12>> groups;
         groups.reserve(m_pairs.size());
         for (const auto& q : m_pairs) groups.push_back(dofs_of(q));
-        detail::MergedPattern mp = detail::merge_pattern(m_body.pattern(), m_body.dofs(), groups);
-        for (const auto& g : groups) m_pair_slots.push_back(mp.block(g));
-        m_pattern = std::move(mp.pattern);
-        m_body_to_pattern = std::move(mp.body_to_pattern);
+        m_merged = detail::merge_pattern_cached(m_p.pattern_cache.get(), m_body.pattern(), m_body.dofs(), groups);
+        for (const auto& g : groups) m_pair_slots.push_back(m_merged->block(g));
     });
 }
+
+const Eigen::SparseMatrix<double, Eigen::RowMajor>& ContactBody::pattern() const {
+    build_pattern();
+    return m_merged->pattern;
+}
+
+std::shared_ptr<PatternCache> make_pattern_cache() { return std::make_shared<PatternCache>(); }
+
+std::pair<int, int> pattern_cache_counts(const PatternCache& cache) { return {cache.builds, cache.reuses}; }
 
 namespace {
 
@@ -281,18 +288,19 @@ Eigen::VectorXd ContactBody::internal_force(const Eigen::VectorXd& u) const {
 
 Eigen::SparseMatrix<double, Eigen::RowMajor> ContactBody::tangent(const Eigen::VectorXd& u, bool project) const {
     build_pattern();
-    RowSparse K = m_pattern;
-    m_body.add_tangent(u, project, K.valuePtr(), m_body_to_pattern.data());
+    RowSparse K = m_merged->pattern;
+    m_body.add_tangent(u, project, K.valuePtr(), m_merged->body_to_pattern.data());
     add_pair_tangents(u, project, K.valuePtr(), nullptr);
     return K;
 }
 
 void ContactBody::add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const {
     build_pattern();
-    // The body's entries go to where[m_body_to_pattern[p]] (composed each call into a kept buffer: no allocation).
+    // The body's entries go to where[body_to_pattern[p]] (composed each call into a kept buffer: no allocation).
     const std::lock_guard<std::mutex> lock(m_compose_mutex);
-    m_compose.resize(m_body_to_pattern.size());
-    for (size_t p = 0; p < m_body_to_pattern.size(); ++p) m_compose[p] = where[m_body_to_pattern[p]];
+    const std::vector<std::int64_t>& b2p = m_merged->body_to_pattern;
+    m_compose.resize(b2p.size());
+    for (size_t p = 0; p < b2p.size(); ++p) m_compose[p] = where[b2p[p]];
     m_body.add_tangent(u, project, values, m_compose.data());
     add_pair_tangents(u, project, values, where);
 }

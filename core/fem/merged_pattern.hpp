@@ -5,6 +5,9 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <iterator>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include <Eigen/SparseCore>
@@ -67,13 +70,9 @@ struct MergedPattern {
     }
 };
 
-/// `body`'s pattern on n × n (n ≥ its size) with a dense block over each group of DOFs. Built row by row in
-/// compressed form: a row without a group's entries is the body's row as it is; a row with some merges its sorted
-/// extra columns into the body's (a patch's tangent has ~10⁶ entries, its dense exterior block most of them,
-/// against a few thousand from the groups, and it is rebuilt every physics frame).
+/// The entries (row, column) of a dense block over each group of DOFs: sorted, unique.
 template <size_t N>
-MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::array<int, N>>& groups) {
-    // Extra columns per row: (row, col) pairs, sorted, unique.
+std::vector<std::pair<int, int>> group_entries(const std::vector<std::array<int, N>>& groups) {
     std::vector<std::pair<int, int>> extra;
     extra.reserve(N * N * groups.size());
     for (const auto& g : groups)
@@ -81,6 +80,14 @@ MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& 
             for (int j : g) extra.emplace_back(i, j);
     std::sort(extra.begin(), extra.end());
     extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
+    return extra;
+}
+
+/// `body`'s pattern on n × n (n ≥ its size) with the entries `extra` (sorted, unique) added. Built row by row in
+/// compressed form: a row without extra entries is the body's row as it is; a row with some merges its sorted
+/// extra columns into the body's (a patch's tangent has ~10⁷ entries, its dense exterior block most of them,
+/// against a few thousand from the groups).
+inline MergedPattern merge_entries(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::pair<int, int>>& extra) {
     const Eigen::Index body_rows = body.outerSize();
     const int* bo = body.outerIndexPtr();
     const int* bi = body.innerIndexPtr();
@@ -114,6 +121,67 @@ MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& 
                                                                                zeros.data());
     m.pattern.makeCompressed();
     return m;
+}
+
+/// `body`'s pattern on n × n with a dense block over each group of DOFs.
+template <size_t N>
+MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::array<int, N>>& groups) {
+    return merge_entries(body, n, group_entries(groups));
+}
+
+}  // namespace aneu::fem::detail
+
+namespace aneu::fem {
+
+/// See hyperelastic.hpp (make_pattern_cache): the last merged pattern, the body pattern it was merged over and the
+/// extra entries it holds.
+struct PatternCache {
+    std::mutex mutex;
+    Eigen::Index n = -1;
+    std::vector<int> body_outer, body_inner;
+    std::vector<std::pair<int, int>> extra;
+    std::shared_ptr<const detail::MergedPattern> merged;
+    int builds = 0, reuses = 0;
+};
+
+}  // namespace aneu::fem
+
+namespace aneu::fem::detail {
+
+/// merge_pattern through a cache kept between decorators of successive solves: the cached pattern serves when
+/// it was merged over the same body pattern (compared entry by entry: milliseconds) and holds every entry the
+/// groups need; else a new one is merged with the cached entries and the new ones (while the union stays within
+/// a few times what is needed now), so that pairs that come and go between frames leave the pattern, and with
+/// it the Newton workspace's analysis, as it is. cache null: merged afresh.
+template <size_t N>
+std::shared_ptr<const MergedPattern> merge_pattern_cached(PatternCache* cache, const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n,
+                                                          const std::vector<std::array<int, N>>& groups) {
+    std::vector<std::pair<int, int>> extra = group_entries(groups);
+    if (!cache || !body.isCompressed()) return std::make_shared<const MergedPattern>(merge_entries(body, n, extra));
+    const std::lock_guard<std::mutex> lock(cache->mutex);
+    const int* bo = body.outerIndexPtr();
+    const int* bi = body.innerIndexPtr();
+    const size_t nnz = static_cast<size_t>(body.nonZeros());
+    const bool same_body = cache->merged && cache->n == n && cache->body_outer.size() == static_cast<size_t>(body.outerSize()) + 1 &&
+                           cache->body_inner.size() == nnz && std::equal(cache->body_outer.begin(), cache->body_outer.end(), bo) &&
+                           std::equal(cache->body_inner.begin(), cache->body_inner.end(), bi);
+    if (same_body && std::includes(cache->extra.begin(), cache->extra.end(), extra.begin(), extra.end())) {
+        ++cache->reuses;
+        return cache->merged;
+    }
+    if (same_body) {
+        std::vector<std::pair<int, int>> all;
+        all.reserve(cache->extra.size() + extra.size());
+        std::set_union(cache->extra.begin(), cache->extra.end(), extra.begin(), extra.end(), std::back_inserter(all));
+        if (all.size() <= 4 * extra.size() + 20000) extra = std::move(all);
+    }
+    cache->merged = std::make_shared<const MergedPattern>(merge_entries(body, n, extra));
+    cache->extra = std::move(extra);
+    cache->n = n;
+    cache->body_outer.assign(bo, bo + body.outerSize() + 1);
+    cache->body_inner.assign(bi, bi + nnz);
+    ++cache->builds;
+    return cache->merged;
 }
 
 /// The largest diagonal entry of the body's tangent at rest [N/mm]: the stiffest node's own stiffness.

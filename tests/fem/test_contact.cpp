@@ -305,6 +305,53 @@ TEST(WallContact, ADecoratorOverTheContactHasItsTangentEntryForEntry) {
     EXPECT_GT((Kb - Eigen::MatrixXd(solid.tangent(u))).cwiseAbs().maxCoeff(), 0.1) << "the pairs are in it";
 }
 
+TEST(WallContact, APatternCacheServesLaterDecoratorsWithTheirOwnTangent) {
+    // Decorators made for successive solves (a simulator's frames) share a PatternCache: one whose pairs the cached
+    // pattern holds takes it as it is (structural zeros where its pairs are not), one with a new pair merges the
+    // union, one over another body pattern merges afresh. Whatever the pattern, the tangent is the decorator's own:
+    // as a dense matrix, equal to an uncached decorator's to the last bit.
+    const Plates p;
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
+        if (p.V(i, 2) > Plates::H + 1e-9) u[3 * i + 2] = -(Plates::GAP - 0.005);
+    auto params = [](double search, std::shared_ptr<fem::PatternCache> cache) {
+        fem::ContactParams cp;
+        cp.stiffness = 1.0;
+        cp.search_mm = search;
+        cp.pattern_cache = std::move(cache);
+        return cp;
+    };
+    auto same_tangent = [&](const fem::ElasticBody& a, const fem::ElasticBody& b) {
+        return (Eigen::MatrixXd(a.tangent(u)) - Eigen::MatrixXd(b.tangent(u))).cwiseAbs().maxCoeff() == 0.0;
+    };
+    const auto cache = fem::make_pattern_cache();
+    const fem::ContactBody wide(solid, p.V, p.faces, u, params(0.3, cache));
+    (void)wide.pattern();
+    EXPECT_EQ(fem::pattern_cache_counts(*cache), std::make_pair(1, 0));
+    const fem::ContactBody narrow(solid, p.V, p.faces, u, params(0.02, cache));  // a subset of wide's pairs
+    const fem::ContactBody narrow_alone(solid, p.V, p.faces, u, params(0.02, nullptr));
+    ASSERT_GT(narrow.candidates(), 0u);
+    ASSERT_LT(narrow.candidates(), wide.candidates());
+    EXPECT_EQ(&narrow.pattern(), &wide.pattern()) << "the cached pattern, not a copy";
+    EXPECT_EQ(fem::pattern_cache_counts(*cache), std::make_pair(1, 1));
+    EXPECT_GT(narrow.pattern().nonZeros(), narrow_alone.pattern().nonZeros());
+    EXPECT_TRUE(same_tangent(narrow, narrow_alone));
+    const fem::ContactBody widest(solid, p.V, p.faces, u, params(0.6, cache));  // pairs beyond the cached ones
+    const fem::ContactBody widest_alone(solid, p.V, p.faces, u, params(0.6, nullptr));
+    ASSERT_GT(widest.candidates(), wide.candidates());
+    (void)widest.pattern();
+    EXPECT_EQ(fem::pattern_cache_counts(*cache), std::make_pair(2, 1));
+    EXPECT_GE(widest.pattern().nonZeros(), widest_alone.pattern().nonZeros());
+    EXPECT_TRUE(same_tangent(widest, widest_alone));
+    EXPECT_TRUE(same_tangent(wide, fem::ContactBody(solid, p.V, p.faces, u, params(0.3, nullptr)))) << "an earlier decorator keeps its pattern";
+    // The same cache over another body's pattern (the solid with the contact's entries): merged afresh.
+    const fem::ContactBody over_contact(narrow_alone, p.V, p.faces, u, params(0.02, cache));
+    (void)over_contact.pattern();
+    EXPECT_EQ(fem::pattern_cache_counts(*cache), std::make_pair(3, 1));
+    EXPECT_TRUE(same_tangent(over_contact, fem::ContactBody(narrow_alone, p.V, p.faces, u, params(0.02, nullptr))));
+}
+
 TEST(WallContact, NoStepPassesThroughAFace) {
     // A vertex sent straight through the opposite plate (and one sent sideways past it): the step is cut where
     // the vertex is a tenth of its distance from the face, and the energy there is finite; a step that stays clear

@@ -89,7 +89,13 @@ struct ClipContactParams {
     /// in the blades' serrations. Much smaller, and Newton's steps overshoot the narrow valley of ψ where a node's
     /// slip reverses.
     double stick_mm = 1e-2;
+    /// Kept between the ClipBodies of successive solves (make_pattern_cache); null: each merges its own pattern.
+    std::shared_ptr<PatternCache> pattern_cache;
 };
+
+namespace detail {
+struct MergedPattern;
+}
 
 /// Where a node grips a blade: its place on the blade's face in the blade's own frame (r from the hinge along
 /// the blade, a across it), which moves with the clip, and the normal force λ [N] that bounds the hold (μ λ).
@@ -139,10 +145,7 @@ public:
     double energy(const Eigen::VectorXd& v) const override;
     Eigen::VectorXd internal_force(const Eigen::VectorXd& v) const override;
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& v, bool project = false) const override;
-    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override {
-        build_pattern();
-        return m_pattern;
-    }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override;
     void add_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const override;
     double min_jacobian(const Eigen::VectorXd& v) const override { return m_body.min_jacobian(v.head(m_body.dofs())); }
     /// The largest fraction of the step dv that keeps every node in front of the blades it faces (and the body's
@@ -208,8 +211,7 @@ private:
     double m_kappa = 0, m_stop = 0;  // the barrier's κ; the closed stop's penalty on θ < 0 [N·mm/rad]
     double m_rho = EDGE_MM;          // edge radius [mm]
     mutable std::once_flag m_pattern_once;
-    mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
-    mutable std::vector<std::int64_t> m_body_to_pattern;
+    mutable std::shared_ptr<const detail::MergedPattern> m_merged;  // the pattern, and where the body's entries lie in it
     mutable std::vector<std::array<std::int64_t, 16>> m_slots;  // per candidate: its 3 DOFs and θ, 4 × 4 entries
     // add_tangent into a caller's matrix: the body's entries' places there (a buffer kept between calls).
     mutable std::mutex m_compose_mutex;

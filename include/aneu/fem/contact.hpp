@@ -17,6 +17,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include <mutex>
@@ -43,7 +44,13 @@ struct ContactParams {
     /// that a trial solve took through a face its ordinary pairs left out (solve_without_crossings).
     std::vector<int> close_vertices;
     double close_search_mm = 0;
+    /// Kept between the decorators of successive solves (make_pattern_cache); null: each merges its own pattern.
+    std::shared_ptr<PatternCache> pattern_cache;
 };
+
+namespace detail {
+struct MergedPattern;
+}
 
 class ContactBody final : public ElasticBody {
 public:
@@ -57,10 +64,7 @@ public:
     double energy(const Eigen::VectorXd& u) const override;
     Eigen::VectorXd internal_force(const Eigen::VectorXd& u) const override;
     Eigen::SparseMatrix<double, Eigen::RowMajor> tangent(const Eigen::VectorXd& u, bool project = false) const override;
-    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override {
-        build_pattern();
-        return m_pattern;
-    }
+    const Eigen::SparseMatrix<double, Eigen::RowMajor>& pattern() const override;
     void add_tangent(const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where) const override;
     double min_jacobian(const Eigen::VectorXd& u) const override { return m_body.min_jacobian(u); }
 
@@ -96,8 +100,7 @@ private:
     double m_kappa = 0;
     std::vector<Pair> m_pairs;
     mutable std::once_flag m_pattern_once;
-    mutable Eigen::SparseMatrix<double, Eigen::RowMajor> m_pattern;
-    mutable std::vector<std::int64_t> m_body_to_pattern;
+    mutable std::shared_ptr<const detail::MergedPattern> m_merged;  // the pattern, and where the body's entries lie in it
     mutable std::vector<std::array<std::int64_t, 144>> m_pair_slots;  // 12 × 12 entries of each pair
     // add_tangent into a decorator's matrix: the body's entries' places there (a buffer kept between calls).
     mutable std::mutex m_compose_mutex;

@@ -101,6 +101,17 @@ private:
 struct NewtonWorkspace;
 std::shared_ptr<NewtonWorkspace> make_newton_workspace();
 
+/// Kept between the contact or clip decorators (ContactBody, ClipBody) made for successive solves on one body (a
+/// simulator's frames): their merged tangent pattern. A new decorator takes the cached pattern when it was merged
+/// over the same body pattern and holds every entry its pairs need; otherwise it merges the cached entries and its
+/// own. (Each sample frame merged the patch's ~10⁷-entry pattern twice afresh: 4-6 s; and a pattern that stays
+/// lets NewtonWorkspace keep its analysis.) Extra entries are structural zeros. One per decorator kind and body;
+/// opaque.
+struct PatternCache;
+std::shared_ptr<PatternCache> make_pattern_cache();
+/// How often a cache built a pattern and served one (for logs).
+std::pair<int, int> pattern_cache_counts(const PatternCache& cache);
+
 /// Options of the Newton solve.
 struct NewtonOptions {
     double tolerance = 1e-9;   ///< converged when ‖free residual‖ ≤ tolerance · ‖internal force‖ (all DOFs) + 1e-14
