@@ -360,6 +360,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const int merges_before = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first;
         fem::NewtonOptions o;
         o.tolerance = scene.patch.tolerance;
+        // Chord steps are an experiment, not a scene option: on the tube they save a third of a frame, but with
+        // 8 Newton iterations a frame and sliding jaws the restarts then leave nodes behind the blades (notes).
+        if (const char* c = std::getenv("ANEU_CHORD_RATIO")) o.chord_ratio = std::atof(c);
         o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
         o.max_halvings = 3;
         o.keep_going = true;
@@ -373,6 +376,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         int its = 0;  // Newton iterations over the frame's solves
         int factorisations = 0, reused = 0, unsolved = 0;  // analyses reused, substeps without a linear solve
         double t_setup = 0, t_tangent = 0, t_factor = 0, t_back = 0;  // over the frame's solves (NewtonResult)
+        int failed = 0, chords = 0;  // factorisations that found the tangent not positive definite; chord steps
+        double t_failed = 0;
         bool at_rest = false;
         fem::BladeLoads loads;
         std::vector<fem::BladeGrip> grips;
@@ -407,6 +412,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             t_setup += res.setup_s;
             t_tangent += res.tangent_s;
             t_factor += res.factorise_s;
+            failed += res.failed_factorisations;
+            chords += res.chord_steps;
+            t_failed += res.failed_factorise_s;
             t_back += res.back_solve_s;
             loads = at_rest ? free_loads : cb.loads(res.u);
             grips = cb.grips(res.u);
@@ -503,11 +511,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const double ms = 1e3 * sw.seconds();
         const int merges = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first - merges_before;
         if (std::getenv("ANEU_PATCH_TRACE"))
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s%s, tangent %.1f, %d factorisations %.1f, back %.1f%s)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s%s, tangent %.1f, %d factorisations %.1f (%d not positive definite: %.1f), %d chord steps, back %.1f%s)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],
                          loads.sliding[0], loads.sliding[1], wall_min, touching, ms, 1e3 * t_wall,
-                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", merges ? (" (patterns merged: " + std::to_string(merges) + ")").c_str() : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, 1e3 * t_back,
+                         1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", merges ? (" (patterns merged: " + std::to_string(merges) + ")").c_str() : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, failed, 1e3 * t_failed, chords, 1e3 * t_back,
                          unsolved ? ", in equilibrium without a solve" : "");
         if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
         if (fr.mx) fr.lock.lock();

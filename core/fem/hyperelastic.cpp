@@ -462,16 +462,22 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             // Not positive definite (buckling, strong compression): project the element tangents instead.
             // The predictor keeps the true tangent's K_fp in its right-hand side, computed above.
             ++out.shifted;
-            out.factorise_s += sw.lap();
+            ++out.failed_factorisations;
+            const double failed = sw.lap();
+            out.factorise_s += failed;
+            out.failed_factorise_s += failed;
             assemble(true);
             out.tangent_s += sw.lap();
         }
         Eigen::VectorXd diag(m);
         for (Eigen::Index a = 0; a < m; ++a) diag[a] = Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]];
         for (double tau = 0; !factored;) {
+            const Stopwatch attempt;
             llt.factorize(Kff);
             ++out.factorisations;
             if (llt.info() == Eigen::Success) break;
+            ++out.failed_factorisations;
+            out.failed_factorise_s += attempt.seconds();
             if (tau > 1e4) throw NumericalError("neo-Hookean solve: the tangent stays indefinite with a shift of 1e4 times its diagonal");
             const double next = tau == 0 ? 1e-8 : 10 * tau;
             for (Eigen::Index a = 0; a < m; ++a) Kff.valuePtr()[diag_pos[static_cast<size_t>(a)]] += (next - tau) * diag[a];
@@ -482,6 +488,22 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         for (Eigen::Index r = 0; r < n; ++r)
             if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
         out.back_solve_s += sw.lap();
+        return du;
+    };
+    // A chord step: the last factorisation (of this call) against the residual g.
+    auto chord_step = [&](const Eigen::VectorXd& g) {
+        Stopwatch sw;
+        Eigen::VectorXd rhs(m);
+        for (Eigen::Index r = 0; r < n; ++r) {
+            const int a = free_index[static_cast<size_t>(r)];
+            if (a >= 0) rhs[a] = -g[r];
+        }
+        const Eigen::VectorXd x = llt.solve(rhs);
+        Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
+        for (Eigen::Index r = 0; r < n; ++r)
+            if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+        out.back_solve_s += sw.lap();
+        ++out.chord_steps;
         return du;
     };
     Eigen::VectorXd u = u0;
@@ -555,6 +577,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             last_failure = "the predictor inverts elements";
             return false;
         }
+        double r_last = -1;        // the last iteration's residual, when its step was taken in full (α = 1)
         for (int it = 0; it < opt.max_iterations; ++it) {
             g = solid.internal_force(v);
             const double r = free_norm(g), scale = std::max(g.norm(), opt.force_scale);
@@ -578,7 +601,10 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                                      std::to_string(s1) + ", residual " + std::to_string(out.residual));
             }
             ++out.iterations;
-            const Eigen::VectorXd du = newton_step(v, g, nullptr);
+            // A chord step while the residual falls fast enough with full steps; a fresh tangent otherwise (and
+            // always after a chord step that did not: the old factorisation has done what it can).
+            const bool chord = opt.chord_ratio > 0 && out.factorisations > 0 && m > 0 && r_last > 0 && r <= opt.chord_ratio * r_last;
+            const Eigen::VectorXd du = chord ? chord_step(g) : newton_step(v, g, nullptr);
             const double slope = g.dot(du);
             if (trace) {
                 Eigen::Index worst = 0;
@@ -601,8 +627,13 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                     v = trial;
                     E = Et;
                     accepted = true;
+                    r_last = alpha == 1 ? r : -1;
                     break;
                 }
+            }
+            if (!accepted && chord) {  // the old factorisation's direction led nowhere: a fresh tangent next
+                r_last = -1;
+                continue;
             }
             if (!accepted) {
                 last_failure = "the line search found no decrease of the energy";

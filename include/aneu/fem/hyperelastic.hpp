@@ -127,6 +127,10 @@ struct NewtonOptions {
     /// max(‖internal force‖, force_scale) + 1e-14. A problem with nothing prescribed or fixed (a released clip's
     /// spring against a free patch) has ‖internal force‖ → 0 at equilibrium, so it needs this floor.
     double force_scale = 0;
+    /// Chord steps: a corrector iteration whose residual fell to at most this fraction of the last one's after a
+    /// full step (α = 1) solves with the last factorisation instead of a new tangent (0: never). A factorisation
+    /// of the patch's tangent is most of a frame; near convergence the old one is nearly as good.
+    double chord_ratio = 0;
     /// Kept between calls (make_newton_workspace): the analysis is reused while the free tangent's pattern stays.
     /// Null: analysed in every call that needs a linear solve.
     std::shared_ptr<NewtonWorkspace> workspace;
@@ -153,6 +157,10 @@ struct NewtonResult {
     /// at the first linearised solve; none when the call starts converged), tangent assembly, numeric
     /// factorisation, back substitution. The rest is residuals and energies (line searches, convergence checks).
     double setup_s = 0, tangent_s = 0, factorise_s = 0, back_solve_s = 0;
+    /// Of the factorisations: those that found the matrix not positive definite, and their seconds (in factorise_s).
+    int failed_factorisations = 0;
+    int chord_steps = 0;        ///< corrector iterations solved with an earlier factorisation (NewtonOptions::chord_ratio)
+    double failed_factorise_s = 0;
 };
 
 /// Static equilibrium without body or surface loads: u = 0 on `fixed_dofs`, u = value on each prescribed
