@@ -357,21 +357,13 @@ Eigen::VectorXd ClipBody::internal_force(const Eigen::VectorXd& v) const {
 Eigen::SparseMatrix<double, Eigen::RowMajor> ClipBody::tangent(const Eigen::VectorXd& v, bool project) const {
     build_pattern();
     RowSparse K = m_merged->pattern;
-    m_body.add_tangent(v.head(m_body.dofs()), project, K.valuePtr(), m_merged->body_to_pattern.data());
-    add_own_tangent(v, project, K.valuePtr(), nullptr);
+    add_tangent(v, project, K.valuePtr(), nullptr);
     return K;
 }
 
 void ClipBody::add_tangent(const Eigen::VectorXd& v, bool project, double* values, const std::int64_t* where) const {
     build_pattern();
-    {
-        // The body's entries go to where[body_to_pattern[p]] (composed each call into a kept buffer).
-        const std::lock_guard<std::mutex> lock(m_compose_mutex);
-        const std::vector<std::int64_t>& b2p = m_merged->body_to_pattern;
-        m_compose.resize(b2p.size());
-        for (size_t p = 0; p < b2p.size(); ++p) m_compose[p] = where[b2p[p]];
-        m_body.add_tangent(v.head(m_body.dofs()), project, values, m_compose.data());
-    }
+    detail::add_body_tangent(m_body, v.head(m_body.dofs()), project, values, where, *m_merged, m_compose, m_compose_mutex);
     add_own_tangent(v, project, values, where);
 }
 

@@ -123,6 +123,21 @@ inline MergedPattern merge_entries(const Eigen::SparseMatrix<double, Eigen::RowM
     return m;
 }
 
+/// A decorator's body's tangent at u added into `values` through the merged pattern mp: the body's p-th entry at
+/// where[mp.body_to_pattern[p]] (where null: at mp.body_to_pattern[p]). The composed places go into `compose`, a
+/// buffer the decorator keeps (no allocation per call), under its mutex.
+inline void add_body_tangent(const ElasticBody& body, const Eigen::VectorXd& u, bool project, double* values, const std::int64_t* where,
+                             const MergedPattern& mp, std::vector<std::int64_t>& compose, std::mutex& compose_mutex) {
+    if (!where) {
+        body.add_tangent(u, project, values, mp.body_to_pattern.data());
+        return;
+    }
+    const std::lock_guard<std::mutex> lock(compose_mutex);
+    compose.resize(mp.body_to_pattern.size());
+    for (size_t p = 0; p < compose.size(); ++p) compose[p] = where[mp.body_to_pattern[p]];
+    body.add_tangent(u, project, values, compose.data());
+}
+
 /// `body`'s pattern on n × n with a dense block over each group of DOFs.
 template <size_t N>
 MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::array<int, N>>& groups) {
