@@ -432,6 +432,19 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         analysed = true;
         out.setup_s += sw.seconds();
     };
+    // −g on the free DOFs (the right-hand side's residual part), and a free solution back on all DOFs.
+    auto free_rhs = [&](const Eigen::VectorXd& g) {
+        Eigen::VectorXd rhs(m);
+        for (Eigen::Index r = 0; r < n; ++r) {
+            const int a = free_index[static_cast<size_t>(r)];
+            if (a >= 0) rhs[a] = -g[r];
+        }
+        return rhs;
+    };
+    auto put_free = [&](const Eigen::VectorXd& x, Eigen::VectorXd& du) {
+        for (Eigen::Index r = 0; r < n; ++r)
+            if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+    };
     auto newton_step = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& g, const Eigen::VectorXd* dp) {
         if (!analysed) analyse();
         Stopwatch sw;
@@ -446,11 +459,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         assemble(false);
         Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
         if (dp) du = *dp;
-        Eigen::VectorXd rhs(m);
-        for (Eigen::Index r = 0; r < n; ++r) {
-            const int a = free_index[static_cast<size_t>(r)];
-            if (a >= 0) rhs[a] = -g[r];
-        }
+        Eigen::VectorXd rhs = free_rhs(g);
         if (dp)  // − K_fp Δp, each row's terms in column order
             for (size_t k = 0; k < ws->fp_row.size(); ++k) rhs[ws->fp_row[k]] -= acc[nff + k] * (*dp)[ws->fp_col[k]];
         out.tangent_s += sw.lap();
@@ -484,24 +493,15 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             tau = next;
         }
         out.factorise_s += sw.lap();
-        const Eigen::VectorXd x = llt.solve(rhs);
-        for (Eigen::Index r = 0; r < n; ++r)
-            if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+        put_free(llt.solve(rhs), du);
         out.back_solve_s += sw.lap();
         return du;
     };
     // A chord step: the last factorisation (of this call) against the residual g.
     auto chord_step = [&](const Eigen::VectorXd& g) {
         Stopwatch sw;
-        Eigen::VectorXd rhs(m);
-        for (Eigen::Index r = 0; r < n; ++r) {
-            const int a = free_index[static_cast<size_t>(r)];
-            if (a >= 0) rhs[a] = -g[r];
-        }
-        const Eigen::VectorXd x = llt.solve(rhs);
         Eigen::VectorXd du = Eigen::VectorXd::Zero(n);
-        for (Eigen::Index r = 0; r < n; ++r)
-            if (free_index[static_cast<size_t>(r)] >= 0) du[r] = x[free_index[static_cast<size_t>(r)]];
+        put_free(llt.solve(free_rhs(g)), du);
         out.back_solve_s += sw.lap();
         ++out.chord_steps;
         return du;

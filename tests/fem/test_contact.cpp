@@ -52,6 +52,13 @@ struct Plates {
         const Eigen::MatrixXi F = fem::boundary_faces_in_set(V, T, set);  // outward: +z below, −z above: towards each other
         faces = F.leftCols(3);
     }
+    /// The top plate moved down rigidly until the plates' facing surfaces are `apart` mm apart.
+    Eigen::VectorXd pressed(double apart) const {
+        Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * V.rows());
+        for (Eigen::Index i = 0; i < V.rows(); ++i)
+            if (V(i, 2) > H + 1e-9) u[3 * i + 2] = -(GAP - apart);
+        return u;
+    }
     std::vector<std::pair<int, double>> push(double depth) const {
         std::vector<std::pair<int, double>> p;
         for (int v : top)
@@ -287,9 +294,7 @@ TEST(WallContact, ADecoratorOverTheContactHasItsTangentEntryForEntry) {
     // body's tangent (active pairs included) entry for entry. Blades far off: no candidate.
     const Plates p;
     const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
-    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
-        if (p.V(i, 2) > Plates::H + 1e-9) u[3 * i + 2] = -(Plates::GAP - 0.005);
+    const Eigen::VectorXd u = p.pressed(0.005);
     fem::ContactParams cp;
     cp.stiffness = 1.0;
     const fem::ContactBody body(solid, p.V, p.faces, u, cp);
@@ -312,9 +317,7 @@ TEST(WallContact, APatternCacheServesLaterDecoratorsWithTheirOwnTangent) {
     // as a dense matrix, equal to an uncached decorator's to the last bit.
     const Plates p;
     const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), {{"plate", 1.0, 0.3}});
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
-    for (Eigen::Index i = 0; i < p.V.rows(); ++i)
-        if (p.V(i, 2) > Plates::H + 1e-9) u[3 * i + 2] = -(Plates::GAP - 0.005);
+    const Eigen::VectorXd u = p.pressed(0.005);
     auto params = [](double search, std::shared_ptr<fem::PatternCache> cache) {
         fem::ContactParams cp;
         cp.stiffness = 1.0;
