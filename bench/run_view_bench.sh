@@ -5,6 +5,7 @@
 # 300 surfaces (10 s at 30 Hz), at two window sizes, capped at 60 Hz (the default: a display shows no more) and
 # uncapped (what the renderer can do). Server, viewer and Xvfb share the machine's cores.
 # usage: bash bench/run_view_bench.sh [SCENE] [OUT.md]    (run `bash scripts/demo.sh` first)
+#   ANEUVIEW=PATH runs another aneuview build (an A/B comparison on the same machine); SIZES="900,700 ..." the windows.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scene=${1:-build/demo/sample/planned_scene.json}
@@ -36,12 +37,13 @@ echo
 echo "| window | --max-fps | surfaces | frames | frame rate (Hz) | steady (Hz) | render mean (ms) | interval p50 / p99 / max (ms) | display periods missed |"
 echo "|---|---|---|---|---|---|---|---|---|"
 } > "$out.tmp"
-for size in 600,500 900,700 1280,800; do
+view=${ANEUVIEW:-build/tools/aneuview}
+for size in ${SIZES:-600,500 900,700 1280,800}; do
     for fps in 60 0; do
         port=$(( 20000 + RANDOM % 20000 ))
         build/tools/aneusim serve "$w/live.json" --port $port --max-seconds 120 --idle-seconds 3 > "$w/serve.out" 2>&1 &
         server=$!
-        bash scripts/xvfb.sh -s "-screen 0 1600x1000x24" build/tools/aneuview --port $port --wait-seconds 60 --steer suction --keys "${keys%,}" \
+        bash scripts/xvfb.sh -s "-screen 0 1600x1000x24" "$view" --port $port --wait-seconds 60 --steer suction --keys "${keys%,}" \
             --screenshot "$w/view.png" --after-surfaces 300 --size $size --max-fps $fps > "$w/view.out"
         wait $server || true
         v() { awk -v k="$1" '$1 == k {print $2}' "$w/view.out"; }

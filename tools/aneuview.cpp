@@ -56,6 +56,8 @@
 #include <vtkTransform.h>
 #include <vtkWindowToImageFilter.h>
 
+#include "aneuview_window.hpp"
+
 #include "aneu/core/common.hpp"
 
 namespace {
@@ -649,7 +651,7 @@ int main(int argc, char** argv) {
     hud->GetTextProperty()->SetColor(0.1, 0.1, 0.1);
     hud->SetPosition(10, 10);
     ren->AddActor2D(hud);
-    vtkNew<vtkRenderWindow> win;
+    const vtkSmartPointer<vtkRenderWindow> win = make_view_window();
     win->AddRenderer(ren);
     win->SetSize(size[0], size[1]);
     win->SetWindowName("aneuview");
