@@ -10,6 +10,7 @@
 // rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
 // solve's).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -363,6 +364,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // Chord steps are an experiment, not a scene option: on the tube they save a third of a frame, but with
         // 8 Newton iterations a frame and sliding jaws the restarts then leave nodes behind the blades (notes).
         if (const char* c = std::getenv("ANEU_CHORD_RATIO")) o.chord_ratio = std::atof(c);
+        // The first patch tangent factorised in this process, for bench/bench_factor.cpp (orderings, the floor).
+        static std::atomic<bool> tangent_dumped{false};
+        if (const char* d = std::getenv("ANEU_DUMP_TANGENT"); d && !tangent_dumped) o.dump_free_tangent = d;
         o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
         o.max_halvings = 3;
         o.keep_going = true;
@@ -404,6 +408,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 res.converged = true;
             } else {
                 res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+            }
+            if (res.factorisations > 0 && !o.dump_free_tangent.empty()) {
+                tangent_dumped = true;
+                o.dump_free_tangent.clear();
             }
             its += res.iterations;
             factorisations += res.factorisations;

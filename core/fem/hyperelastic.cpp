@@ -24,6 +24,23 @@ namespace {
 
 using Mat3 = Eigen::Matrix3d;
 
+/// A symmetric matrix's upper triangle (CSC) as a Matrix Market file, written under path + ".part" and renamed.
+void write_upper_market(const Eigen::SparseMatrix<double>& U, const std::string& path) {
+    const std::string part = path + ".part";
+    FILE* f = std::fopen(part.c_str(), "w");
+    if (!f) throw IoError("cannot write the free tangent to " + part);
+    std::fprintf(f, "%%%%MatrixMarket matrix coordinate real symmetric\n%ld %ld %ld\n", static_cast<long>(U.rows()), static_cast<long>(U.cols()),
+                 static_cast<long>(U.nonZeros()));
+    for (Eigen::Index c = 0; c < U.outerSize(); ++c)  // (row, column) of the lower triangle, as the format wants
+        for (Eigen::SparseMatrix<double>::InnerIterator it(U, c); it; ++it)
+            std::fprintf(f, "%ld %ld %.17g\n", static_cast<long>(c) + 1, static_cast<long>(it.row()) + 1, it.value());
+    const bool ok = std::fclose(f) == 0;
+    if (!ok || std::rename(part.c_str(), path.c_str()) != 0) {
+        std::remove(part.c_str());
+        throw IoError("cannot write the free tangent to " + path);
+    }
+}
+
 /// Quantities of one integration point at deformation gradient F.
 struct PointState {
     double J = 1, logJ = 0;
@@ -464,6 +481,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
             for (size_t k = 0; k < ws->fp_row.size(); ++k) rhs[ws->fp_row[k]] -= acc[nff + k] * (*dp)[ws->fp_col[k]];
         out.tangent_s += sw.lap();
         if (m == 0) return du;
+        if (!opt.dump_free_tangent.empty() && out.factorisations == 0) write_upper_market(Kff, opt.dump_free_tangent);
         llt.factorize(Kff);
         ++out.factorisations;
         bool factored = llt.info() == Eigen::Success;

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <string>
 #include <random>
 
 #include <Eigen/Eigenvalues>
@@ -319,6 +321,55 @@ TEST(NeoHookean, AWorkspaceKeepsTheAnalysisWhileThePatternStaysAndAMoveInEquilib
     const fem::NewtonResult other_fresh = fem::solve_neo_hookean(solid, fixed, held, zero);
     EXPECT_EQ((other.u - other_fresh.u).cwiseAbs().maxCoeff(), 0.0);
     EXPECT_GT((other.u - first.u).cwiseAbs().maxCoeff(), 1e-4);  // a different problem
+}
+
+TEST(NeoHookean, TheFirstFactorisedTangentCanBeWrittenAsASymmetricMatrixMarketFile) {
+    // The diagnostic behind bench/bench_factor.cpp: the box clamped at its base, its top pressed 0.2 mm; the first
+    // factorised free tangent is written once, as the lower triangle of a symmetric m x m matrix (m free DOFs),
+    // every diagonal entry positive, and nothing left under the temporary name.
+    const Model m = box_model(2);
+    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
+    std::vector<int> fd;
+    std::vector<std::pair<int, double>> pressed;
+    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+        if (m.V(i, 2) < 1e-9)
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        if (m.V(i, 2) > 2 - 1e-9) pressed.emplace_back(static_cast<int>(3 * i + 2), -0.2);
+    }
+    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    const std::string path = ::testing::TempDir() + "aneu_free_tangent.mtx";
+    std::remove(path.c_str());
+    fem::NewtonOptions o;
+    o.dump_free_tangent = path;
+    const fem::NewtonResult r = fem::solve_neo_hookean(solid, fixed, pressed, Eigen::VectorXd::Zero(solid.dofs()), o);
+    ASSERT_TRUE(r.converged);
+    ASSERT_GT(r.factorisations, 1);
+    FILE* f = std::fopen(path.c_str(), "r");
+    ASSERT_NE(f, nullptr);
+    char header[128] = {};
+    ASSERT_NE(std::fgets(header, sizeof header, f), nullptr);
+    EXPECT_EQ(std::string(header), "%%MatrixMarket matrix coordinate real symmetric\n");
+    long rows = 0, cols = 0, nnz = 0;
+    ASSERT_EQ(std::fscanf(f, "%ld %ld %ld", &rows, &cols, &nnz), 3);
+    const long free = solid.dofs() - static_cast<long>(fd.size()) - static_cast<long>(pressed.size());
+    EXPECT_EQ(rows, free);
+    EXPECT_EQ(cols, free);
+    long read = 0, upper = 0, positive_diagonal = 0;
+    long i = 0, j = 0;
+    double v = 0;
+    while (std::fscanf(f, "%ld %ld %lf", &i, &j, &v) == 3) {
+        ++read;
+        if (i < j || i < 1 || j < 1 || i > rows) ++upper;
+        if (i == j && v > 0) ++positive_diagonal;
+    }
+    std::fclose(f);
+    EXPECT_EQ(read, nnz);
+    EXPECT_EQ(upper, 0);
+    EXPECT_EQ(positive_diagonal, free);
+    FILE* part = std::fopen((path + ".part").c_str(), "r");
+    EXPECT_EQ(part, nullptr);
+    if (part) std::fclose(part);
+    std::remove(path.c_str());
 }
 
 TEST(NeoHookean, ChordStepsReachTheSameEquilibriumWithFewerFactorisations) {

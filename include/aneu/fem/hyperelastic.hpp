@@ -131,6 +131,9 @@ struct NewtonOptions {
     /// full step (α = 1) solves with the last factorisation instead of a new tangent (0: never). A factorisation
     /// of the patch's tangent is most of a frame; near convergence the old one is nearly as good.
     double chord_ratio = 0;
+    /// A diagnostic (bench/bench_factor.cpp): when not empty, the first factorisation of this call first writes the
+    /// free tangent's upper triangle there as a symmetric Matrix Market file (through a temporary name).
+    std::string dump_free_tangent;
     /// Kept between calls (make_newton_workspace): the analysis is reused while the free tangent's pattern stays.
     /// Null: analysed in every call that needs a linear solve.
     std::shared_ptr<NewtonWorkspace> workspace;
