@@ -86,8 +86,12 @@ std::vector<std::pair<int, int>> group_entries(const std::vector<std::array<int,
 /// `body`'s pattern on n × n (n ≥ its size) with the entries `extra` (sorted, unique) added. Built row by row in
 /// compressed form: a row without extra entries is the body's row as it is; a row with some merges its sorted
 /// extra columns into the body's (a patch's tangent has ~10⁷ entries, its dense exterior block most of them,
-/// against a few thousand from the groups).
-inline MergedPattern merge_entries(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::pair<int, int>>& extra) {
+/// against a few thousand from the groups). Written straight into the result's storage, which is made once: Eigen
+/// 3.4's SparseMatrix has no move constructor, so a pattern returned or assigned by value is copied, and a Map
+/// assigned to it is appended entry by entry (on the C0024 corpus case, 3 × 10⁷ entries, these copies and their
+/// page faults were most of a 20-50 s frame setup).
+inline std::shared_ptr<const MergedPattern> merge_entries(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n,
+                                                          const std::vector<std::pair<int, int>>& extra) {
     const Eigen::Index body_rows = body.outerSize();
     const int* bo = body.outerIndexPtr();
     const int* bi = body.innerIndexPtr();
@@ -95,12 +99,16 @@ inline MergedPattern merge_entries(const Eigen::SparseMatrix<double, Eigen::RowM
     const int* bnz = body.innerNonZeroPtr();
     auto row_begin = [&](Eigen::Index r) { return r < body_rows ? bo[r] : 0; };
     auto row_end = [&](Eigen::Index r) { return r < body_rows ? (compressed ? bo[r + 1] : bo[r] + bnz[r]) : 0; };
-    MergedPattern m;
-    std::vector<int> outer(static_cast<size_t>(n) + 1, 0), inner;
-    inner.reserve(static_cast<size_t>(body.nonZeros()) + extra.size());
-    m.body_to_pattern.resize(static_cast<size_t>(body.nonZeros()));
+    auto m = std::make_shared<MergedPattern>();
+    m->pattern.resize(n, n);
+    m->pattern.resizeNonZeros(static_cast<Eigen::Index>(body.nonZeros()) + static_cast<Eigen::Index>(extra.size()));  // at most
+    int* outer = m->pattern.outerIndexPtr();
+    int* inner = m->pattern.innerIndexPtr();
+    m->body_to_pattern.resize(static_cast<size_t>(body.nonZeros()));
     size_t e = 0;
+    int count = 0;
     std::int64_t body_k = 0;  // running index over the body's stored entries, in row order
+    outer[0] = 0;
     for (Eigen::Index r = 0; r < n; ++r) {
         int k = row_begin(r);
         const int end = row_end(r);
@@ -108,18 +116,16 @@ inline MergedPattern merge_entries(const Eigen::SparseMatrix<double, Eigen::RowM
             const bool take_body = k < end && (e >= extra.size() || extra[e].first != r || bi[k] <= extra[e].second);
             if (take_body) {
                 if (e < extra.size() && extra[e].first == r && extra[e].second == bi[k]) ++e;  // the same entry
-                m.body_to_pattern[static_cast<size_t>(body_k++)] = static_cast<std::int64_t>(inner.size());
-                inner.push_back(bi[k++]);
+                m->body_to_pattern[static_cast<size_t>(body_k++)] = count;
+                inner[count++] = bi[k++];
             } else {
-                inner.push_back(extra[e++].second);
+                inner[count++] = extra[e++].second;
             }
         }
-        outer[static_cast<size_t>(r) + 1] = static_cast<int>(inner.size());
+        outer[r + 1] = count;
     }
-    std::vector<double> zeros(inner.size(), 0.0);
-    m.pattern = Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>>(n, n, static_cast<Eigen::Index>(inner.size()), outer.data(), inner.data(),
-                                                                               zeros.data());
-    m.pattern.makeCompressed();
+    m->pattern.data().resize(count);  // shrinks the size only: the storage stays
+    std::fill(m->pattern.valuePtr(), m->pattern.valuePtr() + count, 0.0);
     return m;
 }
 
@@ -136,12 +142,6 @@ inline void add_body_tangent(const ElasticBody& body, const Eigen::VectorXd& u, 
     compose.resize(mp.body_to_pattern.size());
     for (size_t p = 0; p < compose.size(); ++p) compose[p] = where[mp.body_to_pattern[p]];
     body.add_tangent(u, project, values, compose.data());
-}
-
-/// `body`'s pattern on n × n with a dense block over each group of DOFs.
-template <size_t N>
-MergedPattern merge_pattern(const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n, const std::vector<std::array<int, N>>& groups) {
-    return merge_entries(body, n, group_entries(groups));
 }
 
 }  // namespace aneu::fem::detail
@@ -163,16 +163,16 @@ struct PatternCache {
 
 namespace aneu::fem::detail {
 
-/// merge_pattern through a cache kept between decorators of successive solves: the cached pattern serves when
-/// it was merged over the same body pattern (compared entry by entry: milliseconds) and holds every entry the
-/// groups need; else a new one is merged with the cached entries and the new ones (while the union stays within
+/// The groups' entries merged into the body's pattern (merge_entries) through a cache kept between decorators of
+/// successive solves: the cached pattern serves when it was merged over the same body pattern (compared entry by
+/// entry: milliseconds) and holds every entry the groups need; else a new one is merged with the cached entries and the new ones (while the union stays within
 /// a few times what is needed now), so that pairs that come and go between frames leave the pattern, and with
 /// it the Newton workspace's analysis, as it is. cache null: merged afresh.
 template <size_t N>
 std::shared_ptr<const MergedPattern> merge_pattern_cached(PatternCache* cache, const Eigen::SparseMatrix<double, Eigen::RowMajor>& body, Eigen::Index n,
                                                           const std::vector<std::array<int, N>>& groups) {
     std::vector<std::pair<int, int>> extra = group_entries(groups);
-    if (!cache || !body.isCompressed()) return std::make_shared<const MergedPattern>(merge_entries(body, n, extra));
+    if (!cache || !body.isCompressed()) return merge_entries(body, n, extra);
     const std::lock_guard<std::mutex> lock(cache->mutex);
     const int* bo = body.outerIndexPtr();
     const int* bi = body.innerIndexPtr();
@@ -190,7 +190,7 @@ std::shared_ptr<const MergedPattern> merge_pattern_cached(PatternCache* cache, c
         std::set_union(cache->extra.begin(), cache->extra.end(), extra.begin(), extra.end(), std::back_inserter(all));
         if (all.size() <= 4 * extra.size() + 20000) extra = std::move(all);
     }
-    cache->merged = std::make_shared<const MergedPattern>(merge_entries(body, n, extra));
+    cache->merged = merge_entries(body, n, extra);
     cache->extra = std::move(extra);
     cache->n = n;
     cache->body_outer.assign(bo, bo + body.outerSize() + 1);
