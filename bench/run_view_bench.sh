@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: MIT
 # aneuview's frame rate on the sample case (issue #18): `aneusim serve` on the demo's planned scene (made live:
 # keyframes dropped), aneuview under Xvfb steering the suction tube into the vessel (so every surface differs) for
-# 300 surfaces (10 s at 30 Hz), at two window sizes, capped at 60 Hz (the default: a display shows no more) and
+# 300 surfaces (10 s at 30 Hz), at three window sizes, capped at 60 Hz (the default: a display shows no more) and
 # uncapped (what the renderer can do). Server, viewer and Xvfb share the machine's cores.
 # usage: bash bench/run_view_bench.sh [SCENE] [OUT.md]    (run `bash scripts/demo.sh` first)
 #   ANEUVIEW=PATH runs another aneuview build (an A/B comparison on the same machine); SIZES="900,700 ..." the windows.
