@@ -263,24 +263,37 @@ TEST(NeoHookean, RefusesWhatItCannotSolve) {
     EXPECT_THROW(fem::NeoHookeanSolid(V, T, region, {{"r", 1.0, 0.5}}), InputError);
 }
 
-TEST(NeoHookean, AWorkspaceKeepsTheAnalysisWhileThePatternStaysAndAMoveInEquilibriumNeedsNoSolve) {
-    // The box clamped at its base, its top pressed down 0.2 mm (10 %): three calls in a row as a simulator's frames
-    // make them, on one workspace.
-    const Model m = box_model(2);
-    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
-    std::vector<int> fd;
+/// The 2 mm box (box_model(2)) clamped at its base, as the Newton workspace, dump and chord tests use it: its fixed
+/// DOFs, its top's z DOFs, and those moved down by d (`pressed`).
+struct ClampedBox {
+    Model m = box_model(2);
+    fem::NeoHookeanSolid solid{m.V, m.T, m.region, m.mats};
+    Eigen::VectorXi fixed;
     std::vector<int> top;
-    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
-        if (m.V(i, 2) < 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        if (m.V(i, 2) > 2 - 1e-9) top.push_back(static_cast<int>(3 * i + 2));
+    ClampedBox() {
+        std::vector<int> fd;
+        for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+            if (m.V(i, 2) < 1e-9)
+                for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+            if (m.V(i, 2) > 2 - 1e-9) top.push_back(static_cast<int>(3 * i + 2));
+        }
+        fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
     }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
-    auto pressed = [&](double d) {
+    std::vector<std::pair<int, double>> pressed(double d) const {
         std::vector<std::pair<int, double>> p;
         for (const int dof : top) p.emplace_back(dof, -d);
         return p;
-    };
+    }
+};
+
+TEST(NeoHookean, AWorkspaceKeepsTheAnalysisWhileThePatternStaysAndAMoveInEquilibriumNeedsNoSolve) {
+    // The box clamped at its base, its top pressed down 0.2 mm (10 %): three calls in a row as a simulator's frames
+    // make them, on one workspace.
+    const ClampedBox box;
+    const fem::NeoHookeanSolid& solid = box.solid;
+    const Eigen::VectorXi& fixed = box.fixed;
+    const std::vector<int>& top = box.top;
+    auto pressed = [&](double d) { return box.pressed(d); };
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(solid.dofs());
     fem::NewtonOptions o;
     o.workspace = fem::make_newton_workspace();
@@ -327,21 +340,13 @@ TEST(NeoHookean, TheFirstFactorisedTangentCanBeWrittenAsASymmetricMatrixMarketFi
     // The diagnostic behind bench/bench_factor.cpp: the box clamped at its base, its top pressed 0.2 mm; the first
     // factorised free tangent is written once, as the lower triangle of a symmetric m x m matrix (m free DOFs),
     // every diagonal entry positive, and nothing left under the temporary name.
-    const Model m = box_model(2);
-    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
-    std::vector<int> fd;
-    std::vector<std::pair<int, double>> pressed;
-    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
-        if (m.V(i, 2) < 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        if (m.V(i, 2) > 2 - 1e-9) pressed.emplace_back(static_cast<int>(3 * i + 2), -0.2);
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    const ClampedBox box;
+    const std::vector<std::pair<int, double>> pressed = box.pressed(0.2);
     const std::string path = ::testing::TempDir() + "aneu_free_tangent.mtx";
     std::remove(path.c_str());
     fem::NewtonOptions o;
     o.dump_free_tangent = path;
-    const fem::NewtonResult r = fem::solve_neo_hookean(solid, fixed, pressed, Eigen::VectorXd::Zero(solid.dofs()), o);
+    const fem::NewtonResult r = fem::solve_neo_hookean(box.solid, box.fixed, pressed, Eigen::VectorXd::Zero(box.solid.dofs()), o);
     ASSERT_TRUE(r.converged);
     ASSERT_GT(r.factorisations, 1);
     FILE* f = std::fopen(path.c_str(), "r");
@@ -351,7 +356,7 @@ TEST(NeoHookean, TheFirstFactorisedTangentCanBeWrittenAsASymmetricMatrixMarketFi
     EXPECT_EQ(std::string(header), "%%MatrixMarket matrix coordinate real symmetric\n");
     long rows = 0, cols = 0, nnz = 0;
     ASSERT_EQ(std::fscanf(f, "%ld %ld %ld", &rows, &cols, &nnz), 3);
-    const long free = solid.dofs() - static_cast<long>(fd.size()) - static_cast<long>(pressed.size());
+    const long free = box.solid.dofs() - static_cast<long>(box.fixed.size()) - static_cast<long>(pressed.size());
     EXPECT_EQ(rows, free);
     EXPECT_EQ(cols, free);
     long read = 0, upper = 0, positive_diagonal = 0;
@@ -376,16 +381,10 @@ TEST(NeoHookean, ChordStepsReachTheSameEquilibriumWithFewerFactorisations) {
     // The box pressed 0.4 mm (20 %) in one load step: with chord steps (an iteration whose residual fell to a tenth
     // of the last one's solves with the last factorisation) the solve ends at the Newton solve's equilibrium within
     // the tolerance, with fewer factorisations; with the chords off none is taken.
-    const Model m = box_model(2);
-    const fem::NeoHookeanSolid solid(m.V, m.T, m.region, m.mats);
-    std::vector<int> fd;
-    std::vector<std::pair<int, double>> top;
-    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
-        if (m.V(i, 2) < 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        if (m.V(i, 2) > 2 - 1e-9) top.emplace_back(static_cast<int>(3 * i + 2), -0.4);
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    const ClampedBox box;
+    const fem::NeoHookeanSolid& solid = box.solid;
+    const Eigen::VectorXi& fixed = box.fixed;
+    const std::vector<std::pair<int, double>> top = box.pressed(0.4);
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(solid.dofs());
     fem::NewtonOptions o;
     o.tolerance = 1e-10;
