@@ -42,6 +42,7 @@ void Simulator::Impl::begin_frame(Frame& fr) {
         parts[i] = parts_of(i);
         tips[i] = ins[i].in.pose.position;
     }
+    if (scene.wall_model == WallModel::PATCH) patch_of_clip.resize(clips.size(), -1);  // (the haptic thread may add clips)
     fr.st_seen = st;
     fr.owner_seen = owner;
     fr.gap_seen = gap_side;
@@ -55,6 +56,8 @@ void Simulator::Impl::begin_frame(Frame& fr) {
         if (cm.jaw_mesh) continue;  // a jaw mesh keeps the shape push
         Jaws& J = jaws[i];
         J.on = true;
+        J.clip = ins[i].clip;
+        J.max_opening_deg = cm.max_opening_deg;
         J.blades = blades_of(c, cm);
         J.theta = std::clamp(c.opening_deg, 0.0, cm.max_opening_deg) * DEG;
         double& collided = clip_track[static_cast<size_t>(c.id)].collided_deg;

@@ -66,15 +66,23 @@ void Simulator::Impl::drop_patch(int index) {
 // Patches for held clips whose jaws come near the wall, and remade ones for jaws that left theirs.
 void Simulator::Impl::make_patches(Frame& fr) {
     if (scene.wall_model != WallModel::PATCH) return;
-    patch_of_clip.resize(clips.size(), -1);
     const SimSurface& sf = model.surface;
     std::vector<int> cand;
     for (size_t i = 0; i < ins.size(); ++i) {
-        const int cid = ins[i].clip;
+        // The clip as the frame began (the haptic thread may release it meanwhile: build_patch checks again).
+        const int cid = fr.jaws[i].clip;
         if (cid < 0 || !fr.jaws[i].on) continue;
         const fem::ClipBlades& b = fr.jaws[i].blades;
         const double theta = fr.jaws[i].theta;
-        const int have = patch_of_clip[static_cast<size_t>(cid)];
+        int have = -1;
+        std::shared_ptr<const fem::PatchModel> have_pm;  // (the haptic thread drops a fallen clip's patch under the lock)
+        {
+            std::unique_lock<std::mutex> lk;
+            if (fr.mx) lk = std::unique_lock<std::mutex>(*fr.mx);
+            have = patch_of_clip[static_cast<size_t>(cid)];
+            if (have >= 0) have_pm = patches[static_cast<size_t>(have)].pm;
+        }
+        if (have >= 0 && !have_pm) continue;
         // A first patch when the jaws close on the wall (while they only come near, open, the linear model's
         // contacts are small and the jaws may still move far: a patch made then would have to follow them).
         if (have < 0 && !(theta < fr.jaws[i].theta_prev - 1e-9)) continue;
@@ -102,7 +110,7 @@ void Simulator::Impl::make_patches(Frame& fr) {
             const Eigen::Vector3d p = x_grid.row(v).transpose();
             if (!b.near_wedge(theta, p, reach)) continue;
             near = true;
-            if (have >= 0 && uncovered < 0 && patches[static_cast<size_t>(have)].pm->local(sf.node[v]) < 0) uncovered = v;
+            if (have >= 0 && uncovered < 0 && have_pm->local(sf.node[v]) < 0) uncovered = v;
         }
         std::string why;
         if (uncovered >= 0) {
@@ -113,18 +121,30 @@ void Simulator::Impl::make_patches(Frame& fr) {
                           (x_grid.row(uncovered).transpose() - x0).norm(), reach, b.near_wedge(theta, x0, reach) ? "within" : "not within");
             why = w;
         }
-        if ((have < 0 && near) || uncovered >= 0) build_patch(cid, b, theta, fr.mx, why);
+        if ((have < 0 && near) || uncovered >= 0) build_patch(i, fr.jaws[i], fr.mx, why);
     }
 }
 
 // Made without the lock (the factorisation and interface solves take seconds); what the other threads read is
-// changed under it.
-void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx, const std::string& why) {
+// changed under it. In threaded mode the haptic thread may release the clip meanwhile (it is then deposited on
+// what the linear model holds, or falls away and drops the old patch): the new patch is then not used.
+void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why) {
     const Stopwatch sw;
     const SimSurface& sf = model.surface;
     const VolumeData& vol = *model.volume;
     const FemData& fem = *model.fem;
-    const int old = patch_of_clip[static_cast<size_t>(clip)];
+    const int clip = jaws.clip;
+    const fem::ClipBlades& blades = jaws.blades;
+    const double theta = jaws.theta;
+    int old = -1;
+    std::shared_ptr<const fem::PatchModel> old_pm;  // kept alive while it is read below, without the lock
+    {
+        std::unique_lock<std::mutex> lk;
+        if (mx) lk = std::unique_lock<std::mutex>(*mx);
+        old = patch_of_clip[static_cast<size_t>(clip)];
+        if (old >= 0) old_pm = patches[static_cast<size_t>(old)].pm;
+    }
+    if (old >= 0 && !old_pm) return;  // dropped: its clip fell away
     // The tetrahedra with a corner within radius_mm of the wedge, at rest or where it is now: the surface's vertices
     // where they are displaced to, the old patch's nodes where it holds them. (At rest alone, a remade patch missed
     // tissue the closing jaws had drawn in from beyond the radius, and the next frame's check found it uncovered
@@ -142,8 +162,8 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
             }
         if (old >= 0) {
             const PatchRun& O = patches[static_cast<size_t>(old)];
-            for (size_t a = 0; a < O.pm->nodes().size(); ++a) {
-                const auto n = static_cast<size_t>(O.pm->nodes()[a]);
+            for (size_t a = 0; a < old_pm->nodes().size(); ++a) {
+                const auto n = static_cast<size_t>(old_pm->nodes()[a]);
                 now[n] = O.X.row(static_cast<Eigen::Index>(a)).transpose() + O.v.segment<3>(3 * static_cast<Eigen::Index>(a));
                 moved[n] = 1;
             }
@@ -240,8 +260,7 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     int inside = 0;
     bool cleared = true;
     if (old < 0) {
-        const ClipModel& cm = scene.clip_models.at(clips[static_cast<size_t>(clip)].model);
-        const double top = std::max(theta, cm.max_opening_deg * DEG);
+        const double top = std::max(theta, jaws.max_opening_deg * DEG);
         inside = nodes_in_blades(blades, theta, P.X, P.cand, 0.01);
         cleared = inside == 0;
         for (double th = theta; !cleared && th <= top; th += 0.25 * DEG)
@@ -256,6 +275,16 @@ void Simulator::Impl::build_patch(int clip, const fem::ClipBlades& blades, doubl
     P.stats.min_wall_distance_mm = std::numeric_limits<double>::infinity();
     std::unique_lock<std::mutex> lock;
     if (mx) lock = std::unique_lock<std::mutex>(*mx);
+    // Still the instrument's held clip, with the patch it had when the build began?
+    const Clip& now_clip = clips[static_cast<size_t>(clip)];
+    if (ins[instrument].clip != clip || now_clip.state != Clip::State::HELD || now_clip.model.empty() || patch_of_clip[static_cast<size_t>(clip)] != old ||
+        (old >= 0 && patches[static_cast<size_t>(old)].pm != old_pm)) {
+        char b[200];
+        std::snprintf(b, sizeof b, "clip %d was released while its nonlinear patch was being %s (%.2f s): the patch is not used", clip,
+                      old >= 0 ? "remade" : "made", sw.seconds());
+        warn(b);
+        return;
+    }
     if (old >= 0) {
         // Remade: the state carries over exactly (the old patch's whole displacement, restricted to the new one).
         PatchRun& O = patches[static_cast<size_t>(old)];
@@ -333,7 +362,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         if (!P.alive) continue;
         Clip& c = clips[static_cast<size_t>(P.clip)];
         const ClipModel& cm = scene.clip_models.at(c.model);
-        const fem::PatchModel& pm = *P.pm;
+        // The solve runs without the lock in threaded mode: it keeps the model alive if the clip falls away meanwhile.
+        const std::shared_ptr<const fem::PatchModel> hold = P.pm;
+        const fem::PatchModel& pm = *hold;
         const Eigen::Index nb = pm.dofs();
         const fem::ClipBlades blades = blades_of(c, cm);
         const bool held = c.state == Clip::State::HELD;
@@ -526,22 +557,27 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                          1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", merges ? (" (patterns merged: " + std::to_string(merges) + ")").c_str() : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, failed, 1e3 * t_failed, chords, 1e3 * t_back,
                          unsolved ? ", in equilibrium without a solve" : "");
         if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
-        if (fr.mx) fr.lock.lock();
+        if (fr.mx) {
+            fr.lock.lock();
+            // Released meanwhile and fallen away (the haptic thread dropped the patch): the frame goes with it.
+            if (!P.alive || P.pm != hold) continue;
+        }
+        Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
         P.grips = std::move(grips);
         P.gripped = restarted ? P.gripped_ok : true;
         P.hinge_prev = blades.hinge;
         const double theta = r.u[nb];
-        c.opening_deg = theta / DEG;
-        if (held && cm.spring) c.spring_deg = P.course.theta_bal / DEG;
-        c.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
-        c.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
-        c.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
+        cl.opening_deg = theta / DEG;
+        if (held && cm.spring) cl.spring_deg = P.course.theta_bal / DEG;
+        cl.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
+        cl.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
+        cl.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
         P.force = net;
         P.contacts = loads.contacts[0] + loads.contacts[1];
-        c.net_force = -net;  // on the vessel
-        if (held && c.holder >= 0) patch_force[static_cast<size_t>(c.holder)] += net;
-        a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, c.grip_force_n);
+        cl.net_force = -net;  // on the vessel
+        if (held && cl.holder >= 0) patch_force[static_cast<size_t>(cl.holder)] += net;
+        a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, cl.grip_force_n);
         ++st.frames;
         if (!r.converged) ++st.unconverged_frames;
         st.max_iterations = std::max(st.max_iterations, its);
@@ -550,7 +586,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.mean_iterations = P.iterations_sum / static_cast<double>(st.frames);
         st.mean_solve_ms = P.solve_ms_sum / static_cast<double>(st.frames);
         st.max_solve_ms = std::max(st.max_solve_ms, ms);
-        st.peak_blade_force_n = std::max(st.peak_blade_force_n, c.grip_force_n);
+        st.peak_blade_force_n = std::max(st.peak_blade_force_n, cl.grip_force_n);
         st.min_wall_distance_mm = std::min(st.min_wall_distance_mm, wall_min);
         st.wall_pairs_touching = touching;
         fr.fs.solve_s += 1e-3 * ms;

@@ -52,6 +52,8 @@ struct Simulator::Impl {
     // A held clip's jaws as blades, at this frame's opening and the last frame's (collision detection).
     struct Jaws {
         bool on = false;
+        int clip = -1;                  // the clip the instrument holds (taken under the lock)
+        double max_opening_deg = 0;     // its model's
         fem::ClipBlades blades;
         double theta = 0, theta_prev = 0;
     };
@@ -111,7 +113,9 @@ struct Simulator::Impl {
     // The nonlinear patch under a clip (Scene::wall_model = PATCH; sim_patch.cpp).
     struct PatchRun {
         int clip = -1;
-        std::unique_ptr<fem::PatchModel> pm;
+        /// Shared: a solve running without the lock (threaded mode) keeps its own reference, so a clip that falls away
+        /// meanwhile (the haptic thread drops its patch) does not free the model under it.
+        std::shared_ptr<fem::PatchModel> pm;
         int tets = 0;
         bool quadratic = false;               // 10-node elements: the contacts act on the quadratic surface
         Eigen::MatrixX3d X;                   // rest positions of the patch's nodes
@@ -224,7 +228,7 @@ struct Simulator::Impl {
     // solve_patches: each patch's Newton solve with the clip's blades, spring and wall contact, then d.
     bool patch_holds_instrument(size_t i) const;
     void make_patches(Frame& fr);
-    void build_patch(int clip, const fem::ClipBlades& blades, double theta, std::mutex* mx, const std::string& why = {});
+    void build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why = {});
     void solve_patches(Frame& fr);
     void set_patch_part(Eigen::Index v, const Eigen::Vector3d& value);
     void drop_patch(int index);  // its clip fell away: the wall returns to what the linear model gives

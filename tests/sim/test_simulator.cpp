@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -962,4 +963,50 @@ TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepea
     }
     ASSERT_GT(logs[0].size(), 100u);
     EXPECT_EQ(logs[0], logs[1]);
+}
+
+TEST(SimulatorPatch, InRealTimeAClipReleasedWhileItsPatchIsMadeOrSolvedEndsCleanly) {
+    // The threaded real-time mode runs the scene on the wall clock: the patch's build and Newton frames take far
+    // longer than the scene's 0.01 s frames, so the haptic thread releases the clip while the physics thread is
+    // making its patch or solving it without the lock. Released early (the jaws still in the air or just
+    // touching) the clip grips nothing and falls away; later it is deposited on what it grips. Either way the run
+    // ends, the patch goes with a clip that fell away, and a kept patch belongs to a clip that is still there.
+    // (Before: the build read the fallen clip's emptied model name, std::out_of_range, and the process ended in
+    // std::terminate; a fall during a solve freed the patch model the solve was using.)
+    test::TempDir d("patchrt");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    for (const double release_s : {0.03, 0.06, 0.1}) {
+        SCOPED_TRACE("release at " + std::to_string(release_s) + " s");
+        json j = flattening_scene(bundle, "patch", true);
+        json& keys = j["instruments"][0]["keyframes"];
+        // The release moved earlier: the keyframes after it shifted with it.
+        json moved = json::array();
+        const double shift = 0.17 - release_s;
+        for (json k : keys) {
+            const double t = k["t"].get<double>();
+            if (t > 0.02 && t < 0.17 && t > release_s) continue;  // the closing keys after the release
+            if (t >= 0.17) k["t"] = t - shift;
+            moved.push_back(k);
+        }
+        keys = moved;
+        j["outputs"] = {{"log", "rt_log.csv"}, {"report", "rt_report.json"}};
+        sim::Simulator s = make(j, d.file(""), "rt.json");
+        std::vector<std::string> msgs;
+        sim::RunOptions opt;
+        opt.deterministic = false;
+        opt.on_message = [&](const std::string& m) { msgs.push_back(m); };
+        const sim::Assessment a = sim::run_scene(s, opt);
+        const sim::Clip& c = s.clips().at(0);
+        EXPECT_EQ(c.state, sim::Clip::State::DEPOSITED);
+        for (const auto& p : a.patches) EXPECT_EQ(p.clip, 0);
+        const bool fell = c.model.empty();
+        std::string said;
+        for (const auto& m : msgs) said += m + "\n";
+        if (fell) {
+            EXPECT_NE(said.find("falls away"), std::string::npos) << said;
+        }
+        std::printf("released at %.2f s (wall clock): %s, %zu patch(es), opening %.2f deg\n%s", release_s, fell ? "fell away" : "deposited",
+                    a.patches.size(), c.opening_deg, said.c_str());
+        EXPECT_TRUE(std::filesystem::exists(d.file("rt_report.json")));
+    }
 }
