@@ -11,19 +11,11 @@ extern "C" {
 char* openblas_get_corename(void);
 char* openblas_get_config(void);
 int openblas_get_num_threads(void);
-void openblas_set_num_threads(int);
 }
 
 namespace aneu {
 
 std::string openblas_kernels() { return openblas_get_corename(); }
-
-int set_math_threads(int n) {
-    const int before = openblas_get_num_threads();
-    openblas_set_num_threads(n < 1 ? 1 : n);
-    omp_set_num_threads(n < 1 ? 1 : n);
-    return before;
-}
 
 std::vector<std::pair<std::string, std::string>> core_dependency_versions() {
     unsigned maj = 0, min = 0, rel = 0;

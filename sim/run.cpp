@@ -21,7 +21,6 @@
 
 #include "aneu/core/common.hpp"
 #include "aneu/core/atomic_file.hpp"
-#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
 #include "aneu/sim/simulator.hpp"
@@ -332,13 +331,11 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         std::mutex fmx;
         // One core stays with the haptic loop: the SMVM gets the others (on 2 cores, one thread; two took the
         // haptic period's 99th percentile from 2.0 to 3.5 ms on the demo scene).
-        const int others = std::max(1, static_cast<int>(std::thread::hardware_concurrency()) - 1);
-        sim.set_solver_threads(others);
-        // So do the math libraries: a nonlinear patch's factorisations (CHOLMOD on OpenBLAS) and tangents (OpenMP)
-        // would otherwise take every core, the haptic loop's too.
-        const int blas_before = set_math_threads(others);
+        sim.set_solver_threads(std::max(1, static_cast<int>(std::thread::hardware_concurrency()) - 1));
+        // (The math libraries under a nonlinear patch's frames, CHOLMOD on OpenBLAS and OpenMP's tangents, keep
+        // every core: kept to one, the haptic loop's period did no better with the sample's patch active
+        // (bench/results/study/patch_realtime.md).)
         std::thread physics([&] {
-            set_math_threads(others);  // OpenMP's count is per thread
             const double period = 1.0 / sc.physics_hz;
             double next = 0;
             while (running) {
@@ -454,9 +451,10 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
             if (wait > 0) std::this_thread::sleep_for(std::chrono::duration<double>(wait));
         }
         running = false;
+        sim.cancel_physics(true);  // a patch frame in progress stops at its next iteration
         physics.join();
+        sim.cancel_physics(false);
         output.join();
-        set_math_threads(blas_before);
         for (const auto& [t, f] : hbuf) hlog.line(t, f);
         frames = fbuf;
     }

@@ -189,7 +189,11 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         }
     PatchRun P;
     P.clip = clip;
-    P.pm = std::make_unique<fem::PatchModel>(vol, fem, tets, map_nodes);
+    try {
+        P.pm = std::make_shared<fem::PatchModel>(vol, fem, tets, map_nodes, &cancel_frames);
+    } catch (const Cancelled&) {
+        return;  // the run is ending
+    }
     const fem::PatchModel& pm = *P.pm;
     P.tets = static_cast<int>(tets.size());
     P.map_vertex = std::move(map_vertex);
@@ -374,8 +378,15 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         if (P.course.theta_bal < 0) P.course.theta_bal = P.v[nb];
         const double theta_wanted = !cm.spring ? (held ? theta_applier : c.opening_deg * DEG)
                                                : std::max(held ? theta_applier : 0.0, P.course.theta_bal);
-        // After a restart (below) the opening moves at most theta_step a frame towards it.
-        const double theta_kept = P.v[nb] + std::clamp(theta_wanted - P.v[nb], -P.course.theta_step, P.course.theta_step);
+        // After a restart (below) the opening moves at most theta_step a frame towards it. In the threaded real-time
+        // mode at most REALTIME_STEP_DEG as well: there the applier moves on while a patch frame solves, so the next
+        // frame would take the whole way at once, and a frame's cost grows steeply with that (the sample's first
+        // real-time frame after its patch was made, 60 -> 40 deg in one frame: 557 s, 388 s of it the tangent's
+        // pattern and analysis, 47 s a factorisation, none of it interruptible). The patch then lags the applier
+        // and catches up frame by frame. (The deterministic timeline moves the applier by a frame's worth only.)
+        constexpr double REALTIME_STEP_DEG = 1.0;
+        const double step_max = fr.mx ? std::min(P.course.theta_step, REALTIME_STEP_DEG * DEG) : P.course.theta_step;
+        const double theta_kept = P.v[nb] + std::clamp(theta_wanted - P.v[nb], -step_max, step_max);
         if (P.v_ok.size() != P.v.size()) {  // a new patch: its start is its last converged state
             P.v_ok = P.v;
             P.grips_ok = P.grips;
@@ -403,6 +414,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         o.keep_going = true;
         o.force_scale = 1e-3;  // N: a released clip's free problem has no reaction to measure the residual by
         o.workspace = P.newton;
+        o.cancel = &cancel_frames;
         // θ is prescribed in every frame's solve (a free θ against a stiff, buckling, pressed-together wall makes
         // Newton crawl); the solve's reaction on it is R = τ(θ) − M(θ), the spring's torque less the tissue's
         // moment. A spring clip's balance R = 0 is approached over the frames by secant steps on R (at most 1° a
@@ -562,6 +574,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // Released meanwhile and fallen away (the haptic thread dropped the patch): the frame goes with it.
             if (!P.alive || P.pm != hold) continue;
         }
+        if (cancel_frames) continue;  // the run ended during the solve: its unfinished state is not kept
         Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
         P.grips = std::move(grips);

@@ -104,6 +104,7 @@ void Simulator::apply_script(double t_prev, double t) {
 FrameStats Simulator::physics_step(double t, std::mutex* mx) { return m_impl->physics_step(t, mx); }
 const std::vector<Eigen::Vector3d>& Simulator::haptic_step(double t) { return m_impl->haptic_step(t); }
 void Simulator::set_solver_threads(int n) { m_impl->solver.set_threads(n); }
+void Simulator::cancel_physics(bool on) { m_impl->cancel_frames = on; }
 Eigen::MatrixX3d Simulator::deformed_surface(bool region_only) { return m_impl->deformed(region_only); }
 const std::vector<Clip>& Simulator::clips() const { return m_impl->clips; }
 std::vector<std::optional<Pose>> Simulator::instrument_poses() const {

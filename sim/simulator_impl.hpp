@@ -8,6 +8,7 @@
 //   sim_haptics.cpp  contact areas and the contact-plane haptic force;
 //   assessment.cpp   the assessment (neck occlusion, the neck between closed jaws, the clips at the end).
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -165,6 +166,7 @@ struct Simulator::Impl {
         double iterations_sum = 0, solve_ms_sum = 0;
     };
     std::vector<PatchRun> patches;
+    std::atomic<bool> cancel_frames{false};  // Simulator::cancel_physics
     std::vector<int> patch_of_clip;           // per clip: index into patches, −1
     Eigen::MatrixX3d d_patch;                 // the patches' part of d (d = the linear solve's + this)
     std::vector<Eigen::Vector3d> patch_force; // per instrument: the net force of the tissue on its clip's blades [N]

@@ -609,6 +609,12 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 u = v;
                 return true;
             }
+            if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
+                if (!opt.keep_going) throw Cancelled("neo-Hookean solve: cancelled");
+                u = v;
+                budget_spent = out.cancelled = true;
+                return true;
+            }
             if (opt.max_total_iterations > 0 && out.iterations >= opt.max_total_iterations) {
                 if (opt.keep_going) {
                     u = v;
@@ -662,12 +668,21 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
         return false;
     };
     while (s < 1.0) {
+        // (Also between substeps: a frame whose predictors keep failing and halving never reaches an iteration.)
+        if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
+            if (!opt.keep_going) throw Cancelled("neo-Hookean solve: cancelled");
+            out.converged = false;
+            out.cancelled = true;
+            out.load_fraction = s;
+            out.failure = "cancelled";
+            break;
+        }
         double s1 = std::min(1.0, s + ds);
         if (substep(s1)) {
             if (budget_spent) {
                 out.converged = false;
                 out.load_fraction = s1;
-                out.failure = "the iteration budget (" + std::to_string(opt.max_total_iterations) + ") ran out";
+                out.failure = out.cancelled ? std::string("cancelled") : "the iteration budget (" + std::to_string(opt.max_total_iterations) + ") ran out";
                 break;
             }
             s = s1;

@@ -65,7 +65,8 @@ void for_each_entry(const FemData& fem, F f) {
 
 }  // namespace
 
-PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes)
+PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes,
+                       const std::atomic<bool>* cancel)
     : m(std::make_unique<Impl>()) {
     const Stopwatch clock;
     const Eigen::Index nn = vol.nodes.rows(), nt = vol.tets.rows();
@@ -194,6 +195,7 @@ PatchModel::PatchModel(const VolumeData& vol, const FemData& fem, const std::vec
         const Stopwatch ts;
         constexpr Eigen::Index BLOCK = 64;
         for (Eigen::Index c0 = 0; c0 < ni; c0 += BLOCK) {
+            if (cancel && cancel->load(std::memory_order_relaxed)) throw Cancelled("patch: setup cancelled");
             const Eigen::Index nc = std::min(BLOCK, ni - c0);
             const Eigen::MatrixXd B = Eigen::MatrixXd(m->K_EI.middleCols(c0, nc));
             const Eigen::MatrixXd X = m->llt.solve(B);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -403,3 +404,27 @@ TEST(NeoHookean, ChordStepsReachTheSameEquilibriumWithFewerFactorisations) {
 }
 
 }  // namespace
+
+TEST(NeoHookean, ACancelledSolveStopsBeforeItsNextIteration) {
+    // A real-time run that ends sets the flag from another thread: with keep_going the solve returns its last
+    // accepted state, not converged and marked cancelled; without, it throws aneu::Cancelled. Cleared, the same
+    // call converges.
+    const ClampedBox box;
+    std::atomic<bool> stop{true};
+    fem::NewtonOptions o;
+    o.keep_going = true;
+    o.cancel = &stop;
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(box.solid.dofs());
+    const fem::NewtonResult r = fem::solve_neo_hookean(box.solid, box.fixed, box.pressed(0.2), zero, o);
+    EXPECT_TRUE(r.cancelled);
+    EXPECT_FALSE(r.converged);
+    EXPECT_EQ(r.failure, "cancelled");
+    EXPECT_EQ(r.iterations, 0);
+    o.keep_going = false;
+    EXPECT_THROW(fem::solve_neo_hookean(box.solid, box.fixed, box.pressed(0.2), zero, o), Cancelled);
+    stop = false;
+    const fem::NewtonResult c = fem::solve_neo_hookean(box.solid, box.fixed, box.pressed(0.2), zero, o);
+    EXPECT_TRUE(c.converged);
+    EXPECT_FALSE(c.cancelled);
+    EXPECT_GT(c.iterations, 0);
+}

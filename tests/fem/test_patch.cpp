@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 
 #include "aneu/core/error.hpp"
@@ -97,6 +98,9 @@ TEST(Patch, ExteriorCondensationIsExact) {
         worst = std::max(worst, (um.segment<3>(3 * static_cast<Eigen::Index>(k)) - u.segment<3>(3 * map_nodes[k])).norm());
     EXPECT_LT(worst, 1e-9 * u_full.norm());
     EXPECT_THROW(fem::PatchModel(tube.vol, tube.fem, tube.tets_near(1.6), {static_cast<int>(tube.vol.nodes.rows())}), InputError);
+    // A setup asked to stop (a real-time run ending) stops before its interface solves.
+    const std::atomic<bool> stop{true};
+    EXPECT_THROW(fem::PatchModel(tube.vol, tube.fem, tube.tets_near(1.6), map_nodes, &stop), Cancelled);
     // The reactions (the force to push) too.
     EXPECT_NEAR(r.reaction.sum(), fem::solve_dirichlet(tube.fem, pres).reaction.sum(), 1e-9 * r.reaction.cwiseAbs().sum());
 }

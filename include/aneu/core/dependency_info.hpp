@@ -17,9 +17,4 @@ std::vector<std::pair<std::string, std::string>> core_dependency_versions();
 /// OPENBLAS_CORETYPE before the process starts.
 std::string openblas_kernels();
 
-/// Threads the math libraries may use: OpenBLAS's (process-wide: CHOLMOD's supernodal factorisation runs on it) and
-/// OpenMP's for loops started from the calling thread. Returns OpenBLAS's count before, to give back.
-/// The simulator's threaded mode gives its physics thread all cores but the haptic loop's.
-int set_math_threads(int n);
-
 }  // namespace aneu

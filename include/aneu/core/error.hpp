@@ -41,5 +41,10 @@ class NumericalError : public Error {
 public:
     using Error::Error;
 };
+/// A long computation was asked to stop (a real-time run ending while a patch is made): nothing is wrong.
+class Cancelled : public Error {
+public:
+    using Error::Error;
+};
 
 }  // namespace aneu

@@ -6,6 +6,7 @@
 /// displacements. It is the reference the linear model is measured against (bench/bench_closure.cpp, issue #6):
 /// at small strain the two coincide — the tangent at u = 0 *is* K — so every difference is large-deformation
 /// physics, not a different discretisation.
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -137,6 +138,10 @@ struct NewtonOptions {
     /// Kept between calls (make_newton_workspace): the analysis is reused while the free tangent's pattern stays.
     /// Null: analysed in every call that needs a linear solve.
     std::shared_ptr<NewtonWorkspace> workspace;
+    /// Set by another thread to stop the solve before its next iteration (a real-time run that ends): with
+    /// keep_going the last accepted state comes back (converged = false, NewtonResult::cancelled), else
+    /// aneu::Cancelled is thrown. Null: not cancellable.
+    const std::atomic<bool>* cancel = nullptr;
 };
 
 struct NewtonResult {
@@ -150,6 +155,7 @@ struct NewtonResult {
     bool converged = true;      ///< false only with NewtonOptions::keep_going
     double load_fraction = 1;   ///< of the prescribed increment reached (< 1 only when not converged)
     std::string failure;        ///< why the last attempt failed, when not converged (for logs)
+    bool cancelled = false;     ///< stopped by NewtonOptions::cancel
     int factorisations = 0;     ///< numeric Cholesky factorisations (predictors, iterations, shifted retries)
     /// The analysis came from NewtonOptions::workspace (the free tangent's pattern unchanged since the last call).
     bool analysis_reused = false;

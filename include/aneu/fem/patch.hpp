@@ -29,9 +29,12 @@ public:
     /// @param map_nodes  global nodes whose displacement the model should give cheaply for any patch state
     ///                   (mapped_displacement): the rows of K_EE⁻¹ K_EI for them are kept from the setup's
     ///                   interface solves (a simulator's visible surface outside the patch)
+    /// @param cancel     set by another thread to stop the setup between blocks of interface solves (null: not
+    ///                   cancellable)
     /// @throws InputError empty or out-of-range patch or map node, a model without the whole vessel outside it;
-    ///         NumericalError K_EE not positive definite
-    PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes = {});
+    ///         NumericalError K_EE not positive definite; aneu::Cancelled when cancel was set
+    PatchModel(const VolumeData& vol, const FemData& fem, const std::vector<int>& patch_tets, const std::vector<int>& map_nodes = {},
+               const std::atomic<bool>* cancel = nullptr);
     ~PatchModel() override;
     PatchModel(const PatchModel&) = delete;
     PatchModel& operator=(const PatchModel&) = delete;

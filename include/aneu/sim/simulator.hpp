@@ -159,6 +159,10 @@ public:
     /// Threads of the deformation SMVM (default 2; used only when a product has at least 200,000 entries).
     /// The threaded runner (sim/run.cpp) sets hardware threads − 1, leaving a core to the haptic loop.
     void set_solver_threads(int n);
+    /// Threaded mode's end: while set, a physics frame in progress stops its nonlinear patch's build or Newton solve
+    /// at the next block or iteration and keeps none of it (the threaded runner sets it when the haptic loop ends, so
+    /// that the run does not wait for a patch frame of seconds or minutes). Safe from any thread.
+    void cancel_physics(bool on);
     /// Haptic force on each instrument at time t by the contact-plane method (cheap; the haptic rate).
     /// Also accumulates the force/velocity assessment.
     const std::vector<Eigen::Vector3d>& haptic_step(double t);
