@@ -22,22 +22,7 @@ else
   case_dir=$(cd "$src" && pwd)
 fi
 "$sim" plan "$case_dir/case.h5" -o "$out/plan.json" 2> "$out/plan.err"
-python3 - "$out/plan.json" "$out/scene.json" "$case_dir/case.h5" "$scale" <<'PY'
-import json, sys
-src, dst, bundle, scale = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
-text = "\n".join(l for l in open(src).read().splitlines() if not l.lstrip().startswith("//"))
-s = json.loads(text)
-s["bundle"] = bundle
-s["model"] = {"wall": "patch", "newton_per_frame": 40}
-s["outputs"] = {"log": "scene_log.csv", "report": "scene_report.json"}
-if scale != 1:
-    for m in s["clip_models"].values():
-        sp = m["spring"]
-        sp["label_force_n"] *= scale
-        sp["open_force_n"] *= scale
-        sp["source"] = "experiment: %g x the planned clip's spring (%s)" % (scale, sp.get("source", ""))
-json.dump(s, open(dst, "w"), indent=1)
-PY
+python3 "$root/bench/patch_scene.py" "$out/plan.json" "$out/scene.json" "$case_dir/case.h5" --spring-scale "$scale"
 cp "$sim" "$out/aneusim"  # the run keeps its own binary: a rebuild during the hour does not change it
 start=$(date +%s)
 (cd "$out" && OMP_THREAD_LIMIT=1 OPENBLAS_NUM_THREADS=1 ANEU_PATCH_TRACE=1 ANEU_LUMEN_OBJ=lumen_end.obj \

@@ -15,22 +15,7 @@ case_dir=$root/build/demo/sample
 sim=$root/build/tools/aneusim
 [ -f "$case_dir/case.h5" ] || { echo "run_patch_realtime: $case_dir/case.h5 missing (bash scripts/build.sh builds the sample)" >&2; exit 2; }
 "$sim" plan "$case_dir/case.h5" -o "$out/plan.json" 2> "$out/plan.err"
-python3 - "$out/plan.json" "$out/scene.json" "$case_dir/case.h5" "$dur" <<'PY'
-import json, sys
-src, dst, bundle, dur = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
-text = "\n".join(l for l in open(src).read().splitlines() if not l.lstrip().startswith("//"))
-s = json.loads(text)
-s["bundle"] = bundle
-s["model"] = {"wall": "patch", "newton_per_frame": 40}
-s["outputs"] = {"log": "log.csv", "report": "report.json"}
-k = s["instruments"][0]["keyframes"]
-at = dict(k[1])                      # at the neck, open (the planned approach's end, t = 0.8 s)
-mid = dict(at); mid.update(t=30.0, opening_deg=30.0)
-end = dict(at); end.update(t=600.0, opening_deg=0.0)
-s["instruments"][0]["keyframes"] = [k[0], at, mid, end]
-s["duration_s"] = dur
-json.dump(s, open(dst, "w"), indent=1)
-PY
+python3 "$root/bench/patch_scene.py" "$out/plan.json" "$out/scene.json" "$case_dir/case.h5" --log log.csv --report report.json --slow "$dur"
 printf '| run | haptic rate Hz | period p50 / p99 / max ms | step p99 ms | patch frames | end wait s |\n|---|---|---|---|---|---|\n'
 for run in $(seq 1 "${RUNS:-1}"); do
   mkdir -p "$out/$run"

@@ -1,0 +1,43 @@
+#!/usr/bin/env python3
+# SPDX-License-Identifier: MIT
+"""A planned scene (`aneusim plan` output, // comments allowed) made into a scene run with the nonlinear patch
+(model.wall = "patch", 40 Newton iterations a frame), for bench/run_patch_case.sh and bench/run_patch_realtime.sh.
+
+usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring-scale S] [--slow DURATION_S]
+  --spring-scale S  multiplies the planned clip's two spring forces (an experiment; its source says so)
+  --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
+                    600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
+"""
+import argparse
+import json
+
+ap = argparse.ArgumentParser()
+ap.add_argument("plan")
+ap.add_argument("scene")
+ap.add_argument("bundle")
+ap.add_argument("--log", default="scene_log.csv")
+ap.add_argument("--report", default="scene_report.json")
+ap.add_argument("--spring-scale", type=float, default=1.0)
+ap.add_argument("--slow", type=float, default=0.0)
+a = ap.parse_args()
+text = "\n".join(l for l in open(a.plan).read().splitlines() if not l.lstrip().startswith("//"))
+s = json.loads(text)
+s["bundle"] = a.bundle
+s["model"] = {"wall": "patch", "newton_per_frame": 40}
+s["outputs"] = {"log": a.log, "report": a.report}
+if a.spring_scale != 1:
+    for m in s["clip_models"].values():
+        sp = m["spring"]
+        sp["label_force_n"] *= a.spring_scale
+        sp["open_force_n"] *= a.spring_scale
+        sp["source"] = "experiment: %g x the planned clip's spring (%s)" % (a.spring_scale, sp.get("source", ""))
+if a.slow > 0:
+    k = s["instruments"][0]["keyframes"]
+    at = dict(k[1])  # at the neck, open (the planned approach's end)
+    mid = dict(at)
+    mid.update(t=30.0, opening_deg=30.0)
+    end = dict(at)
+    end.update(t=600.0, opening_deg=0.0)
+    s["instruments"][0]["keyframes"] = [k[0], at, mid, end]
+    s["duration_s"] = a.slow
+json.dump(s, open(a.scene, "w"), indent=1)
