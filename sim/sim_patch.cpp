@@ -569,6 +569,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                          1e3 * (t_clip - t_wall), 1e3 * (t_solve - t_clip), 1e3 * t_setup, reused ? " (analysis reused)" : "", merges ? (" (patterns merged: " + std::to_string(merges) + ")").c_str() : "", 1e3 * t_tangent, factorisations, 1e3 * t_factor, failed, 1e3 * t_failed, chords, 1e3 * t_back,
                          unsolved ? ", in equilibrium without a solve" : "");
         if (std::getenv("ANEU_PATCH_TRACE") && !r.converged) std::fprintf(stderr, "patch t=%.4f not converged: %s\n", fr.t, r.failure.c_str());
+        // The surface outside the patch (at region_hz) is computed here, before the lock: the haptic thread waits on it.
+        const bool remap = P.t_map < 0 || fr.t - P.t_map >= 1.0 / scene.region_hz - 1e-9;
+        const Eigen::VectorXd mapped = remap ? pm.mapped_displacement(r.u.head(nb)) : Eigen::VectorXd();
         if (fr.mx) {
             fr.lock.lock();
             // Released meanwhile and fallen away (the haptic thread dropped the patch): the frame goes with it.
@@ -605,10 +608,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         fr.fs.solve_s += 1e-3 * ms;
         // The surface: the patch's own vertices every frame, the rest of the region from the interface at region_hz.
         for (size_t k = 0; k < P.cand_vertex.size(); ++k) set_patch_part(P.cand_vertex[k], P.v.segment<3>(3 * P.cand[k]));
-        if (P.t_map < 0 || fr.t - P.t_map >= 1.0 / scene.region_hz - 1e-9) {
+        if (remap) {
             P.t_map = fr.t;
-            const Eigen::VectorXd m = pm.mapped_displacement(P.v.head(nb));
-            for (size_t k = 0; k < P.map_vertex.size(); ++k) set_patch_part(P.map_vertex[k], m.segment<3>(3 * static_cast<Eigen::Index>(k)));
+            for (size_t k = 0; k < P.map_vertex.size(); ++k) set_patch_part(P.map_vertex[k], mapped.segment<3>(3 * static_cast<Eigen::Index>(k)));
         }
     }
 }
