@@ -510,6 +510,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         } else {
             r = solve_with(pm, nullptr);
         }
+        if (cancel_frames) {  // the run ended during the solve: nothing of the frame is kept, its course included
+            if (fr.mx) fr.lock.lock();
+            continue;
+        }
         // A frame that does not converge leaves its last iterate for the next frame to go on from (most do: the
         // next frame, with the same opening, converges in a few iterations). A second in a row got no nearer from
         // there: the patch goes back to the last converged frame's state, grips and loads, and the opening moves
@@ -577,7 +581,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // Released meanwhile and fallen away (the haptic thread dropped the patch): the frame goes with it.
             if (!P.alive || P.pm != hold) continue;
         }
-        if (cancel_frames) continue;  // the run ended during the solve: its unfinished state is not kept
         Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
         P.grips = std::move(grips);

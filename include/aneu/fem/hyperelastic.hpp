@@ -138,7 +138,7 @@ struct NewtonOptions {
     /// Kept between calls (make_newton_workspace): the analysis is reused while the free tangent's pattern stays.
     /// Null: analysed in every call that needs a linear solve.
     std::shared_ptr<NewtonWorkspace> workspace;
-    /// Set by another thread to stop the solve before its next iteration (a real-time run that ends): with
+    /// Set by another thread to stop the solve before its next substep or iteration (a real-time run that ends): with
     /// keep_going the last accepted state comes back (converged = false, NewtonResult::cancelled), else
     /// aneu::Cancelled is thrown. Null: not cancellable.
     const std::atomic<bool>* cancel = nullptr;
