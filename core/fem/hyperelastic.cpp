@@ -535,6 +535,12 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     const bool trace = std::getenv("ANEU_NEWTON_TRACE") != nullptr;
     std::string last_failure = "no iteration";
     bool budget_spent = false;  // keep_going: the iteration budget ran out (u is the last accepted iterate)
+    // NewtonOptions::cancel set: true with keep_going (the caller returns the last accepted state), else throws.
+    auto stop_asked = [&] {
+        if (!opt.cancel || !opt.cancel->load(std::memory_order_relaxed)) return false;
+        if (!opt.keep_going) throw Cancelled("neo-Hookean solve: cancelled");
+        return true;
+    };
     // Tries to reach load fraction s1 from the converged state u (at s); true on convergence (u updated).
     // (s1 may come back smaller: a contact that stops the prescribed DOFs' own move short makes the step shorter.)
     auto substep = [&](double& s1) {
@@ -609,8 +615,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
                 u = v;
                 return true;
             }
-            if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
-                if (!opt.keep_going) throw Cancelled("neo-Hookean solve: cancelled");
+            if (stop_asked()) {
                 u = v;
                 budget_spent = out.cancelled = true;
                 return true;
@@ -669,8 +674,7 @@ NewtonResult solve_neo_hookean(const ElasticBody& solid, const Eigen::VectorXi& 
     };
     while (s < 1.0) {
         // (Also between substeps: a frame whose predictors keep failing and halving never reaches an iteration.)
-        if (opt.cancel && opt.cancel->load(std::memory_order_relaxed)) {
-            if (!opt.keep_going) throw Cancelled("neo-Hookean solve: cancelled");
+        if (stop_asked()) {
             out.converged = false;
             out.cancelled = true;
             out.load_fraction = s;

@@ -1004,6 +1004,18 @@ TEST(SimulatorPatch, InRealTimeAClipReleasedWhileItsPatchIsMadeOrSolvedEndsClean
         for (const auto& m : msgs) said += m + "\n";
         if (fell) {
             EXPECT_NE(said.find("falls away"), std::string::npos) << said;
+        } else {
+            EXPECT_GT(c.grip_force_n, 0.0);  // deposited on tissue it grips
+        }
+        // A patch made for a clip released meanwhile is not used: it is not among the patches the run reports.
+        if (said.find("the patch is not used") != std::string::npos) {
+            EXPECT_TRUE(a.patches.empty()) << said;
+        }
+        // A patch the run kept that belonged to a clip that fell away was dropped with it: nothing of it stays on the
+        // surface (the deformed surface is the linear model's, which a fallen clip no longer pushes: within the
+        // linear solve's own displacement of the tube at rest, zero).
+        if (fell) {
+            EXPECT_LT((s.deformed_surface() - s.model().surface.X).cwiseAbs().maxCoeff(), 1e-9);
         }
         std::printf("released at %.2f s (wall clock): %s, %zu patch(es), opening %.2f deg\n%s", release_s, fell ? "fell away" : "deposited",
                     a.patches.size(), c.opening_deg, said.c_str());
