@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <iterator>
 #include <limits>
@@ -32,12 +33,22 @@ struct Linearisation::Impl {
     Eigen::Index nfree = 0;
     Eigen::MatrixXd W;
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    std::uint64_t serial = 0;
+};
+
+struct GatheredCompliance {
+    std::uint64_t serial = 0;  // the linearisation's
+    std::vector<int> nodes;    // candidates, in the order of Wa's blocks
+    std::vector<int> slot;     // per candidate: its block in Wa, -1 none
+    Eigen::MatrixXd Wa;        // 3|nodes| x 3|nodes|
 };
 
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                              const std::vector<int>& candidates)
     : m(std::make_unique<Impl>()) {
+    static std::atomic<std::uint64_t> made{0};
+    m->serial = ++made;
     const Eigen::Index n = body.dofs();
     if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
     if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
@@ -118,6 +129,7 @@ const Eigen::MatrixX3d& Linearisation::free_positions() const { return m->free_x
 const Eigen::VectorXd& Linearisation::free_candidate_u() const { return m->free_u; }
 const std::vector<int>& Linearisation::candidates() const { return m->cand; }
 const Eigen::MatrixXd& Linearisation::compliance() const { return m->W; }
+std::uint64_t Linearisation::serial() const { return m->serial; }
 
 Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
     if (f.size() != 3 * static_cast<Eigen::Index>(m->cand.size()))
@@ -164,6 +176,106 @@ double blade_distance_d(const ClipBlades& b, int s, double theta, const Eigen::V
 
 double blade_distance(const ClipBlades& b, int s, double theta, const Eigen::Vector3d& x) {
     return blade_distance_d(b, s, theta, x, nullptr, nullptr);
+}
+
+LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
+    const Eigen::Index mz = q.size();
+    if (A.rows() != mz || A.cols() != mz || z.size() != mz)
+        throw InputError("lcp: a " + std::to_string(A.rows()) + " x " + std::to_string(A.cols()) + " matrix, " + std::to_string(q.size()) + " constants and " +
+                         std::to_string(z.size()) + " unknowns do not match");
+    // Projected Gauss–Seidel from z, keeping w = q + A z up to date.
+    Eigen::VectorXd w = q + A * z;
+    LcpResult out;
+    auto violation = [&] {
+        double v = 0;
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // the stop's row: θ [rad]
+        }
+        return v;
+    };
+    auto sweep_once = [&] {  // one projected Gauss–Seidel sweep
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            if (!(A(i, i) > 0)) continue;
+            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
+            if (dz != 0) {
+                w.noalias() += dz * A.col(i);
+                z[i] = zi;
+            }
+        }
+        return violation();
+    };
+    int sweep = 0;
+    double viol = violation();
+    while (sweep < opt.max_sweeps && viol > opt.tolerance) {
+        viol = sweep_once();
+        ++sweep;
+    }
+    out.sweeps = sweep;
+    // The sweeps converge slowly where θ couples every row (a released clip); finish by block principal pivoting
+    // from the sweeps' active set: solve the active rows exactly, move every row whose force came out negative or
+    // whose gap is negative across, repeat. Flipping every such row at once can cycle (the sample's pressed walls:
+    // nearly redundant rows); Júdice & Pires (1994)'s safeguard: when the count of such rows has not fallen for 3
+    // solves, flip only the last of them (Murty's rule, finite for the P-matrix that A is with its mixing) until it
+    // falls below the best count again. Kept only where it does better than the sweeps.
+    if (viol > opt.tolerance && mz > 0) {
+        std::vector<char> act(static_cast<size_t>(mz));
+        for (Eigen::Index i = 0; i < mz; ++i) act[static_cast<size_t>(i)] = z[i] > 0 || w[i] < 0;
+        size_t best_count = std::numeric_limits<size_t>::max();
+        int tries = 3;
+        for (int it = 0; it < opt.max_pivots; ++it) {
+            std::vector<Eigen::Index> S;
+            for (Eigen::Index i = 0; i < mz; ++i)
+                if (act[static_cast<size_t>(i)]) S.push_back(i);
+            Eigen::VectorXd zt = Eigen::VectorXd::Zero(mz);
+            if (!S.empty()) {
+                const Eigen::Index ns = static_cast<Eigen::Index>(S.size());
+                Eigen::MatrixXd As(ns, ns);
+                Eigen::VectorXd qs(ns);
+                for (Eigen::Index c = 0; c < ns; ++c) {
+                    qs[c] = -q[S[static_cast<size_t>(c)]];
+                    for (Eigen::Index a2 = 0; a2 < ns; ++a2) As(a2, c) = A(S[static_cast<size_t>(a2)], S[static_cast<size_t>(c)]);
+                }
+                const Eigen::VectorXd zs = As.llt().solve(qs);  // SPD: the compliance is, and every row has its mixing
+                for (Eigen::Index a2 = 0; a2 < ns; ++a2) zt[S[static_cast<size_t>(a2)]] = zs[a2];
+            }
+            const Eigen::VectorXd wt = q + A * zt;
+            std::vector<Eigen::Index> wrong;
+            for (Eigen::Index i = 0; i < mz; ++i) {
+                const bool in = act[static_cast<size_t>(i)];
+                if ((in && zt[i] < -opt.tolerance * 1e-3) || (!in && wt[i] < -opt.tolerance)) wrong.push_back(i);
+            }
+            out.pivots = it + 1;
+            if (wrong.empty()) {
+                const Eigen::VectorXd zc = zt.cwiseMax(0.0), wc = q + A * zc;
+                double v = 0;
+                for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, zc[i] > 0 ? std::abs(wc[i]) : std::max(0.0, -wc[i]));
+                if (v < viol) {
+                    z = zc;
+                    w = wc;
+                    viol = v;
+                }
+                break;
+            }
+            if (wrong.size() < best_count) {
+                best_count = wrong.size();
+                tries = 3;
+            } else if (tries > 0) {
+                --tries;
+            } else {
+                wrong = {wrong.back()};
+                ++out.single_pivots;
+            }
+            for (Eigen::Index i : wrong) act[static_cast<size_t>(i)] ^= 1;
+        }
+    }
+    // Pivoting that cycled or stalled (redundant rows: a vertex pressed on two faces of an edge): more sweeps from
+    // the best so far, until the gaps are off by no more than opt.accept.
+    for (int extra = 0; viol > opt.accept && extra < 100; ++extra) {
+        viol = sweep_once();
+        ++out.sweeps;
+    }
+    out.violation = viol;
+    return out;
 }
 
 namespace {
@@ -271,21 +383,47 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
     Eigen::MatrixXd A(mz, mz);
     Eigen::VectorXd q(mz);
+    std::shared_ptr<const GatheredCompliance> gathered;
+    int gathers = 0;
     {
-        // Through the compliance of the candidates in the rows only, gathered once (contiguous): per row its
-        // column of W Jᵀ on them, then the rows' gradients on it.
-        std::vector<int> slot(static_cast<size_t>(nc), -1), used;
+        // Through the compliance of the candidates in the rows only, gathered into one contiguous block: per row its
+        // column of W Jᵀ on them, then the rows' gradients on it. The block the last pass or frame gathered on this
+        // linearisation serves while it holds every candidate of the rows and not many more (the products below run
+        // over all of its rows); else the rows' candidates are gathered afresh.
+        std::vector<char> in_rows(static_cast<size_t>(nc), 0);
+        size_t need = 0;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)
-                if (slot[static_cast<size_t>(r.k[static_cast<size_t>(a)])] < 0) {
-                    slot[static_cast<size_t>(r.k[static_cast<size_t>(a)])] = static_cast<int>(used.size());
-                    used.push_back(r.k[static_cast<size_t>(a)]);
+                if (!in_rows[static_cast<size_t>(r.k[static_cast<size_t>(a)])]++) ++need;
+        if (warm && warm->gathered && warm->gathered->serial == lin.serial() && 4 * warm->gathered->nodes.size() <= 5 * need) {
+            gathered = warm->gathered;
+            for (Eigen::Index c = 0; c < nc; ++c)
+                if (in_rows[static_cast<size_t>(c)] && gathered->slot[static_cast<size_t>(c)] < 0) {
+                    gathered.reset();
+                    break;
                 }
-        const Eigen::Index p = static_cast<Eigen::Index>(used.size());
-        Eigen::MatrixXd Wa(3 * p, 3 * p);
-        for (Eigen::Index b = 0; b < p; ++b)
-            for (Eigen::Index a = 0; a < p; ++a) Wa.block<3, 3>(3 * a, 3 * b) = W.block<3, 3>(3 * used[static_cast<size_t>(a)], 3 * used[static_cast<size_t>(b)]);
-        Eigen::VectorXd y(3 * p);
+        }
+        if (!gathered) {
+            auto g = std::make_shared<GatheredCompliance>();
+            g->serial = lin.serial();
+            g->slot.assign(static_cast<size_t>(nc), -1);
+            for (const Row& r : rows)
+                for (int a = 0; a < r.n; ++a)
+                    if (const int c = r.k[static_cast<size_t>(a)]; g->slot[static_cast<size_t>(c)] < 0) {
+                        g->slot[static_cast<size_t>(c)] = static_cast<int>(g->nodes.size());
+                        g->nodes.push_back(c);
+                    }
+            const Eigen::Index p = static_cast<Eigen::Index>(g->nodes.size());
+            g->Wa.resize(3 * p, 3 * p);
+            for (Eigen::Index b = 0; b < p; ++b)
+                for (Eigen::Index a = 0; a < p; ++a)
+                    g->Wa.block<3, 3>(3 * a, 3 * b) = W.block<3, 3>(3 * g->nodes[static_cast<size_t>(a)], 3 * g->nodes[static_cast<size_t>(b)]);
+            gathered = std::move(g);
+            ++gathers;
+        }
+        const std::vector<int>& slot = gathered->slot;
+        const Eigen::MatrixXd& Wa = gathered->Wa;
+        Eigen::VectorXd y(Wa.rows());
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
             y.noalias() = Wa.middleCols<3>(3 * slot[static_cast<size_t>(ri.k[0])]) * ri.g[0];
@@ -324,84 +462,17 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         for (Eigen::Index i = 0; i < m; ++i)
             if (auto it = last.find({rows[static_cast<size_t>(i)].k[0], rows[static_cast<size_t>(i)].s}); it != last.end()) z[i] = it->second;
     }
-    // Projected Gauss–Seidel, keeping w = q + A z up to date.
-    Eigen::VectorXd w = q + A * z;
     CompliantFrame out;
-    auto violation = [&] {
-        double v = 0;
-        for (Eigen::Index i = 0; i < mz; ++i) {
-            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // the stop's row: θ [rad]
-        }
-        return v;
-    };
-    auto sweep_once = [&] {  // one projected Gauss–Seidel sweep
-        for (Eigen::Index i = 0; i < mz; ++i) {
-            if (!(A(i, i) > 0)) continue;
-            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
-            if (dz != 0) {
-                w.noalias() += dz * A.col(i);
-                z[i] = zi;
-            }
-        }
-        return violation();
-    };
-    int sweep = 0;
-    double viol = violation();
-    while (sweep < opt.max_sweeps && viol > opt.tolerance_mm) {
-        viol = sweep_once();
-        ++sweep;
-    }
-    out.sweeps = sweep;
-    // The sweeps converge slowly where θ couples every row (a released clip); finish by block principal pivoting
-    // (Júdice & Pires 1994) from the sweeps' active set: solve the active rows exactly, move every row whose force
-    // came out negative or whose gap is negative across, repeat. Kept only where it does better.
-    if (viol > opt.tolerance_mm && mz > 0) {
-        std::vector<char> act(static_cast<size_t>(mz));
-        for (Eigen::Index i = 0; i < mz; ++i) act[static_cast<size_t>(i)] = z[i] > 0 || w[i] < 0;
-        for (int it = 0; it < 30; ++it) {
-            std::vector<Eigen::Index> S;
-            for (Eigen::Index i = 0; i < mz; ++i)
-                if (act[static_cast<size_t>(i)]) S.push_back(i);
-            Eigen::VectorXd zt = Eigen::VectorXd::Zero(mz);
-            if (!S.empty()) {
-                const Eigen::Index ns = static_cast<Eigen::Index>(S.size());
-                Eigen::MatrixXd As(ns, ns);
-                Eigen::VectorXd qs(ns);
-                for (Eigen::Index a = 0; a < ns; ++a) {
-                    qs[a] = -q[S[static_cast<size_t>(a)]];
-                    for (Eigen::Index c = 0; c < ns; ++c) As(a, c) = A(S[static_cast<size_t>(a)], S[static_cast<size_t>(c)]);
-                }
-                const Eigen::VectorXd zs = As.llt().solve(qs);  // SPD: the compliance is, and every row has its mixing
-                for (Eigen::Index a = 0; a < ns; ++a) zt[S[static_cast<size_t>(a)]] = zs[a];
-            }
-            const Eigen::VectorXd wt = q + A * zt;
-            bool changed = false;
-            for (Eigen::Index i = 0; i < mz; ++i) {
-                const bool in = act[static_cast<size_t>(i)];
-                if (in && zt[i] < -opt.tolerance_mm * 1e-3) { act[static_cast<size_t>(i)] = 0; changed = true; }
-                if (!in && wt[i] < -opt.tolerance_mm) { act[static_cast<size_t>(i)] = 1; changed = true; }
-            }
-            if (!changed) {
-                const Eigen::VectorXd zc = zt.cwiseMax(0.0), wc = q + A * zc;
-                double v = 0;
-                for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, zc[i] > 0 ? std::abs(wc[i]) : std::max(0.0, -wc[i]));
-                if (v < viol) {
-                    z = zc;
-                    w = wc;
-                    viol = v;
-                }
-                out.pivots = it + 1;
-                break;
-            }
-        }
-    }
-    // Pivoting that cycled or stalled (redundant rows: a vertex pressed on two faces of an edge): more sweeps from
-    // the best so far, until the gaps are off by no more than accept_mm.
-    for (int extra = 0; viol > opt.accept_mm && extra < 100; ++extra) {
-        viol = sweep_once();
-        ++out.sweeps;
-    }
-    out.complementarity_mm = viol;
+    LcpOptions lo;
+    lo.max_sweeps = opt.max_sweeps;
+    lo.max_pivots = opt.max_pivots;
+    lo.tolerance = opt.tolerance_mm;
+    lo.accept = opt.accept_mm;
+    const LcpResult lr = solve_lcp(A, q, z, lo);
+    out.sweeps = lr.sweeps;
+    out.pivots = lr.pivots;
+    out.single_pivots = lr.single_pivots;
+    out.complementarity_mm = lr.violation;
 
     const double t_lcp = sw.seconds();
     // The frame's state: forces on the candidates, their displacement, θ, the blades' loads.
@@ -448,6 +519,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     }
     out.wall_rows = wall_rows;
     out.wall_min_distance_mm = wall_min;
+    out.gathered = std::move(gathered);
+    out.gathers = gathers;
     out.seconds = sw.seconds();
     out.rows_s = t_rows;
     out.delassus_s = t_delassus - t_rows;
@@ -473,6 +546,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
         g.lcp_s += f.lcp_s;
+        g.gathers += f.gathers;
         const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
         f = std::move(g);
         if (moved <= 1e3 * opt.tolerance_mm) {
@@ -533,6 +607,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         acc.rows_s += f.rows_s;
         acc.delassus_s += f.delassus_s;
         acc.lcp_s += f.lcp_s;
+        acc.gathers += f.gathers;
         const std::vector<std::pair<int, int>> end = crossings(f.candidate_u);
         std::vector<std::pair<int, int>> left;
         std::set_difference(end.begin(), end.end(), before.begin(), before.end(), std::back_inserter(left));
@@ -541,6 +616,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         f.rows_s = acc.rows_s;
         f.delassus_s = acc.delassus_s;
         f.lcp_s = acc.lcp_s;
+        f.gathers = acc.gathers;
         f.search_s = search_s;
         f.seconds = search_s + frames_s;
         if (left.empty() || round == 3) {

@@ -251,3 +251,108 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
     std::printf("tube: blade force %.4f N with the walls' contact (%d pairs pressed, %.4f N through them), %.4f N without\n",
                 with.f.loads.force_n[0], with.f.wall_contacts, with.f.wall_force_n, without.f.loads.force_n[0]);
 }
+
+namespace {
+
+/// The LCP's solution by enumeration: the one active set whose solve has z ≥ 0 and w ≥ 0 (unique for an SPD A).
+Eigen::VectorXd lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q) {
+    const int n = static_cast<int>(q.size());
+    for (int mask = 0; mask < (1 << n); ++mask) {
+        std::vector<int> S;
+        for (int i = 0; i < n; ++i)
+            if (mask & (1 << i)) S.push_back(i);
+        Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
+        if (!S.empty()) {
+            Eigen::MatrixXd As(S.size(), S.size());
+            Eigen::VectorXd qs(S.size());
+            for (size_t a = 0; a < S.size(); ++a) {
+                qs[static_cast<Eigen::Index>(a)] = -q[S[a]];
+                for (size_t c = 0; c < S.size(); ++c) As(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(c)) = A(S[a], S[c]);
+            }
+            const Eigen::VectorXd zs = As.llt().solve(qs);
+            for (size_t a = 0; a < S.size(); ++a) z[S[a]] = zs[static_cast<Eigen::Index>(a)];
+        }
+        const Eigen::VectorXd w = q + A * z;
+        if (z.minCoeff() >= -1e-12 && w.minCoeff() >= -1e-12) return z;
+    }
+    return Eigen::VectorXd();
+}
+
+}  // namespace
+
+// Flipping every wrong row at once cycles on this 3 x 3 SPD problem from the empty active set ({0} → {1, 2} → {0, 1}
+// → {0} …, found by a random search); Júdice & Pires' safeguard (single flips after three solves without fewer
+// wrong rows) reaches the solution, which enumeration confirms.
+TEST(Lcp, BlockPivotingThatWouldCycleReachesTheSolutionBySingleFlips) {
+    Eigen::MatrixXd A(3, 3);
+    A << 62.5, -50, -23, -50, 62.5, 45, -23, 45, 41.5;
+    const Eigen::Vector3d q(-4, 3, 1);
+    const Eigen::VectorXd ref = lcp_by_enumeration(A, q);
+    ASSERT_EQ(ref.size(), 3);
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(3);
+    fem::LcpOptions o;
+    o.max_sweeps = 0;  // pivoting from the empty set
+    o.accept = 1e-300; // no sweeps after it either: the pivoting alone must find it
+    const fem::LcpResult r = fem::solve_lcp(A, q, z, o);
+    EXPECT_GE(r.single_pivots, 1);
+    EXPECT_LE(r.violation, 1e-12);
+    EXPECT_LE((z - ref).norm(), 1e-12 * ref.norm());
+    // Without the safeguard's single flips (too few solves allowed to reach them) it does not: the sweeps after it
+    // only approach the solution.
+    Eigen::VectorXd z3 = Eigen::VectorXd::Zero(3);
+    o.max_pivots = 3;
+    o.accept = 1e-4;
+    const fem::LcpResult r3 = fem::solve_lcp(A, q, z3, o);
+    EXPECT_EQ(r3.single_pivots, 0);
+    EXPECT_GT(r3.sweeps, 0);
+}
+
+// Random SPD problems (including nearly redundant rows: two of them almost equal, as a vertex pressed on two faces of
+// an edge) against enumeration, from a zero and from a perturbed warm start.
+TEST(Lcp, RandomProblemsWithNearlyRedundantRowsMatchEnumeration) {
+    std::srand(11);
+    auto rnd = [] { return 2.0 * std::rand() / RAND_MAX - 1.0; };
+    int solved = 0, singles = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        const int n = 4 + trial % 7, k = n + 2;
+        Eigen::MatrixXd J(n, k);
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < k; ++j) J(i, j) = rnd();
+        if (trial % 2) J.row(1) = J.row(0) + 1e-6 * J.row(1);  // nearly redundant
+        Eigen::MatrixXd A = J * J.transpose();
+        A.diagonal().array() += 1e-9 * A.diagonal().maxCoeff();  // the frames' mixing
+        Eigen::VectorXd q(n);
+        for (int i = 0; i < n; ++i) q[i] = rnd();
+        const Eigen::VectorXd ref = lcp_by_enumeration(A, q);
+        ASSERT_EQ(ref.size(), n) << trial;
+        for (int warm = 0; warm < 2; ++warm) {
+            Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
+            if (warm) {
+                for (int i = 0; i < n; ++i) z[i] = std::max(0.0, ref[i] + 0.3 * rnd());
+            }
+            fem::LcpOptions o;
+            o.accept = 1e-300;
+            const fem::LcpResult r = fem::solve_lcp(A, q, z, o);
+            EXPECT_LE(r.violation, 1e-9) << trial;
+            const Eigen::VectorXd w = q + A * z;
+            EXPECT_GE(z.minCoeff(), 0.0);
+            EXPECT_GE(w.minCoeff(), -1e-9) << trial;
+            EXPECT_LE(std::abs(z.dot(w)), 1e-9 * (1 + z.norm())) << trial;
+            // The forces themselves are unique only up to the mixing where rows are nearly redundant: compare the
+            // gaps (what the frames use) there, the forces elsewhere.
+            if (trial % 2 == 0) {
+                EXPECT_LE((z - ref).norm(), 1e-7 * (1 + ref.norm())) << trial;
+            }
+            EXPECT_LE((w - (q + A * ref)).norm(), 1e-7) << trial;
+            solved += r.violation <= 1e-9;
+            singles += r.single_pivots;
+        }
+    }
+    EXPECT_EQ(solved, 600);
+    std::printf("random LCPs: %d solved, %d single flips in all\n", solved, singles);
+}
+
+TEST(Lcp, SizesThatDoNotMatchAreRefused) {
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(2);
+    EXPECT_THROW(fem::solve_lcp(Eigen::MatrixXd::Identity(3, 3), Eigen::VectorXd::Ones(3), z), InputError);
+}

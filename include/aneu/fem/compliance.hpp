@@ -26,6 +26,7 @@
 /// ClipBody (less the barrier's d̂); run asynchronously, the frames use the newest linearisation the other core has
 /// finished, and how far they lag is the trade the benchmark (bench/bench_compliance.cpp) measures.
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -64,6 +65,8 @@ public:
     /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance's back
     /// substitutions.
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
+    /// Distinct for every linearisation made in this process (what a frame's gathered compliance was taken from).
+    std::uint64_t serial() const;
 
 private:
     struct Impl;
@@ -74,6 +77,7 @@ struct CompliantOptions {
     double reach_mm = 0.05;      ///< candidates nearer a blade than this (where the last frame left them) are constraints:
                                  ///< more than a frame's blade travel (0.384° a frame at 250 Hz moves a 13 mm blade's tip 0.044 mm)
     int max_sweeps = 4;          ///< projected Gauss–Seidel sweeps before block pivoting finishes the solve
+    int max_pivots = 30;         ///< block-pivoting solves at most (each a dense Cholesky of the active rows)
     /// Where pivoting fails (redundant rows), further sweeps (at most 100) stop at this: a gap or complementarity off
     /// by 0.1 µm
     double accept_mm = 1e-4;
@@ -101,6 +105,10 @@ struct CompliantWalls {
 };
 
 /// One clip frame on a linearisation.
+/// The compliance of the candidates a frame's rows touch, gathered into one contiguous block (compliance.cpp); kept
+/// by the frame so that its next passes and the next frames on the same linearisation need not gather it again.
+struct GatheredCompliance;
+
 struct CompliantFrame {
     double theta = 0;                  ///< the blades' opening [rad]
     Eigen::VectorXd candidate_forces;  ///< the blades' forces on the candidates (3|C|) [N]
@@ -119,11 +127,16 @@ struct CompliantFrame {
     int sweeps = 0;
     int passes = 0;                    ///< geometry passes (CompliantOptions::geometry_passes)
     int pivots = 0;                    ///< block-pivoting solves that finished the sweeps (0: the sweeps converged)
+    int single_pivots = 0;             ///< of them, solves after a single row's flip (the safeguard against cycling)
     double complementarity_mm = 0;     ///< the largest |min(λ_i, D_i)|-type violation left, in mm
     double seconds = 0;                ///< the frame's wall-clock time (constraints, Delassus matrix, sweeps)
     /// Its parts [s], summed over passes (and a walls frame's repeats): making the rows, the Delassus matrix, the LCP
     /// (sweeps, pivoting, forces and displacements), and with the walls the pair search and crossing checks.
     double rows_s = 0, delassus_s = 0, lcp_s = 0, search_s = 0;
+    /// W on the candidates this frame's rows (and the frames' before it on this linearisation) touched: what the next
+    /// pass or frame reuses while its rows touch no other candidate
+    std::shared_ptr<const GatheredCompliance> gathered;
+    int gathers = 0;                   ///< gatherings of it in this frame (0: every pass reused the last frame's)
 };
 
 /// The clip's blades (at their pose; `theta_held` the forceps' opening, or none: released, θ free on its spring
@@ -156,6 +169,26 @@ struct CompliantWallSearch {
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr);
+
+/// The frames' linear complementarity problem: find z with w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0, A symmetric positive
+/// definite (the Delassus matrix with its constraint force mixing).
+struct LcpOptions {
+    int max_sweeps = 4;       ///< projected Gauss–Seidel sweeps (from the given z) before block pivoting finishes the solve
+    int max_pivots = 30;      ///< block-pivoting solves at most
+    double tolerance = 1e-10; ///< done when no row's w or complementarity is off by more than this
+    double accept = 1e-4;     ///< where pivoting did not finish, further sweeps (at most 100) until no row is off by more than this
+};
+struct LcpResult {
+    int sweeps = 0;
+    int pivots = 0;         ///< block-pivoting solves (each a dense Cholesky of the active rows)
+    int single_pivots = 0;  ///< of them, after a single row's flip (Júdice & Pires' safeguard against cycling)
+    double violation = 0;   ///< the largest |w_i| where z_i > 0, or −w_i where w_i < 0, left
+};
+/// Projected Gauss–Seidel from z (the warm start), finished by block principal pivoting with Júdice & Pires (1994)'s
+/// safeguard: every wrong row flipped at once while their count falls, a single one (Murty's rule) after three
+/// solves without a fall. z is the best solution found (the smaller violation of the sweeps' and the pivoting's).
+/// @throws InputError sizes that do not match
+LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt = {});
 
 /// How far in front of blade s (±1) at opening θ the point x lies, the blade a solid whose sides and tip are rounded
 /// (ClipBody's geometry and edge radius): negative behind its face.
