@@ -14,13 +14,14 @@
 // at --checkpoints openings, each solved from the last.
 //
 // Usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] [--checkpoints 24,16,8,4,1.89]
-//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 30] [--accept 1e-4] [--max-frames N] [--out FILE.jsonl]
+//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--max-frames N] [--out FILE.jsonl]
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
 // or complementarity is off by more than this [mm] (accept_mm); --max-frames: stop each mode there (with no
 // --checkpoints: no reference), for timing.
 // One JSON line per frame and mode, one per checkpoint, a summary line last (stdout, or --out).
 #include <algorithm>
+#include <malloc.h>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -71,13 +72,18 @@ double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
 }  // namespace
 
 int main(int argc, char** argv) {
+    // As aneusim: the frames' large buffers (the gathered compliance, the Delassus matrix: megabytes to tens of
+    // megabytes, every pass) stay on the heap and are reused, not mapped afresh and page-faulted in at each use
+    // (without this, one frame in two took 100-250 ms more on the sample's pressed walls).
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    mallopt(M_TRIM_THRESHOLD, 1 << 30);
     if (argc < 3) {
         std::fprintf(stderr, "usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] "
                              "[--checkpoints 8,5,3,1.89] [--patch-radius 1.5] [--reach 0.05] [--out FILE.jsonl]\n");
         return 2;
     }
     double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4;
-    int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 30;
+    int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
     std::string out_path;
     for (int i = 3; i + 1 < argc; i += 2) {
@@ -271,7 +277,7 @@ int main(int argc, char** argv) {
                          {"contacts", {f.loads.contacts[0], f.loads.contacts[1]}}, {"rows", f.lambda.size()}, {"sweeps", f.sweeps},
                          {"pivots", f.pivots}, {"single_pivots", f.single_pivots}, {"passes", f.passes}, {"complementarity_mm", f.complementarity_mm}, {"walls", {f.wall_rows, f.wall_contacts}},
                          {"wall_force_n", f.wall_force_n}, {"wall_crossings", f.wall_crossings}, {"ms", frame_ms.back()},
-                         {"split_ms", {1e3 * f.rows_s, 1e3 * f.delassus_s, 1e3 * f.lcp_s, 1e3 * f.search_s}}, {"gathers", f.gathers}};
+                         {"split_ms", {1e3 * f.rows_s, 1e3 * f.delassus_s, 1e3 * f.lcp_s, 1e3 * f.search_s}}, {"gathers", f.gathers}, {"gathered_nodes", f.gathered_nodes}, {"refactors", f.refactors}};
             if (std::find(check_frames.begin(), check_frames.end(), fi) != check_frames.end())
                 at_check[R][fi] = {0.5 * (f.loads.force_n[0] + f.loads.force_n[1]), f.candidate_u};
             emit(line);

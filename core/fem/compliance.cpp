@@ -178,6 +178,100 @@ double blade_distance(const ClipBlades& b, int s, double theta, const Eigen::Vec
     return blade_distance_d(b, s, theta, x, nullptr, nullptr);
 }
 
+namespace {
+
+/// The Cholesky factor L Lᵀ = A_SS of the active rows S of an SPD matrix, kept as the pivoting flips rows in and out:
+/// a row taken in is appended (a forward substitution, O(|S|²)), a row let go is cut out and the factor below it
+/// mended by a rank-one update (O(|S|²)); many flips at once, or an append whose pivot has lost its digits (nearly
+/// redundant rows), factorise A_SS afresh (O(|S|³)).
+class ActiveFactor {
+public:
+    explicit ActiveFactor(const Eigen::MatrixXd& A) : A_(A), L_(A.rows(), A.rows()), pos_(static_cast<size_t>(A.rows()), -1) {}
+
+    /// Factorise A_SS afresh for the rows marked in `act`, in index order.
+    void refactor(const std::vector<char>& act) {
+        S_.clear();
+        std::fill(pos_.begin(), pos_.end(), -1);
+        for (Eigen::Index i = 0; i < A_.rows(); ++i)
+            if (act[static_cast<size_t>(i)]) {
+                pos_[static_cast<size_t>(i)] = static_cast<Eigen::Index>(S_.size());
+                S_.push_back(i);
+            }
+        const Eigen::Index ns = size();
+        Eigen::MatrixXd As(ns, ns);
+        for (Eigen::Index c = 0; c < ns; ++c)
+            for (Eigen::Index a = 0; a < ns; ++a) As(a, c) = A_(S_[static_cast<size_t>(a)], S_[static_cast<size_t>(c)]);
+        Eigen::LLT<Eigen::MatrixXd> llt(As);  // SPD: the compliance is, and every row has its mixing
+        L_.topLeftCorner(ns, ns) = llt.matrixL();
+        ++refactors;
+        updates = 0;
+    }
+    /// Take row i in. False where its pivot came out at or below 10⁻¹² of its diagonal: the caller factorises afresh.
+    bool append(Eigen::Index i) {
+        const Eigen::Index ns = size();
+        Eigen::VectorXd l(ns);
+        for (Eigen::Index a = 0; a < ns; ++a) l[a] = A_(S_[static_cast<size_t>(a)], i);
+        if (ns > 0) L_.topLeftCorner(ns, ns).triangularView<Eigen::Lower>().solveInPlace(l);
+        const double d2 = A_(i, i) - l.squaredNorm();
+        if (!(d2 > 1e-12 * A_(i, i))) return false;
+        L_.row(ns).head(ns) = l.transpose();
+        L_(ns, ns) = std::sqrt(d2);
+        pos_[static_cast<size_t>(i)] = ns;
+        S_.push_back(i);
+        ++updates;
+        return true;
+    }
+    /// Let row i go: its row and column cut out of L, the block below mended by the rank-one update that the cut
+    /// column carried.
+    void remove(Eigen::Index i) {
+        const Eigen::Index k = pos_[static_cast<size_t>(i)], ns = size(), r = ns - k - 1;
+        Eigen::VectorXd x = L_.col(k).segment(k + 1, r);
+        for (Eigen::Index c = 0; c < k; ++c)  // columns left of it: their rows below it move up
+            for (Eigen::Index a = k; a < ns - 1; ++a) L_(a, c) = L_(a + 1, c);
+        for (Eigen::Index c = k; c < ns - 1; ++c)  // the block below and right of it moves up and left
+            for (Eigen::Index a = c; a < ns - 1; ++a) L_(a, c) = L_(a + 1, c + 1);
+        // L₂₂' L₂₂'ᵀ = L₂₂ L₂₂ᵀ + x xᵀ (the update of LINPACK's dchud, column by column)
+        for (Eigen::Index j = 0; j < r; ++j) {
+            const Eigen::Index c = k + j;
+            const double ljj = L_(c, c), rr = std::hypot(ljj, x[j]), cs = rr / ljj, sn = x[j] / ljj;
+            L_(c, c) = rr;
+            const Eigen::Index rest = r - j - 1;
+            if (rest > 0) {
+                L_.col(c).segment(c + 1, rest) = (L_.col(c).segment(c + 1, rest) + sn * x.segment(j + 1, rest)) / cs;
+                x.segment(j + 1, rest) = cs * x.segment(j + 1, rest) - sn * L_.col(c).segment(c + 1, rest);
+            }
+        }
+        S_.erase(S_.begin() + k);
+        pos_[static_cast<size_t>(i)] = -1;
+        ++updates;
+        for (Eigen::Index a = k; a < size(); ++a) pos_[static_cast<size_t>(S_[static_cast<size_t>(a)])] = a;
+    }
+    /// z with z_S = −A_SS⁻¹ q_S and 0 elsewhere.
+    Eigen::VectorXd solve(const Eigen::VectorXd& q) const {
+        const Eigen::Index ns = size();
+        Eigen::VectorXd y(ns);
+        for (Eigen::Index a = 0; a < ns; ++a) y[a] = -q[S_[static_cast<size_t>(a)]];
+        const auto L = L_.topLeftCorner(ns, ns).triangularView<Eigen::Lower>();
+        L.solveInPlace(y);
+        L.transpose().solveInPlace(y);
+        Eigen::VectorXd z = Eigen::VectorXd::Zero(q.size());
+        for (Eigen::Index a = 0; a < ns; ++a) z[S_[static_cast<size_t>(a)]] = y[a];
+        return z;
+    }
+    Eigen::Index size() const { return static_cast<Eigen::Index>(S_.size()); }
+    const std::vector<Eigen::Index>& rows() const { return S_; }
+    int refactors = 0;
+    int updates = 0;  ///< rows appended or removed since the last factorisation from scratch (round-off accumulates)
+
+private:
+    const Eigen::MatrixXd& A_;
+    Eigen::MatrixXd L_;                 // lower, its leading |S| x |S| in use
+    std::vector<Eigen::Index> S_;       // the active rows in the factor's order
+    std::vector<Eigen::Index> pos_;     // per row: its place in S_, -1 out
+};
+
+}  // namespace
+
 LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
     const Eigen::Index mz = q.size();
     if (A.rows() != mz || A.cols() != mz || z.size() != mz)
@@ -222,23 +316,12 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
         for (Eigen::Index i = 0; i < mz; ++i) act[static_cast<size_t>(i)] = z[i] > 0 || w[i] < 0;
         size_t best_count = std::numeric_limits<size_t>::max();
         int tries = 3;
+        ActiveFactor F(A);
+        F.refactor(act);
         for (int it = 0; it < opt.max_pivots; ++it) {
-            std::vector<Eigen::Index> S;
-            for (Eigen::Index i = 0; i < mz; ++i)
-                if (act[static_cast<size_t>(i)]) S.push_back(i);
-            Eigen::VectorXd zt = Eigen::VectorXd::Zero(mz);
-            if (!S.empty()) {
-                const Eigen::Index ns = static_cast<Eigen::Index>(S.size());
-                Eigen::MatrixXd As(ns, ns);
-                Eigen::VectorXd qs(ns);
-                for (Eigen::Index c = 0; c < ns; ++c) {
-                    qs[c] = -q[S[static_cast<size_t>(c)]];
-                    for (Eigen::Index a2 = 0; a2 < ns; ++a2) As(a2, c) = A(S[static_cast<size_t>(a2)], S[static_cast<size_t>(c)]);
-                }
-                const Eigen::VectorXd zs = As.llt().solve(qs);  // SPD: the compliance is, and every row has its mixing
-                for (Eigen::Index a2 = 0; a2 < ns; ++a2) zt[S[static_cast<size_t>(a2)]] = zs[a2];
-            }
-            const Eigen::VectorXd wt = q + A * zt;
+            const Eigen::VectorXd zt = F.solve(q);
+            Eigen::VectorXd wt = q;  // q + A zt, through the active columns only
+            for (Eigen::Index i : F.rows()) wt.noalias() += zt[i] * A.col(i);
             std::vector<Eigen::Index> wrong;
             for (Eigen::Index i = 0; i < mz; ++i) {
                 const bool in = act[static_cast<size_t>(i)];
@@ -266,7 +349,21 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
                 ++out.single_pivots;
             }
             for (Eigen::Index i : wrong) act[static_cast<size_t>(i)] ^= 1;
+            // The factor follows: row by row where few flip (each O(|S|²)), afresh where many do (O(|S|³)) or an
+            // appended row's pivot lost its digits.
+            bool fresh = 8 * wrong.size() > static_cast<size_t>(F.size()) + 8 || F.updates > 64;
+            if (!fresh) {
+                for (Eigen::Index i : wrong)
+                    if (!act[static_cast<size_t>(i)]) F.remove(i);
+                for (Eigen::Index i : wrong)
+                    if (act[static_cast<size_t>(i)] && !F.append(i)) {
+                        fresh = true;
+                        break;
+                    }
+            }
+            if (fresh) F.refactor(act);
         }
+        out.refactors = F.refactors;
     }
     // Pivoting that cycled or stalled (redundant rows: a vertex pressed on two faces of an edge): more sweeps from
     // the best so far, until the gaps are off by no more than opt.accept.
@@ -389,30 +486,23 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         // Through the compliance of the candidates in the rows only, gathered into one contiguous block: per row its
         // column of W Jᵀ on them, then the rows' gradients on it. The block the last pass or frame gathered on this
         // linearisation serves while it holds every candidate of the rows and not many more (the products below run
-        // over all of its rows); else the rows' candidates are gathered afresh.
+        // over its rows); else the rows' candidates are gathered afresh, in the rows' order. (Gathering the union
+        // with the last block instead, by copying it and adding the new candidates, was tried on the sample: the
+        // blocks grew by a quarter, past glibc's 32 MB mapping threshold, and frames got slower.)
         std::vector<char> in_rows(static_cast<size_t>(nc), 0);
-        size_t need = 0;
+        std::vector<int> need;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)
-                if (!in_rows[static_cast<size_t>(r.k[static_cast<size_t>(a)])]++) ++need;
-        if (warm && warm->gathered && warm->gathered->serial == lin.serial() && 4 * warm->gathered->nodes.size() <= 5 * need) {
+                if (const int c = r.k[static_cast<size_t>(a)]; !in_rows[static_cast<size_t>(c)]++) need.push_back(c);
+        if (opt.reuse_gathered && warm && warm->gathered && warm->gathered->serial == lin.serial() && 4 * warm->gathered->nodes.size() <= 5 * need.size() &&
+            std::all_of(need.begin(), need.end(), [&](int c) { return warm->gathered->slot[static_cast<size_t>(c)] >= 0; }))
             gathered = warm->gathered;
-            for (Eigen::Index c = 0; c < nc; ++c)
-                if (in_rows[static_cast<size_t>(c)] && gathered->slot[static_cast<size_t>(c)] < 0) {
-                    gathered.reset();
-                    break;
-                }
-        }
         if (!gathered) {
             auto g = std::make_shared<GatheredCompliance>();
             g->serial = lin.serial();
             g->slot.assign(static_cast<size_t>(nc), -1);
-            for (const Row& r : rows)
-                for (int a = 0; a < r.n; ++a)
-                    if (const int c = r.k[static_cast<size_t>(a)]; g->slot[static_cast<size_t>(c)] < 0) {
-                        g->slot[static_cast<size_t>(c)] = static_cast<int>(g->nodes.size());
-                        g->nodes.push_back(c);
-                    }
+            g->nodes = need;
+            for (size_t a = 0; a < need.size(); ++a) g->slot[static_cast<size_t>(need[a])] = static_cast<int>(a);
             const Eigen::Index p = static_cast<Eigen::Index>(g->nodes.size());
             g->Wa.resize(3 * p, 3 * p);
             for (Eigen::Index b = 0; b < p; ++b)
@@ -424,11 +514,15 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         const std::vector<int>& slot = gathered->slot;
         const Eigen::MatrixXd& Wa = gathered->Wa;
         Eigen::VectorXd y(Wa.rows());
+        // Row i meets rows 0 … i only (A is symmetric): y is needed on their candidates' blocks, which lie below the
+        // largest block of those rows (a block gathered for these rows comes in their order: about half of y).
+        Eigen::Index reach = 0;
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
-            y.noalias() = Wa.middleCols<3>(3 * slot[static_cast<size_t>(ri.k[0])]) * ri.g[0];
+            for (int a = 0; a < ri.n; ++a) reach = std::max<Eigen::Index>(reach, 3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])] + 3);
+            y.head(reach).noalias() = Wa.block(0, 3 * slot[static_cast<size_t>(ri.k[0])], reach, 3) * ri.g[0];
             for (int a = 1; a < ri.n; ++a)
-                y.noalias() += Wa.middleCols<3>(3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])]) * ri.g[static_cast<size_t>(a)];
+                y.head(reach).noalias() += Wa.block(0, 3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])], reach, 3) * ri.g[static_cast<size_t>(a)];
             for (Eigen::Index j = 0; j <= i; ++j) {
                 const Row& rj = rows[static_cast<size_t>(j)];
                 double a = 0;
@@ -472,6 +566,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     out.sweeps = lr.sweeps;
     out.pivots = lr.pivots;
     out.single_pivots = lr.single_pivots;
+    out.refactors = lr.refactors;
     out.complementarity_mm = lr.violation;
 
     const double t_lcp = sw.seconds();
@@ -519,6 +614,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     }
     out.wall_rows = wall_rows;
     out.wall_min_distance_mm = wall_min;
+    out.gathered_nodes = static_cast<int>(gathered->nodes.size());
     out.gathered = std::move(gathered);
     out.gathers = gathers;
     out.seconds = sw.seconds();

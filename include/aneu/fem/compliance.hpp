@@ -77,7 +77,8 @@ struct CompliantOptions {
     double reach_mm = 0.05;      ///< candidates nearer a blade than this (where the last frame left them) are constraints:
                                  ///< more than a frame's blade travel (0.384° a frame at 250 Hz moves a 13 mm blade's tip 0.044 mm)
     int max_sweeps = 4;          ///< projected Gauss–Seidel sweeps before block pivoting finishes the solve
-    int max_pivots = 30;         ///< block-pivoting solves at most (each a dense Cholesky of the active rows)
+    int max_pivots = 200;        ///< block-pivoting solves at most (each a dense Cholesky of the active rows; the sample's
+                                 ///< pressed walls took up to 39, session 32)
     /// Where pivoting fails (redundant rows), further sweeps (at most 100) stop at this: a gap or complementarity off
     /// by 0.1 µm
     double accept_mm = 1e-4;
@@ -94,6 +95,9 @@ struct CompliantOptions {
     /// Passes per frame: each re-linearises the gaps where the last ended (a normal turns as its face moves), on the
     /// same compliance; they stop when the candidates move less than 1000 × tolerance_mm between two.
     int geometry_passes = 3;
+    /// Reuse the compliance the last pass or frame gathered on this linearisation while it covers the rows (the same
+    /// figures: tests compare with it off)
+    bool reuse_gathered = true;
 };
 
 /// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
@@ -137,6 +141,8 @@ struct CompliantFrame {
     /// pass or frame reuses while its rows touch no other candidate
     std::shared_ptr<const GatheredCompliance> gathered;
     int gathers = 0;                   ///< gatherings of it in this frame (0: every pass reused the last frame's)
+    int gathered_nodes = 0;            ///< the candidates in it
+    int refactors = 0;                 ///< LcpResult::refactors of the last pass
 };
 
 /// The clip's blades (at their pose; `theta_held` the forceps' opening, or none: released, θ free on its spring
@@ -174,7 +180,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
 /// definite (the Delassus matrix with its constraint force mixing).
 struct LcpOptions {
     int max_sweeps = 4;       ///< projected Gauss–Seidel sweeps (from the given z) before block pivoting finishes the solve
-    int max_pivots = 30;      ///< block-pivoting solves at most
+    int max_pivots = 200;     ///< block-pivoting solves at most
     double tolerance = 1e-10; ///< done when no row's w or complementarity is off by more than this
     double accept = 1e-4;     ///< where pivoting did not finish, further sweeps (at most 100) until no row is off by more than this
 };
@@ -182,6 +188,7 @@ struct LcpResult {
     int sweeps = 0;
     int pivots = 0;         ///< block-pivoting solves (each a dense Cholesky of the active rows)
     int single_pivots = 0;  ///< of them, after a single row's flip (Júdice & Pires' safeguard against cycling)
+    int refactors = 0;      ///< Cholesky factorisations of the active rows from scratch (the others updated it row by row)
     double violation = 0;   ///< the largest |w_i| where z_i > 0, or −w_i where w_i < 0, left
 };
 /// Projected Gauss–Seidel from z (the warm start), finished by block principal pivoting with Júdice & Pires (1994)'s
