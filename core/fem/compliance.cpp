@@ -31,7 +31,7 @@ struct Linearisation::Impl {
     std::vector<int> cand;
     std::vector<int> free_index;  // per body DOF: its index among the free ones, −1 fixed
     Eigen::Index nfree = 0;
-    Eigen::MatrixXd W;
+    std::vector<double> Wb;  // W in 3 x 3 blocks: block (a, b) at 9 (b |C| + a), column-major
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
     std::uint64_t serial = 0;
 };
@@ -102,9 +102,11 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
             m->free_x(static_cast<Eigen::Index>(k), ax) = X(c, ax) + m->free_u[static_cast<Eigen::Index>(3 * k) + ax];
         }
     }
-    // W, in blocks of columns (a dense right-hand side of all free DOFs per column; only the candidates' rows kept).
-    const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size());
-    m->W = Eigen::MatrixXd::Zero(nc, nc);
+    // W, in blocks of columns (a dense right-hand side of all free DOFs per column; only the candidates' rows kept),
+    // stored in 3 x 3 node blocks, a column of blocks contiguous: a frame gathers the blocks of the candidates its
+    // rows touch, 72 bytes each, in rising order.
+    const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size()), ncand = static_cast<Eigen::Index>(candidates.size());
+    m->Wb.assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
     constexpr Eigen::Index BLOCK = 96;
     for (Eigen::Index j0 = 0; j0 < nc && mf > 0; j0 += BLOCK) {
         const Eigen::Index nb = std::min(BLOCK, nc - j0);
@@ -114,9 +116,12 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
             if (a >= 0) B(a, j) = 1.0;
         }
         const Eigen::MatrixXd S = m->llt.solve(B);
-        for (Eigen::Index i = 0; i < nc; ++i) {
-            const int a = m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(i / 3)] + i % 3)];
-            if (a >= 0) m->W.block(i, j0, 1, nb) = S.row(a);
+        for (Eigen::Index j = 0; j < nb; ++j) {
+            const Eigen::Index cb = (j0 + j) / 3, col = (j0 + j) % 3;
+            for (Eigen::Index i = 0; i < nc; ++i) {
+                const int a = m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(i / 3)] + i % 3)];
+                if (a >= 0) m->Wb[static_cast<size_t>(9 * (cb * ncand + i / 3) + 3 * col + i % 3)] = S(a, j);
+            }
         }
     }
     compliance_s = sw.lap();
@@ -128,7 +133,13 @@ const Eigen::VectorXd& Linearisation::u0() const { return m->u0; }
 const Eigen::MatrixX3d& Linearisation::free_positions() const { return m->free_x; }
 const Eigen::VectorXd& Linearisation::free_candidate_u() const { return m->free_u; }
 const std::vector<int>& Linearisation::candidates() const { return m->cand; }
-const Eigen::MatrixXd& Linearisation::compliance() const { return m->W; }
+Eigen::Matrix3d Linearisation::compliance(int a, int b) const {
+    const int n = static_cast<int>(m->cand.size());
+    if (a < 0 || a >= n || b < 0 || b >= n)
+        throw InputError("linearisation: compliance block (" + std::to_string(a) + ", " + std::to_string(b) + ") of " + std::to_string(n) + " candidates");
+    return Eigen::Map<const Eigen::Matrix3d>(m->Wb.data() + 9 * (static_cast<size_t>(b) * static_cast<size_t>(n) + static_cast<size_t>(a)));
+}
+const double* Linearisation::compliance_blocks() const { return m->Wb.data(); }
 std::uint64_t Linearisation::serial() const { return m->serial; }
 
 Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
@@ -387,8 +398,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
     const double theta_ref = theta_held ? *theta_held : std::max(theta_start, 0.0);
     const Eigen::MatrixX3d& Xf = lin.free_positions();
-    const Eigen::MatrixXd& W = lin.compliance();
     const Eigen::Index nc = Xf.rows();
+    const double* Wb = lin.compliance_blocks();
+    auto Wblock = [&](int a, int b) {
+        return Eigen::Map<const Eigen::Matrix3d>(Wb + 9 * (static_cast<size_t>(b) * static_cast<size_t>(nc) + static_cast<size_t>(a)));
+    };
 
     // The constraints: every candidate within reach of a blade (and not behind it: tissue beside or behind a blade
     // stays there), and every wall pair within reach, linearised where the candidates are: gap d, gradient g on the
@@ -486,7 +500,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         // Through the compliance of the candidates in the rows only, gathered into one contiguous block: per row its
         // column of W Jᵀ on them, then the rows' gradients on it. The block the last pass or frame gathered on this
         // linearisation serves while it holds every candidate of the rows and not many more (the products below run
-        // over its rows); else the rows' candidates are gathered afresh, in the rows' order. (Gathering the union
+        // over its rows); else the rows' candidates are gathered afresh. (Gathering the union
         // with the last block instead, by copying it and adding the new candidates, was tried on the sample: the
         // blocks grew by a quarter, past glibc's 32 MB mapping threshold, and frames got slower.)
         std::vector<char> in_rows(static_cast<size_t>(nc), 0);
@@ -501,13 +515,15 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             auto g = std::make_shared<GatheredCompliance>();
             g->serial = lin.serial();
             g->slot.assign(static_cast<size_t>(nc), -1);
+            // In the rows' order (the products above then run over about half of the block; sorted by candidate,
+            // which reads W's blocks in rising order, the sample's frames were slower).
             g->nodes = need;
-            for (size_t a = 0; a < need.size(); ++a) g->slot[static_cast<size_t>(need[a])] = static_cast<int>(a);
+            for (size_t a = 0; a < g->nodes.size(); ++a) g->slot[static_cast<size_t>(g->nodes[a])] = static_cast<int>(a);
             const Eigen::Index p = static_cast<Eigen::Index>(g->nodes.size());
             g->Wa.resize(3 * p, 3 * p);
             for (Eigen::Index b = 0; b < p; ++b)
                 for (Eigen::Index a = 0; a < p; ++a)
-                    g->Wa.block<3, 3>(3 * a, 3 * b) = W.block<3, 3>(3 * g->nodes[static_cast<size_t>(a)], 3 * g->nodes[static_cast<size_t>(b)]);
+                    g->Wa.block<3, 3>(3 * a, 3 * b) = Wblock(g->nodes[static_cast<size_t>(a)], g->nodes[static_cast<size_t>(b)]);
             gathered = std::move(g);
             ++gathers;
         }
@@ -591,7 +607,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 const int c = r.k[static_cast<size_t>(a)];
                 if (done[static_cast<size_t>(c)]++) continue;
                 const Eigen::Vector3d fk = out.candidate_forces.segment<3>(3 * c);
-                if (fk.squaredNorm() > 0) out.candidate_u.noalias() += W.middleCols<3>(3 * c) * fk;
+                if (fk.squaredNorm() > 0)
+                    for (Eigen::Index a = 0; a < nc; ++a) out.candidate_u.segment<3>(3 * a).noalias() += Wblock(static_cast<int>(a), c) * fk;
             }
     }
     out.loads.opening_rad = out.theta;

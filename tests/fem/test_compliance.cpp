@@ -59,8 +59,9 @@ TEST(CompliantClip, HeldOpenOnABlockOneFrameGivesItsHardContactForce) {
     const fem::ClipBlades blades;
     const fem::Linearisation lin(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 3});
     // The compliance of a node on its ground spring: 1/K along each axis, nothing between the two nodes.
-    EXPECT_NEAR(lin.compliance()(0, 0), 1.0 / Block::K, 1e-12);
-    EXPECT_NEAR(lin.compliance()(1, 4), 0.0, 1e-12);
+    EXPECT_NEAR(lin.compliance(0, 0)(0, 0), 1.0 / Block::K, 1e-12);
+    EXPECT_NEAR(lin.compliance(0, 1)(1, 1), 0.0, 1e-12);
+    EXPECT_THROW(lin.compliance(2, 0), InputError);
     const double touch = 2 * std::atan(Block::H / Block::A);
     for (const double held : {touch + 0.01, touch - 0.01, touch - 0.03}) {  // clear; pressing 0.02 and 0.06 mm
         const fem::CompliantFrame f = fem::solve_compliant_clip(lin, blades, spring, held, touch + 0.01);

@@ -57,8 +57,10 @@ public:
     /// The candidates' displacement at the free state, u0 + Δu_free (3|C|).
     const Eigen::VectorXd& free_candidate_u() const;
     const std::vector<int>& candidates() const;
-    /// W: the displacement of candidate DOF i per unit force on candidate DOF j (3 per candidate, in order).
-    const Eigen::MatrixXd& compliance() const;
+    /// W's block of candidates a and b: the displacement of candidate a per unit force on candidate b [mm/N].
+    Eigen::Matrix3d compliance(int a, int b) const;
+    /// All of W, in 3 x 3 blocks: block (a, b) is the 9 values from 9 (b |C| + a), column-major.
+    const double* compliance_blocks() const;
     /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
     /// back substitution.
     Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
