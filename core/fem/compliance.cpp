@@ -8,6 +8,8 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -661,6 +663,15 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         g.lcp_s += f.lcp_s;
         g.gathers += f.gathers;
         const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
+        if (std::getenv("ANEU_PASS_TRACE")) {  // how the passes settle (or do not): compliance.md, session 32
+            Eigen::Index worst = 0;
+            (g.candidate_u - f.candidate_u).cwiseAbs().maxCoeff(&worst);
+            const Eigen::Vector3d dw = (g.candidate_u - f.candidate_u).segment<3>(3 * (worst / 3));
+            Eigen::Vector3d t, n, w;
+            blades.frame(1, g.theta, t, n, w);
+            std::fprintf(stderr, "pass %d: moved %.3e mm (candidate %ld: %.3e along the blades, %.3e across their width, %.3e along blade +1's normal), rows %zu, grip %.5f N\n",
+                         passes + 1, moved, static_cast<long>(worst / 3), dw.dot(t), dw.dot(w), dw.dot(n), g.lambda.size(), 0.5 * (g.loads.force_n[0] + g.loads.force_n[1]));
+        }
         f = std::move(g);
         if (moved <= 1e3 * opt.tolerance_mm) {
             ++passes;
