@@ -106,7 +106,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     }
     // W, in blocks of columns (a dense right-hand side of all free DOFs per column; only the candidates' rows kept),
     // stored in 3 x 3 node blocks, a column of blocks contiguous: a frame gathers the blocks of the candidates its
-    // rows touch, 72 bytes each, in rising order.
+    // rows touch, 72 contiguous bytes each.
     const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size()), ncand = static_cast<Eigen::Index>(candidates.size());
     m->Wb.assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
     constexpr Eigen::Index BLOCK = 96;
@@ -296,7 +296,7 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
     auto violation = [&] {
         double v = 0;
         for (Eigen::Index i = 0; i < mz; ++i) {
-            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // the stop's row: θ [rad]
+            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // in the rows' units (the clip's stop: rad)
         }
         return v;
     };
@@ -517,7 +517,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             auto g = std::make_shared<GatheredCompliance>();
             g->serial = lin.serial();
             g->slot.assign(static_cast<size_t>(nc), -1);
-            // In the rows' order (the products above then run over about half of the block; sorted by candidate,
+            // In the rows' order (the products below then run over about half of the block; sorted by candidate,
             // which reads W's blocks in rising order, the sample's frames were slower).
             g->nodes = need;
             for (size_t a = 0; a < g->nodes.size(); ++a) g->slot[static_cast<size_t>(g->nodes[a])] = static_cast<int>(a);
