@@ -285,25 +285,34 @@ private:
 
 }  // namespace
 
-LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
+LcpResult solve_box_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
+                        const LcpOptions& opt) {
     const Eigen::Index mz = q.size();
-    if (A.rows() != mz || A.cols() != mz || z.size() != mz)
-        throw InputError("lcp: a " + std::to_string(A.rows()) + " x " + std::to_string(A.cols()) + " matrix, " + std::to_string(q.size()) + " constants and " +
-                         std::to_string(z.size()) + " unknowns do not match");
+    if (A.rows() != mz || A.cols() != mz || z.size() != mz || lo.size() != mz || hi.size() != mz)
+        throw InputError("lcp: a " + std::to_string(A.rows()) + " x " + std::to_string(A.cols()) + " matrix, " + std::to_string(q.size()) + " constants, " +
+                         std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " bounds and " + std::to_string(z.size()) + " unknowns do not match");
+    for (Eigen::Index i = 0; i < mz; ++i)
+        if (!(lo[i] <= hi[i]) || lo[i] == std::numeric_limits<double>::infinity() || hi[i] == -std::numeric_limits<double>::infinity())
+            throw InputError("lcp: row " + std::to_string(i) + " has bounds [" + std::to_string(lo[i]) + ", " + std::to_string(hi[i]) + "]: expected lo <= hi, lo < inf, hi > -inf");
+    z = z.cwiseMax(lo).cwiseMin(hi);
     // Projected Gauss–Seidel from z, keeping w = q + A z up to date.
     Eigen::VectorXd w = q + A * z;
     LcpResult out;
+    // How far a row is off, in the rows' units (the clip's stop: rad): at its lower bound w must be ≥ 0, at its upper
+    // bound ≤ 0, between them 0; a row whose bounds meet is held there, whatever its w.
+    auto off = [&](Eigen::Index i, double zi, double wi) {
+        if (zi <= lo[i] && zi >= hi[i]) return 0.0;
+        return zi <= lo[i] ? std::max(0.0, -wi) : zi >= hi[i] ? std::max(0.0, wi) : std::abs(wi);
+    };
     auto violation = [&] {
         double v = 0;
-        for (Eigen::Index i = 0; i < mz; ++i) {
-            v = std::max(v, z[i] > 0 ? std::abs(w[i]) : std::max(0.0, -w[i]));  // in the rows' units (the clip's stop: rad)
-        }
+        for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, off(i, z[i], w[i]));
         return v;
     };
     auto sweep_once = [&] {  // one projected Gauss–Seidel sweep
         for (Eigen::Index i = 0; i < mz; ++i) {
             if (!(A(i, i) > 0)) continue;
-            const double zi = std::max(0.0, z[i] - w[i] / A(i, i)), dz = zi - z[i];
+            const double zi = std::clamp(z[i] - w[i] / A(i, i), lo[i], hi[i]), dz = zi - z[i];
             if (dz != 0) {
                 w.noalias() += dz * A.col(i);
                 z[i] = zi;
@@ -319,32 +328,53 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
     }
     out.sweeps = sweep;
     // The sweeps converge slowly where θ couples every row (a released clip); finish by block principal pivoting
-    // from the sweeps' active set: solve the active rows exactly, move every row whose force came out negative or
-    // whose gap is negative across, repeat. Flipping every such row at once can cycle (the sample's pressed walls:
-    // nearly redundant rows); Júdice & Pires (1994)'s safeguard: when the count of such rows has not fallen for 3
-    // solves, flip only the last of them (Murty's rule, finite for the P-matrix that A is with its mixing) until it
-    // falls below the best count again. Kept only where it does better than the sweeps.
+    // from the sweeps' active set: solve the free rows exactly (the others held at their bounds), move every free row
+    // that came out beyond a bound to it and every bounded row whose w points into its range free, repeat. Flipping
+    // every such row at once can cycle (the sample's pressed walls: nearly redundant rows); Júdice & Pires (1994)'s
+    // safeguard: when the count of such rows has not fallen for 3 solves, flip only the last of them (Murty's rule,
+    // finite for the P-matrix that A is with its mixing) until it falls below the best count again. Kept only where
+    // it does better than the sweeps.
     if (viol > opt.tolerance && mz > 0) {
-        std::vector<char> act(static_cast<size_t>(mz));
-        for (Eigen::Index i = 0; i < mz; ++i) act[static_cast<size_t>(i)] = z[i] > 0 || w[i] < 0;
+        enum : char { LOW = 0, FREE = 1, HIGH = 2 };
+        std::vector<char> state(static_cast<size_t>(mz)), act(static_cast<size_t>(mz));
+        for (Eigen::Index i = 0; i < mz; ++i) {
+            const bool at_lo = z[i] <= lo[i], at_hi = z[i] >= hi[i];
+            state[static_cast<size_t>(i)] = lo[i] == hi[i] ? LOW  // held at its bounds: never free
+                                            : (!at_lo && !at_hi) || (at_lo && w[i] < 0) || (at_hi && w[i] > 0) ? FREE
+                                            : at_lo ? LOW : HIGH;
+            act[static_cast<size_t>(i)] = state[static_cast<size_t>(i)] == FREE;
+        }
         size_t best_count = std::numeric_limits<size_t>::max();
         int tries = 3;
         ActiveFactor F(A);
         F.refactor(act);
         for (int it = 0; it < opt.max_pivots; ++it) {
-            const Eigen::VectorXd zt = F.solve(q);
-            Eigen::VectorXd wt = q;  // q + A zt, through the active columns only
-            for (Eigen::Index i : F.rows()) wt.noalias() += zt[i] * A.col(i);
+            // The rows at a bound (other than 0) move the free rows' right-hand side.
+            Eigen::VectorXd qb = q, zt = Eigen::VectorXd::Zero(mz);
+            for (Eigen::Index i = 0; i < mz; ++i)
+                if (const char st = state[static_cast<size_t>(i)]; st != FREE) {
+                    zt[i] = st == LOW ? lo[i] : hi[i];
+                    if (zt[i] != 0) qb.noalias() += zt[i] * A.col(i);
+                }
+            const Eigen::VectorXd zf = F.solve(qb);
+            Eigen::VectorXd wt = qb;  // q + A zt, through the free columns
+            for (Eigen::Index i : F.rows()) {
+                zt[i] = zf[i];
+                wt.noalias() += zt[i] * A.col(i);
+            }
             std::vector<Eigen::Index> wrong;
             for (Eigen::Index i = 0; i < mz; ++i) {
-                const bool in = act[static_cast<size_t>(i)];
-                if ((in && zt[i] < -opt.tolerance * 1e-3) || (!in && wt[i] < -opt.tolerance)) wrong.push_back(i);
+                const char st = state[static_cast<size_t>(i)];
+                if (lo[i] == hi[i]) continue;
+                if ((st == FREE && (zt[i] < lo[i] - opt.tolerance * 1e-3 || zt[i] > hi[i] + opt.tolerance * 1e-3)) || (st == LOW && wt[i] < -opt.tolerance) ||
+                    (st == HIGH && wt[i] > opt.tolerance))
+                    wrong.push_back(i);
             }
             out.pivots = it + 1;
             if (wrong.empty()) {
-                const Eigen::VectorXd zc = zt.cwiseMax(0.0), wc = q + A * zc;
+                const Eigen::VectorXd zc = zt.cwiseMax(lo).cwiseMin(hi), wc = q + A * zc;
                 double v = 0;
-                for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, zc[i] > 0 ? std::abs(wc[i]) : std::max(0.0, -wc[i]));
+                for (Eigen::Index i = 0; i < mz; ++i) v = std::max(v, off(i, zc[i], wc[i]));
                 if (v < viol) {
                     z = zc;
                     w = wc;
@@ -361,7 +391,11 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
                 wrong = {wrong.back()};
                 ++out.single_pivots;
             }
-            for (Eigen::Index i : wrong) act[static_cast<size_t>(i)] ^= 1;
+            for (Eigen::Index i : wrong) {
+                char& st = state[static_cast<size_t>(i)];
+                st = st != FREE ? FREE : zt[i] < lo[i] ? LOW : HIGH;
+                act[static_cast<size_t>(i)] = st == FREE;
+            }
             // The factor follows: row by row where few flip (each O(|S|²)), afresh where many do (O(|S|³)) or an
             // appended row's pivot lost its digits.
             bool fresh = 8 * wrong.size() > static_cast<size_t>(F.size()) + 8 || F.updates > 64;
@@ -386,6 +420,10 @@ LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::V
     }
     out.violation = viol;
     return out;
+}
+
+LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
+    return solve_box_lcp(A, q, Eigen::VectorXd::Zero(q.size()), Eigen::VectorXd::Constant(q.size(), std::numeric_limits<double>::infinity()), z, opt);
 }
 
 namespace {

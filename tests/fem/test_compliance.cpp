@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
@@ -405,4 +406,106 @@ TEST(Lcp, LargerProblemsSolvedWithTheActiveFactorUpdatedRowByRow) {
     }
     std::printf("larger LCPs: %d pivoting solves, %d factorisations from scratch\n", pivots, refactors);
     EXPECT_LT(2 * refactors, pivots);
+}
+
+namespace {
+
+/// The box-constrained LCP's solution by enumeration: each row at its lower bound, free, or at its upper bound; the
+/// one assignment whose solve keeps the free rows within their bounds and the bounded rows' w of the right sign.
+Eigen::VectorXd box_lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {
+    const int n = static_cast<int>(q.size());
+    int states = 1;
+    for (int i = 0; i < n; ++i) states *= 3;
+    for (int code = 0; code < states; ++code) {
+        std::vector<int> st(static_cast<size_t>(n));
+        bool usable = true;
+        for (int i = 0, c = code; i < n; ++i, c /= 3) {
+            st[static_cast<size_t>(i)] = c % 3;  // 0 at lo, 1 free, 2 at hi
+            if ((c % 3 == 0 && !std::isfinite(lo[i])) || (c % 3 == 2 && !std::isfinite(hi[i]))) usable = false;
+        }
+        if (!usable) continue;
+        Eigen::VectorXd z = Eigen::VectorXd::Zero(n), rhs = -q;
+        std::vector<int> F;
+        for (int i = 0; i < n; ++i) {
+            if (st[static_cast<size_t>(i)] == 1) {
+                F.push_back(i);
+                continue;
+            }
+            z[i] = st[static_cast<size_t>(i)] == 0 ? lo[i] : hi[i];
+            rhs -= z[i] * A.col(i);
+        }
+        if (!F.empty()) {
+            Eigen::MatrixXd Af(F.size(), F.size());
+            Eigen::VectorXd bf(F.size());
+            for (size_t a = 0; a < F.size(); ++a) {
+                bf[static_cast<Eigen::Index>(a)] = rhs[F[a]];
+                for (size_t c = 0; c < F.size(); ++c) Af(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(c)) = A(F[a], F[c]);
+            }
+            const Eigen::VectorXd zf = Af.llt().solve(bf);
+            for (size_t a = 0; a < F.size(); ++a) z[F[a]] = zf[static_cast<Eigen::Index>(a)];
+        }
+        const Eigen::VectorXd w = q + A * z;
+        bool ok = true;
+        for (int i = 0; i < n && ok; ++i) {
+            const int s = st[static_cast<size_t>(i)];
+            if (s == 1) ok = z[i] >= lo[i] - 1e-12 && z[i] <= hi[i] + 1e-12;
+            else ok = s == 0 ? w[i] >= -1e-12 : w[i] <= 1e-12;
+        }
+        if (ok) return z;
+    }
+    return Eigen::VectorXd();
+}
+
+}  // namespace
+
+// Box-constrained problems (friction-like rows bounded on both sides, normal-like rows bounded below only, some
+// rows fixed, lo = hi) against enumeration of the 3^n assignments, from zero and from a perturbed warm start; the
+// plain LCP is the box [0, ∞) and gives the same forces through either function.
+TEST(Lcp, BoxBoundedProblemsMatchEnumeration) {
+    std::srand(23);
+    auto rnd = [] { return 2.0 * std::rand() / RAND_MAX - 1.0; };
+    const double inf = std::numeric_limits<double>::infinity();
+    int with_upper = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        const int n = 3 + trial % 5, k = n + 2;
+        Eigen::MatrixXd J(n, k);
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < k; ++j) J(i, j) = rnd();
+        Eigen::MatrixXd A = J * J.transpose();
+        A.diagonal().array() += 1e-3 * A.diagonal().maxCoeff();
+        Eigen::VectorXd q(n), lo(n), hi(n);
+        for (int i = 0; i < n; ++i) {
+            q[i] = rnd();
+            switch ((trial + i) % 4) {
+                case 0: lo[i] = 0; hi[i] = inf; break;                                     // a normal row
+                case 1: hi[i] = 0.3 * std::abs(rnd()); lo[i] = -hi[i]; break;              // a friction row
+                case 2: lo[i] = -inf; hi[i] = inf; break;                                  // free
+                default: lo[i] = 0.1 * rnd(); hi[i] = lo[i] + 0.2 * std::abs(rnd()); break; // a box
+            }
+        }
+        if (trial % 7 == 0) hi[0] = lo[0] = 0.05;  // a fixed row
+        const Eigen::VectorXd ref = box_lcp_by_enumeration(A, q, lo, hi);
+        ASSERT_EQ(ref.size(), n) << trial;
+        for (int warm = 0; warm < 2; ++warm) {
+            Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
+            if (warm) {
+                for (int i = 0; i < n; ++i) z[i] = ref[i] + 0.3 * rnd();
+            }
+            fem::LcpOptions o;
+            o.accept = 1e-300;
+            const fem::LcpResult r = fem::solve_box_lcp(A, q, lo, hi, z, o);
+            EXPECT_LE(r.violation, 1e-9) << trial;
+            EXPECT_LE((z - ref).norm(), 1e-8 * (1 + ref.norm())) << trial;
+            EXPECT_TRUE(((z - lo).array() >= 0).all() && ((hi - z).array() >= 0).all()) << trial;
+            for (int i = 0; i < n; ++i) with_upper += std::isfinite(hi[i]) && z[i] >= hi[i] ? 1 : 0;
+        }
+        // The plain problem both ways.
+        Eigen::VectorXd z1 = Eigen::VectorXd::Zero(n), z2 = Eigen::VectorXd::Zero(n);
+        fem::solve_lcp(A, q, z1);
+        fem::solve_box_lcp(A, q, Eigen::VectorXd::Zero(n), Eigen::VectorXd::Constant(n, inf), z2);
+        EXPECT_EQ(z1, z2) << trial;
+    }
+    EXPECT_GT(with_upper, 50);  // upper bounds were reached, not only lower ones
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(2);
+    EXPECT_THROW(fem::solve_box_lcp(Eigen::MatrixXd::Identity(2, 2), Eigen::VectorXd::Ones(2), Eigen::Vector2d(1, 0), Eigen::Vector2d(0, 1), z), InputError);
 }

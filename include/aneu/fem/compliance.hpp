@@ -198,6 +198,12 @@ struct LcpResult {
 /// solves without a fall. z is the best solution found (the smaller violation of the sweeps' and the pivoting's).
 /// @throws InputError sizes that do not match
 LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt = {});
+/// The same with bounds lo ≤ z ≤ hi per row (a box-constrained LCP, the bound-constrained QP min ½ zᵀ A z + qᵀ z):
+/// w ≥ 0 where z = lo, w ≤ 0 where z = hi, w = 0 between. What Coulomb friction rows need (|λ_t| ≤ μ λ_n, the
+/// bound taken from the last pass's normal force); solve_lcp is lo = 0, hi = ∞.
+/// @throws InputError sizes that do not match, lo > hi, lo = ∞ or hi = −∞
+LcpResult solve_box_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
+                        const LcpOptions& opt = {});
 
 /// How far in front of blade s (±1) at opening θ the point x lies, the blade a solid whose sides and tip are rounded
 /// (ClipBody's geometry and edge radius): negative behind its face.
