@@ -14,10 +14,11 @@
 // at --checkpoints openings, each solved from the last.
 //
 // Usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] [--checkpoints 24,16,8,4,1.89]
-//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--max-frames N] [--out FILE.jsonl]
+//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--friction 0] [--max-frames N] [--out FILE.jsonl]
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
-// or complementarity is off by more than this [mm] (accept_mm); --max-frames: stop each mode there (with no
+// or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction);
+// --max-frames: stop each mode there (with no
 // --checkpoints: no reference), for timing.
 // One JSON line per frame and mode, one per checkpoint, a summary line last (stdout, or --out).
 #include <algorithm>
@@ -82,7 +83,7 @@ int main(int argc, char** argv) {
                              "[--checkpoints 8,5,3,1.89] [--patch-radius 1.5] [--reach 0.05] [--out FILE.jsonl]\n");
         return 2;
     }
-    double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4;
+    double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0;
     int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
     std::string out_path;
@@ -100,6 +101,7 @@ int main(int argc, char** argv) {
         else if (k == "--sweeps") sweeps = std::stoi(v);
         else if (k == "--pivots") pivots = std::stoi(v);
         else if (k == "--accept") accept = std::stod(v);
+        else if (k == "--friction") friction = std::stod(v);
         else {
             std::fprintf(stderr, "aneu_bench_compliance: unknown option %s\n", k.c_str());
             return 2;
@@ -247,6 +249,7 @@ int main(int argc, char** argv) {
         co.max_sweeps = sweeps;
         co.max_pivots = pivots;
         co.accept_mm = accept;
+        co.blade_friction = friction;
         fem::CompliantWallSearch cp;  // the walls' pair search, close vertices and crossings carried from frame to frame
         int refresh_failed = 0;
         for (size_t fi = 0; fi < frames.size(); ++fi) {
@@ -276,7 +279,7 @@ int main(int argc, char** argv) {
             json line = {{"mode_refresh", R}, {"frame", fi}, {"theta_deg", frames[fi] / DEG}, {"force_n", {f.loads.force_n[0], f.loads.force_n[1]}},
                          {"contacts", {f.loads.contacts[0], f.loads.contacts[1]}}, {"rows", f.lambda.size()}, {"sweeps", f.sweeps},
                          {"pivots", f.pivots}, {"single_pivots", f.single_pivots}, {"passes", f.passes}, {"complementarity_mm", f.complementarity_mm}, {"walls", {f.wall_rows, f.wall_contacts}},
-                         {"wall_force_n", f.wall_force_n}, {"wall_crossings", f.wall_crossings}, {"ms", frame_ms.back()},
+                         {"wall_force_n", f.wall_force_n}, {"friction_n", {f.loads.friction_n[0], f.loads.friction_n[1]}}, {"sliding", {f.loads.sliding[0], f.loads.sliding[1]}}, {"wall_crossings", f.wall_crossings}, {"ms", frame_ms.back()},
                          {"split_ms", {1e3 * f.rows_s, 1e3 * f.delassus_s, 1e3 * f.lcp_s, 1e3 * f.search_s}}, {"gathers", f.gathers}, {"gathered_nodes", f.gathered_nodes}, {"refactors", f.refactors}};
             if (std::find(check_frames.begin(), check_frames.end(), fi) != check_frames.end())
                 at_check[R][fi] = {0.5 * (f.loads.force_n[0] + f.loads.force_n[1]), f.candidate_u};

@@ -453,6 +453,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face
         double d = 0, b = 0;
         std::array<Eigen::Vector3d, 4> g;
+        double lo = 0, hi = std::numeric_limits<double>::infinity();  // its force's bounds (friction rows: ±μ λ_n)
     };
     std::vector<Row> rows;
     constexpr double BEHIND = 0.02;
@@ -470,6 +471,13 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         for (Eigen::Index k = 0; k < nc; ++k) Xl.row(k) += (warm->candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
     Eigen::MatrixX3d Xs = Xf;  // where the frame started
     for (Eigen::Index k = 0; k < nc; ++k) Xs.row(k) += (start.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
+    // Friction (opt.blade_friction, a held clip): a candidate the last pass or frame pressed on a blade with normal force
+    // λ_n is held where it stood on that blade when the frame started (carried by the blade's turn since), by two
+    // tangential rows whose forces stay within ±μ λ_n (Coulomb's box; λ_n from the last pass: the passes iterate on it).
+    std::map<std::pair<int, int>, double> pressed;
+    if (opt.blade_friction > 0 && theta_held && warm)
+        for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i)
+            if ((warm->constraint[i].second == 1 || warm->constraint[i].second == -1) && warm->lambda[i] > 0) pressed[warm->constraint[i]] = warm->lambda[i];
     for (Eigen::Index k = 0; k < nc; ++k) {
         const Eigen::Vector3d x = Xl.row(k).transpose();
         for (int s : {1, -1}) {
@@ -483,6 +491,24 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             r.s = s;
             r.d = d + r.g[0].dot(Xf.row(k).transpose() - x);
             rows.push_back(r);
+            if (const auto it = pressed.find({static_cast<int>(k), s}); it != pressed.end()) {
+                Eigen::Vector3d t0, n0, w0, t, n, w;
+                blades.frame(s, std::max(theta_start, 0.0), t0, n0, w0);
+                blades.frame(s, theta_ref, t, n, w);
+                const Eigen::Vector3d rel = Xs.row(k).transpose() - blades.hinge;
+                const Eigen::Vector3d stick = blades.hinge + rel.dot(t0) * t + rel.dot(w0) * w + rel.dot(n0) * n;
+                const double bound = opt.blade_friction * it->second;
+                for (int dir = 0; dir < 2; ++dir) {
+                    Row fr;
+                    fr.k[0] = static_cast<int>(k);
+                    fr.s = -2 - (2 * (s > 0 ? 0 : 1) + dir);
+                    fr.g[0] = dir == 0 ? t : w;
+                    fr.d = fr.g[0].dot(Xf.row(k).transpose() - stick);  // the slip from the stick point, linear in the motion
+                    fr.lo = -bound;
+                    fr.hi = bound;
+                    rows.push_back(fr);
+                }
+            }
         }
     }
     int wall_rows = 0;
@@ -618,7 +644,12 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     lo.max_pivots = opt.max_pivots;
     lo.tolerance = opt.tolerance_mm;
     lo.accept = opt.accept_mm;
-    const LcpResult lr = solve_lcp(A, q, z, lo);
+    Eigen::VectorXd zlo = Eigen::VectorXd::Zero(mz), zhi = Eigen::VectorXd::Constant(mz, std::numeric_limits<double>::infinity());
+    for (Eigen::Index i = 0; i < m; ++i) {
+        zlo[i] = rows[static_cast<size_t>(i)].lo;
+        zhi[i] = rows[static_cast<size_t>(i)].hi;
+    }
+    const LcpResult lr = solve_box_lcp(A, q, zlo, zhi, z, lo);
     out.sweeps = lr.sweeps;
     out.pivots = lr.pivots;
     out.single_pivots = lr.single_pivots;
@@ -657,6 +688,13 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         const Row& r = rows[static_cast<size_t>(i)];
         out.lambda.push_back(z[i]);
         out.constraint.emplace_back(r.k[0], r.s);
+        if (r.s <= -2) {  // a friction row (its force may have either sign)
+            const int side = (-2 - r.s) / 2;
+            out.loads.friction_n[side] += std::abs(z[i]);
+            if (r.hi > 0 && std::abs(z[i]) >= r.hi * (1 - 1e-9)) ++out.loads.sliding[side];
+            out.loads.net_force -= z[i] * r.g[0];
+            continue;
+        }
         if (z[i] <= 0) continue;
         if (r.s >= 2) {
             ++out.wall_contacts;

@@ -509,3 +509,43 @@ TEST(Lcp, BoxBoundedProblemsMatchEnumeration) {
     Eigen::VectorXd z = Eigen::VectorXd::Zero(2);
     EXPECT_THROW(fem::solve_box_lcp(Eigen::MatrixXd::Identity(2, 2), Eigen::VectorXd::Ones(2), Eigen::Vector2d(1, 0), Eigen::Vector2d(0, 1), z), InputError);
 }
+
+// Blade friction on the block: a node pressed on blade +1 whose frame starts δ across the blade from where its ground
+// spring holds it (the spring pulls it back with K δ). Within the friction limit μ λ_n it sticks where it started (the
+// tangential force is K δ); beyond it, it slides back until the spring's pull is μ λ_n. Frictionless it goes all the way.
+TEST(CompliantClip, BladeFrictionHoldsANodeWithinTheLimitAndLetsItSlideBeyond) {
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    const fem::ClipBlades blades;
+    const fem::Linearisation lin(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 3});
+    const double touch = 2 * std::atan(Block::H / Block::A), held = touch - 0.03;
+    const fem::CompliantFrame f1 = fem::solve_compliant_clip(lin, blades, spring, held, touch + 0.01);  // closing onto it
+    const double Fn = f1.loads.force_n[0];
+    ASSERT_NEAR(Fn, block_force(held), 1e-8 * (1 + Fn));
+    Eigen::Vector3d t, n, w;
+    blades.frame(1, held, t, n, w);
+    constexpr double MU = 0.3;
+    for (const double ratio : {0.5, 2.0}) {  // the spring's pull over the friction limit
+        const double delta = ratio * MU * Fn / Block::K;
+        fem::CompliantFrame start = f1;
+        start.candidate_u.segment<3>(0) += delta * w;  // node 2 starts δ across the blade
+        fem::CompliantOptions o;
+        o.blade_friction = MU;
+        const fem::CompliantFrame f = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
+        const double across = f.candidate_u.segment<3>(0).dot(w);
+        EXPECT_NEAR(f.loads.force_n[0], Fn, 1e-6 * Fn) << ratio;  // the normal force is the frictionless one
+        if (ratio < 1) {
+            EXPECT_NEAR(across, delta, 1e-8) << "sticks where it started";
+            EXPECT_NEAR(f.loads.friction_n[0], Block::K * delta, 1e-6 * Fn);
+            EXPECT_EQ(f.loads.sliding[0], 0);
+        } else {
+            EXPECT_NEAR(across, delta - MU * Fn / Block::K, 1e-8) << "slides back to the limit";
+            EXPECT_NEAR(f.loads.friction_n[0], MU * Fn, 1e-6 * Fn);
+            EXPECT_EQ(f.loads.sliding[0], 1);
+        }
+        o.blade_friction = 0;
+        const fem::CompliantFrame g = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
+        EXPECT_NEAR(g.candidate_u.segment<3>(0).dot(w), 0.0, 1e-8) << "frictionless: back to the spring's rest";
+        EXPECT_EQ(g.loads.friction_n[0], 0.0);
+    }
+}

@@ -100,6 +100,9 @@ struct CompliantOptions {
     /// Reuse the compliance the last pass or frame gathered on this linearisation while it covers the rows (the same
     /// figures: tests compare with it off)
     bool reuse_gathered = true;
+    /// Coulomb friction between the blades and the tissue they press (a held clip only; 0: frictionless, as until
+    /// session 32). aneusim's blades have 0.3 (scene patch.blade_friction).
+    double blade_friction = 0;
 };
 
 /// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
@@ -121,7 +124,8 @@ struct CompliantFrame {
     Eigen::VectorXd candidate_u;       ///< the candidates' displacement (3|C|) [mm]
     BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
     std::vector<double> lambda;        ///< per constraint: its normal force (warm start of the next frame)
-    /// per constraint: (candidate, blade ±1), or (vertex, 2 + face) for a wall pair
+    /// per constraint: (candidate, blade ±1), (vertex, 2 + face) for a wall pair, or (candidate, −2 − (2 side + dir))
+    /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it)
     std::vector<std::pair<int, int>> constraint;
     int wall_rows = 0;                 ///< wall pairs within reach (constraints)
     int wall_contacts = 0;             ///< wall pairs pressed together
