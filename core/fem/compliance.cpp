@@ -450,7 +450,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     struct Row {
         int n = 1;                         // candidates in the row
         std::array<int, 4> k{0, 0, 0, 0};  // which
-        int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face
+        int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face; −2 − (2 side + dir): friction
         double d = 0, b = 0;
         std::array<Eigen::Vector3d, 4> g;
         double lo = 0, hi = std::numeric_limits<double>::infinity();  // its force's bounds (friction rows: ±μ λ_n)
@@ -474,6 +474,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // Friction (opt.blade_friction, a held clip): a candidate the last pass or frame pressed on a blade with normal force
     // λ_n is held where it stood on that blade when the frame started (carried by the blade's turn since), by two
     // tangential rows whose forces stay within ±μ λ_n (Coulomb's box; λ_n from the last pass: the passes iterate on it).
+    // Not followed: the hinge's own motion within the frame (the stick point turns with the blade about where the hinge
+    // is now), and the friction forces' small moment about the hinge (the loads' moment is the normal forces').
     std::map<std::pair<int, int>, double> pressed;
     if (opt.blade_friction > 0 && theta_held && warm)
         for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i)
