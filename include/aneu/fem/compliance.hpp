@@ -113,17 +113,17 @@ struct CompliantWalls {
     std::vector<std::array<int, 2>> pairs;    ///< (vertex, face)
 };
 
-/// One clip frame on a linearisation.
 /// The compliance of the candidates a frame's rows touch, gathered into one contiguous block (compliance.cpp); kept
 /// by the frame so that its next passes and the next frames on the same linearisation need not gather it again.
 struct GatheredCompliance;
 
+/// One clip frame on a linearisation.
 struct CompliantFrame {
     double theta = 0;                  ///< the blades' opening [rad]
     Eigen::VectorXd candidate_forces;  ///< the blades' forces on the candidates (3|C|) [N]
     Eigen::VectorXd candidate_u;       ///< the candidates' displacement (3|C|) [mm]
     BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
-    std::vector<double> lambda;        ///< per constraint: its normal force (warm start of the next frame)
+    std::vector<double> lambda;        ///< per constraint: its force, normal (a friction row's: tangential) (warm start of the next frame)
     /// per constraint: (candidate, blade ±1), (vertex, 2 + face) for a wall pair, or (candidate, −2 − (2 side + dir))
     /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it)
     std::vector<std::pair<int, int>> constraint;
@@ -143,8 +143,8 @@ struct CompliantFrame {
     /// Its parts [s], summed over passes (and a walls frame's repeats): making the rows, the Delassus matrix, the LCP
     /// (sweeps, pivoting, forces and displacements), and with the walls the pair search and crossing checks.
     double rows_s = 0, delassus_s = 0, lcp_s = 0, search_s = 0;
-    /// W on the candidates this frame's rows (and the frames' before it on this linearisation) touched: what the next
-    /// pass or frame reuses while its rows touch no other candidate
+    /// W on the candidates of the rows it was gathered for (this frame's last pass's, or an earlier pass's or frame's
+    /// that covered them): what the next pass or frame reuses while it covers their rows
     std::shared_ptr<const GatheredCompliance> gathered;
     int gathers = 0;                   ///< gatherings of it in this frame (0: every pass reused the last frame's)
     int gathered_nodes = 0;            ///< the candidates in it
