@@ -4,7 +4,7 @@
 # acceptance: haptics 1 kHz, period p99 <= 2 ms, with the patch active, on 2 cores). The sample's planned scene with
 # model.wall = "patch", the applier slowed so that the run's DURATION (wall clock) covers the patch's build and its
 # first frames: approach as planned (0.8 s), 60 -> 30 deg by 30 s, on towards 0 deg at 600 s. Nothing else should
-# run beside it. Writes OUT/run/report.json and run.log and prints a table row; RUNS=3 runs it three times.
+# run beside it. Writes OUT/N/report.json and run.log for run N and prints a table row each; RUNS=3 runs it three times.
 # usage: bash bench/run_patch_realtime.sh [OUT_DIR] [DURATION_S]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)

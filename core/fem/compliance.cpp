@@ -741,7 +741,8 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         g.lcp_s += f.lcp_s;
         g.gathers += f.gathers;
         const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
-        if (std::getenv("ANEU_PASS_TRACE")) {  // how the passes settle (or do not): compliance.md, session 32
+        static const bool trace = std::getenv("ANEU_PASS_TRACE") != nullptr;
+        if (trace) {  // how the passes settle (or do not): compliance.md, session 32
             Eigen::Index worst = 0;
             (g.candidate_u - f.candidate_u).cwiseAbs().maxCoeff(&worst);
             const Eigen::Vector3d dw = (g.candidate_u - f.candidate_u).segment<3>(3 * (worst / 3));

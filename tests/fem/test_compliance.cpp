@@ -266,28 +266,55 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
 
 namespace {
 
-/// The LCP's solution by enumeration: the one active set whose solve has z ≥ 0 and w ≥ 0 (unique for an SPD A).
-Eigen::VectorXd lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q) {
+/// The box-constrained LCP's solution by enumeration: each row at its lower bound, free, or at its upper bound; the
+/// one assignment whose solve keeps the free rows within their bounds and the bounded rows' w of the right sign.
+Eigen::VectorXd box_lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {
     const int n = static_cast<int>(q.size());
-    for (int mask = 0; mask < (1 << n); ++mask) {
-        std::vector<int> S;
-        for (int i = 0; i < n; ++i)
-            if (mask & (1 << i)) S.push_back(i);
-        Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
-        if (!S.empty()) {
-            Eigen::MatrixXd As(S.size(), S.size());
-            Eigen::VectorXd qs(S.size());
-            for (size_t a = 0; a < S.size(); ++a) {
-                qs[static_cast<Eigen::Index>(a)] = -q[S[a]];
-                for (size_t c = 0; c < S.size(); ++c) As(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(c)) = A(S[a], S[c]);
+    int states = 1;
+    for (int i = 0; i < n; ++i) states *= 3;
+    for (int code = 0; code < states; ++code) {
+        std::vector<int> st(static_cast<size_t>(n));
+        bool usable = true;
+        for (int i = 0, c = code; i < n; ++i, c /= 3) {
+            st[static_cast<size_t>(i)] = c % 3;  // 0 at lo, 1 free, 2 at hi
+            if ((c % 3 == 0 && !std::isfinite(lo[i])) || (c % 3 == 2 && !std::isfinite(hi[i]))) usable = false;
+        }
+        if (!usable) continue;
+        Eigen::VectorXd z = Eigen::VectorXd::Zero(n), rhs = -q;
+        std::vector<int> F;
+        for (int i = 0; i < n; ++i) {
+            if (st[static_cast<size_t>(i)] == 1) {
+                F.push_back(i);
+                continue;
             }
-            const Eigen::VectorXd zs = As.llt().solve(qs);
-            for (size_t a = 0; a < S.size(); ++a) z[S[a]] = zs[static_cast<Eigen::Index>(a)];
+            z[i] = st[static_cast<size_t>(i)] == 0 ? lo[i] : hi[i];
+            rhs -= z[i] * A.col(i);
+        }
+        if (!F.empty()) {
+            Eigen::MatrixXd Af(F.size(), F.size());
+            Eigen::VectorXd bf(F.size());
+            for (size_t a = 0; a < F.size(); ++a) {
+                bf[static_cast<Eigen::Index>(a)] = rhs[F[a]];
+                for (size_t c = 0; c < F.size(); ++c) Af(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(c)) = A(F[a], F[c]);
+            }
+            const Eigen::VectorXd zf = Af.llt().solve(bf);
+            for (size_t a = 0; a < F.size(); ++a) z[F[a]] = zf[static_cast<Eigen::Index>(a)];
         }
         const Eigen::VectorXd w = q + A * z;
-        if (z.minCoeff() >= -1e-12 && w.minCoeff() >= -1e-12) return z;
+        bool ok = true;
+        for (int i = 0; i < n && ok; ++i) {
+            const int s = st[static_cast<size_t>(i)];
+            if (s == 1) ok = z[i] >= lo[i] - 1e-12 && z[i] <= hi[i] + 1e-12;
+            else ok = s == 0 ? w[i] >= -1e-12 : w[i] <= 1e-12;
+        }
+        if (ok) return z;
     }
     return Eigen::VectorXd();
+}
+
+/// The plain LCP's (z ≥ 0, w ≥ 0, zᵀ w = 0): the box [0, ∞).
+Eigen::VectorXd lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q) {
+    return box_lcp_by_enumeration(A, q, Eigen::VectorXd::Zero(q.size()), Eigen::VectorXd::Constant(q.size(), std::numeric_limits<double>::infinity()));
 }
 
 }  // namespace
@@ -408,55 +435,6 @@ TEST(Lcp, LargerProblemsSolvedWithTheActiveFactorUpdatedRowByRow) {
     EXPECT_LT(2 * refactors, pivots);
 }
 
-namespace {
-
-/// The box-constrained LCP's solution by enumeration: each row at its lower bound, free, or at its upper bound; the
-/// one assignment whose solve keeps the free rows within their bounds and the bounded rows' w of the right sign.
-Eigen::VectorXd box_lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {
-    const int n = static_cast<int>(q.size());
-    int states = 1;
-    for (int i = 0; i < n; ++i) states *= 3;
-    for (int code = 0; code < states; ++code) {
-        std::vector<int> st(static_cast<size_t>(n));
-        bool usable = true;
-        for (int i = 0, c = code; i < n; ++i, c /= 3) {
-            st[static_cast<size_t>(i)] = c % 3;  // 0 at lo, 1 free, 2 at hi
-            if ((c % 3 == 0 && !std::isfinite(lo[i])) || (c % 3 == 2 && !std::isfinite(hi[i]))) usable = false;
-        }
-        if (!usable) continue;
-        Eigen::VectorXd z = Eigen::VectorXd::Zero(n), rhs = -q;
-        std::vector<int> F;
-        for (int i = 0; i < n; ++i) {
-            if (st[static_cast<size_t>(i)] == 1) {
-                F.push_back(i);
-                continue;
-            }
-            z[i] = st[static_cast<size_t>(i)] == 0 ? lo[i] : hi[i];
-            rhs -= z[i] * A.col(i);
-        }
-        if (!F.empty()) {
-            Eigen::MatrixXd Af(F.size(), F.size());
-            Eigen::VectorXd bf(F.size());
-            for (size_t a = 0; a < F.size(); ++a) {
-                bf[static_cast<Eigen::Index>(a)] = rhs[F[a]];
-                for (size_t c = 0; c < F.size(); ++c) Af(static_cast<Eigen::Index>(a), static_cast<Eigen::Index>(c)) = A(F[a], F[c]);
-            }
-            const Eigen::VectorXd zf = Af.llt().solve(bf);
-            for (size_t a = 0; a < F.size(); ++a) z[F[a]] = zf[static_cast<Eigen::Index>(a)];
-        }
-        const Eigen::VectorXd w = q + A * z;
-        bool ok = true;
-        for (int i = 0; i < n && ok; ++i) {
-            const int s = st[static_cast<size_t>(i)];
-            if (s == 1) ok = z[i] >= lo[i] - 1e-12 && z[i] <= hi[i] + 1e-12;
-            else ok = s == 0 ? w[i] >= -1e-12 : w[i] <= 1e-12;
-        }
-        if (ok) return z;
-    }
-    return Eigen::VectorXd();
-}
-
-}  // namespace
 
 // Box-constrained problems (friction-like rows bounded on both sides, normal-like rows bounded below only, some
 // rows fixed, lo = hi) against enumeration of the 3^n assignments, from zero and from a perturbed warm start; the
