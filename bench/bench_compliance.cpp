@@ -14,10 +14,10 @@
 // at --checkpoints openings, each solved from the last.
 //
 // Usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] [--checkpoints 24,16,8,4,1.89]
-//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--friction 0] [--max-frames N] [--out FILE.jsonl]
+//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--friction 0] [--friction-cell 0] [--max-frames N] [--out FILE.jsonl]
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
-// or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction);
+// or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction); --friction-cell: its cells [mm] (friction_cell_mm, 0: per node);
 // --max-frames: stop each mode there (with no
 // --checkpoints: no reference), for timing.
 // One JSON line per frame and mode, one per checkpoint, a summary line last (stdout, or --out).
@@ -83,7 +83,7 @@ int main(int argc, char** argv) {
                              "[--checkpoints 8,5,3,1.89] [--patch-radius 1.5] [--reach 0.05] [--out FILE.jsonl]\n");
         return 2;
     }
-    double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0;
+    double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0, friction_cell = 0;
     int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
     std::string out_path;
@@ -102,6 +102,7 @@ int main(int argc, char** argv) {
         else if (k == "--pivots") pivots = std::stoi(v);
         else if (k == "--accept") accept = std::stod(v);
         else if (k == "--friction") friction = std::stod(v);
+        else if (k == "--friction-cell") friction_cell = std::stod(v);
         else {
             std::fprintf(stderr, "aneu_bench_compliance: unknown option %s\n", k.c_str());
             return 2;
@@ -250,6 +251,7 @@ int main(int argc, char** argv) {
         co.max_pivots = pivots;
         co.accept_mm = accept;
         co.blade_friction = friction;
+        co.friction_cell_mm = friction_cell;
         fem::CompliantWallSearch cp;  // the walls' pair search, close vertices and crossings carried from frame to frame
         int refresh_failed = 0;
         for (size_t fi = 0; fi < frames.size(); ++fi) {

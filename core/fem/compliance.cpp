@@ -461,11 +461,15 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // positions of its candidates (one for a blade, the vertex and the face's three for a wall pair), b on θ.
     struct Row {
         int n = 1;                         // candidates in the row
-        std::array<int, 4> k{0, 0, 0, 0};  // which
+        std::array<int, 4> k{0, 0, 0, 0};  // which (a friction cell's: its first; all of them in kx)
         int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face; −2 − (2 side + dir): friction
         double d = 0, b = 0;
         std::array<Eigen::Vector3d, 4> g;
         double lo = 0, hi = std::numeric_limits<double>::infinity();  // its force's bounds (friction rows: ±μ λ_n)
+        std::vector<int> kx;               // a friction cell's candidates (n of them), else empty
+        std::vector<Eigen::Vector3d> gx;   // and its gradient on each
+        int cand(int a) const { return kx.empty() ? k[static_cast<size_t>(a)] : kx[static_cast<size_t>(a)]; }
+        const Eigen::Vector3d& grad(int a) const { return gx.empty() ? g[static_cast<size_t>(a)] : gx[static_cast<size_t>(a)]; }
     };
     std::vector<Row> rows;
     constexpr double BEHIND = 0.02;
@@ -484,14 +488,33 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     Eigen::MatrixX3d Xs = Xf;  // where the frame started
     for (Eigen::Index k = 0; k < nc; ++k) Xs.row(k) += (start.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
     // Friction (opt.blade_friction, a held clip): a candidate the last pass or frame pressed on a blade with normal force
-    // λ_n is held where it stood on that blade when the frame started (carried by the blade's turn since), by two
-    // tangential rows whose forces stay within ±μ λ_n (Coulomb's box; λ_n from the last pass: the passes iterate on it).
+    // λ_n is held where it stood on that blade when the frame started (carried by the blade's turn since), by tangential
+    // rows whose forces stay within ±μ λ_n (Coulomb's box; λ_n from the last pass: the passes iterate on it).
+    // With opt.friction_cell_mm > 0 the pressed candidates of a blade are gathered in square cells of the blade's face
+    // (by where they stood at the frame's start), two rows a cell: the slip of the cell's candidates, each weighted by
+    // its share w_k = λ_k / Λ of the cell's normal force Λ, is zero, the row's force z within ±μ Λ. Its force on
+    // candidate k is z w_k, so each candidate's friction stays within its own ±μ λ_k; what the cell gives up is the
+    // candidates' slips relative to one another (each node its own cell: friction_cell_mm = 0).
     // Not followed: the hinge's own motion within the frame (the stick point turns with the blade about where the hinge
     // is now), and the friction forces' small moment about the hinge (the loads' moment is the normal forces').
     std::map<std::pair<int, int>, double> pressed;
     if (opt.blade_friction > 0 && theta_held && warm)
         for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i)
             if ((warm->constraint[i].second == 1 || warm->constraint[i].second == -1) && warm->lambda[i] > 0) pressed[warm->constraint[i]] = warm->lambda[i];
+    struct Cell {
+        int side = 0;                       // 0: blade +1, 1: blade −1
+        std::vector<int> nodes;
+        std::vector<double> lambda;
+        std::vector<Eigen::Vector3d> stick;
+    };
+    std::vector<Cell> cells;
+    std::map<std::array<long long, 3>, size_t> cell_of;
+    std::array<Eigen::Vector3d, 2> ft, fw;  // the blades' directions along and across where they are now
+    {
+        Eigen::Vector3d n;
+        blades.frame(1, theta_ref, ft[0], n, fw[0]);
+        blades.frame(-1, theta_ref, ft[1], n, fw[1]);
+    }
     for (Eigen::Index k = 0; k < nc; ++k) {
         const Eigen::Vector3d x = Xl.row(k).transpose();
         for (int s : {1, -1}) {
@@ -506,23 +529,44 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             r.d = d + r.g[0].dot(Xf.row(k).transpose() - x);
             rows.push_back(r);
             if (const auto it = pressed.find({static_cast<int>(k), s}); it != pressed.end()) {
-                Eigen::Vector3d t0, n0, w0, t, n, w;
+                const int side = s > 0 ? 0 : 1;
+                Eigen::Vector3d t0, n0, w0;
                 blades.frame(s, std::max(theta_start, 0.0), t0, n0, w0);
-                blades.frame(s, theta_ref, t, n, w);
                 const Eigen::Vector3d rel = Xs.row(k).transpose() - blades.hinge;
+                Eigen::Vector3d t, n, w;
+                blades.frame(s, theta_ref, t, n, w);
                 const Eigen::Vector3d stick = blades.hinge + rel.dot(t0) * t + rel.dot(w0) * w + rel.dot(n0) * n;
-                const double bound = opt.blade_friction * it->second;
-                for (int dir = 0; dir < 2; ++dir) {
-                    Row fr;
-                    fr.k[0] = static_cast<int>(k);
-                    fr.s = -2 - (2 * (s > 0 ? 0 : 1) + dir);
-                    fr.g[0] = dir == 0 ? t : w;
-                    fr.d = fr.g[0].dot(Xf.row(k).transpose() - stick);  // the slip from the stick point, linear in the motion
-                    fr.lo = -bound;
-                    fr.hi = bound;
-                    rows.push_back(fr);
-                }
+                const double h = opt.friction_cell_mm;
+                const std::array<long long, 3> key = h > 0 ? std::array<long long, 3>{side, static_cast<long long>(std::floor(rel.dot(t0) / h)), static_cast<long long>(std::floor(rel.dot(w0) / h))}
+                                                           : std::array<long long, 3>{side, static_cast<long long>(k), 0};
+                auto [pos, fresh] = cell_of.try_emplace(key, cells.size());
+                if (fresh) cells.push_back(Cell{side, {}, {}, {}});
+                Cell& c = cells[pos->second];
+                c.nodes.push_back(static_cast<int>(k));
+                c.lambda.push_back(it->second);
+                c.stick.push_back(stick);
             }
+        }
+    }
+    for (const Cell& c : cells) {
+        double total = 0;
+        for (double l : c.lambda) total += l;
+        for (int dir = 0; dir < 2; ++dir) {
+            const Eigen::Vector3d& e = dir == 0 ? ft[static_cast<size_t>(c.side)] : fw[static_cast<size_t>(c.side)];
+            Row fr;
+            fr.n = static_cast<int>(c.nodes.size());
+            fr.k[0] = c.nodes[0];
+            fr.s = -2 - (2 * c.side + dir);
+            fr.kx = c.nodes;
+            fr.d = 0;
+            for (size_t a = 0; a < c.nodes.size(); ++a) {
+                fr.gx.push_back(c.lambda[a] / total * e);
+                fr.d += fr.gx.back().dot(Xf.row(c.nodes[a]).transpose() - c.stick[a]);  // the weighted slip from the stick points, linear in the motion
+            }
+            fr.g[0] = fr.gx[0];
+            fr.lo = -opt.blade_friction * total;
+            fr.hi = opt.blade_friction * total;
+            rows.push_back(std::move(fr));
         }
     }
     int wall_rows = 0;
@@ -587,7 +631,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         std::vector<int> need;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)
-                if (const int c = r.k[static_cast<size_t>(a)]; !in_rows[static_cast<size_t>(c)]++) need.push_back(c);
+                if (const int c = r.cand(a); !in_rows[static_cast<size_t>(c)]++) need.push_back(c);
         if (opt.reuse_gathered && warm && warm->gathered && warm->gathered->serial == lin.serial() && 4 * warm->gathered->nodes.size() <= 5 * need.size() &&
             std::all_of(need.begin(), need.end(), [&](int c) { return warm->gathered->slot[static_cast<size_t>(c)] >= 0; }))
             gathered = warm->gathered;
@@ -615,14 +659,13 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         Eigen::Index reach = 0;
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
-            for (int a = 0; a < ri.n; ++a) reach = std::max<Eigen::Index>(reach, 3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])] + 3);
-            y.head(reach).noalias() = Wa.block(0, 3 * slot[static_cast<size_t>(ri.k[0])], reach, 3) * ri.g[0];
-            for (int a = 1; a < ri.n; ++a)
-                y.head(reach).noalias() += Wa.block(0, 3 * slot[static_cast<size_t>(ri.k[static_cast<size_t>(a)])], reach, 3) * ri.g[static_cast<size_t>(a)];
+            for (int a = 0; a < ri.n; ++a) reach = std::max<Eigen::Index>(reach, 3 * slot[static_cast<size_t>(ri.cand(a))] + 3);
+            y.head(reach).noalias() = Wa.block(0, 3 * slot[static_cast<size_t>(ri.cand(0))], reach, 3) * ri.grad(0);
+            for (int a = 1; a < ri.n; ++a) y.head(reach).noalias() += Wa.block(0, 3 * slot[static_cast<size_t>(ri.cand(a))], reach, 3) * ri.grad(a);
             for (Eigen::Index j = 0; j <= i; ++j) {
                 const Row& rj = rows[static_cast<size_t>(j)];
                 double a = 0;
-                for (int c = 0; c < rj.n; ++c) a += rj.g[static_cast<size_t>(c)].dot(y.segment<3>(3 * slot[static_cast<size_t>(rj.k[static_cast<size_t>(c)])]));
+                for (int c = 0; c < rj.n; ++c) a += rj.grad(c).dot(y.segment<3>(3 * slot[static_cast<size_t>(rj.cand(c))]));
                 if (free_theta) a += ri.b * rj.b / k;
                 A(i, j) = A(j, i) = a;
             }
@@ -675,7 +718,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     out.candidate_forces = Eigen::VectorXd::Zero(3 * nc);
     for (Eigen::Index i = 0; i < m; ++i) {
         const Row& r = rows[static_cast<size_t>(i)];
-        for (int a = 0; a < r.n; ++a) out.candidate_forces.segment<3>(3 * r.k[static_cast<size_t>(a)]) += z[i] * r.g[static_cast<size_t>(a)];
+        for (int a = 0; a < r.n; ++a) out.candidate_forces.segment<3>(3 * r.cand(a)) += z[i] * r.grad(a);
     }
     out.theta = theta_held ? *theta_held : theta_ref;
     if (free_theta) {
@@ -689,7 +732,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         std::vector<char> done(static_cast<size_t>(nc), 0);
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a) {
-                const int c = r.k[static_cast<size_t>(a)];
+                const int c = r.cand(a);
                 if (done[static_cast<size_t>(c)]++) continue;
                 const Eigen::Vector3d fk = out.candidate_forces.segment<3>(3 * c);
                 if (fk.squaredNorm() > 0)
@@ -706,7 +749,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             const int side = (-2 - r.s) / 2;
             out.loads.friction_n[side] += std::abs(z[i]);
             if (r.hi > 0 && std::abs(z[i]) >= r.hi * (1 - 1e-9)) ++out.loads.sliding[side];
-            out.loads.net_force -= z[i] * r.g[0];
+            for (int a = 0; a < r.n; ++a) out.loads.net_force -= z[i] * r.grad(a);
             continue;
         }
         if (z[i] <= 0) continue;

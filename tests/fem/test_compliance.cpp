@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -525,5 +526,84 @@ TEST(CompliantClip, BladeFrictionHoldsANodeWithinTheLimitAndLetsItSlideBeyond) {
         const fem::CompliantFrame g = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
         EXPECT_NEAR(g.candidate_u.segment<3>(0).dot(w), 0.0, 1e-8) << "frictionless: back to the spring's rest";
         EXPECT_EQ(g.loads.friction_n[0], 0.0);
+    }
+}
+
+TEST(CompliantClip, BladeFrictionCellsShareTheirLimitInProportionToTheNormalForces) {
+    // Three nodes on one blade, each on its own ground spring (K 20, 35, 50 N/mm), pressed at different depths (so
+    // with different normal forces λ_k), start displaced across the blade by different δ_k. Per node (cells of 0 mm)
+    // each sticks with force K_k δ_k or slides to μ λ_k. In one cell, the slip of the three weighted by w_k = λ_k / Λ
+    // is held: the cell's force z acts on node k as z w_k, so a_k = z w_k / K_k and Σ w_k (a_k − δ_k) = 0 give
+    // z = Σ w_k δ_k / Σ w_k² / K_k while |z| ≤ μ Λ, else z = ±μ Λ.
+    constexpr int N = 3;
+    const std::array<double, N> K{20, 35, 50}, dx{0.0, 0.2, 0.35}, dz{0.05, 0.15, 0.3};
+    Eigen::MatrixX3d X(2 * N, 3);
+    std::vector<Eigen::Triplet<double>> t;
+    for (int k = 0; k < N; ++k) {
+        X.row(k) << Block::A + dx[k], Block::H, dz[k];
+        X.row(N + k) = X.row(k);
+        for (int ax = 0; ax < 3; ++ax) {
+            const int g = 3 * k + ax, b = 3 * (N + k) + ax;
+            t.emplace_back(g, g, K[k]);
+            t.emplace_back(b, b, K[k]);
+            t.emplace_back(g, b, -K[k]);
+            t.emplace_back(b, g, -K[k]);
+        }
+    }
+    Eigen::SparseMatrix<double, Eigen::RowMajor> Km(6 * N, 6 * N);
+    Km.setFromTriplets(t.begin(), t.end());
+    const fem::LinearBody body(Km);
+    Eigen::VectorXi fixed(3 * N);
+    for (int i = 0; i < 3 * N; ++i) fixed[i] = i;
+    const fem::Linearisation lin(body, X, fixed, Eigen::VectorXd::Zero(6 * N), {N, N + 1, N + 2});
+    const fem::ClipSpring spring = test_spring();
+    const fem::ClipBlades blades;
+    const double held = 2 * std::atan(Block::H / (Block::A + dx[2])) - 0.03;  // all three pressed
+    const fem::CompliantFrame f1 = fem::solve_compliant_clip(lin, blades, spring, held, held + 0.05);
+    Eigen::Vector3d tb, nb, wb;
+    blades.frame(1, held, tb, nb, wb);
+    std::array<double, N> lambda{};
+    double Lam = 0;
+    for (int k = 0; k < N; ++k) {
+        lambda[k] = f1.candidate_forces.segment<3>(3 * k).norm();
+        ASSERT_GT(lambda[k], 0.1) << k;
+        Lam += lambda[k];
+    }
+    ASSERT_GT(std::abs(lambda[0] - lambda[2]), 0.2 * Lam / N) << "the normal forces differ";
+    constexpr double MU = 0.3;
+    const std::array<double, N> shape{0.5, -0.2, 0.8};  // δ_k = scale × shape_k
+    double sw = 0, sw2k = 0;
+    for (int k = 0; k < N; ++k) {
+        sw += lambda[k] / Lam * shape[k];
+        sw2k += (lambda[k] / Lam) * (lambda[k] / Lam) / K[k];
+    }
+    for (const double ratio : {0.5, 2.0}) {  // the cell's sticking force over its limit
+        const double scale = ratio * MU * Lam / (sw / sw2k);
+        fem::CompliantFrame start = f1;
+        for (int k = 0; k < N; ++k) start.candidate_u.segment<3>(3 * k) += scale * shape[k] * wb;
+        fem::CompliantOptions o;
+        o.blade_friction = MU;
+        o.friction_cell_mm = 5.0;
+        const fem::CompliantFrame f = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
+        EXPECT_EQ(std::count_if(f.constraint.begin(), f.constraint.end(), [](const auto& c) { return c.second <= -2; }), 2) << "one cell, two rows";
+        const double z = ratio < 1 ? scale * sw / sw2k : MU * Lam;
+        for (int k = 0; k < N; ++k) {
+            EXPECT_NEAR(f.candidate_u.segment<3>(3 * k).dot(wb), z * lambda[k] / Lam / K[k], 1e-8) << ratio << " node " << k;
+            EXPECT_NEAR(f.candidate_u.segment<3>(3 * k).dot(tb), start.candidate_u.segment<3>(3 * k).dot(tb), 1e-8) << "no slip along the blade";
+            EXPECT_LE(std::abs(f.candidate_forces.segment<3>(3 * k).dot(wb)), MU * lambda[k] * (1 + 1e-9)) << "each node within its own limit";
+        }
+        EXPECT_NEAR(f.loads.friction_n[0], z, 1e-6 * Lam);
+        EXPECT_EQ(f.loads.sliding[0], ratio < 1 ? 0 : 1);
+        // Per node: each its own stick or slide.
+        o.friction_cell_mm = 0;
+        const fem::CompliantFrame g = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
+        EXPECT_EQ(std::count_if(g.constraint.begin(), g.constraint.end(), [](const auto& c) { return c.second <= -2; }), 2 * N);
+        int sliding = 0;
+        for (int k = 0; k < N; ++k) {
+            const double delta = scale * shape[k], zk = std::clamp(K[k] * delta, -MU * lambda[k], MU * lambda[k]);
+            sliding += std::abs(K[k] * delta) > MU * lambda[k];
+            EXPECT_NEAR(g.candidate_u.segment<3>(3 * k).dot(wb), zk / K[k], 1e-8) << ratio << " node " << k;
+        }
+        EXPECT_EQ(g.loads.sliding[0], sliding);
     }
 }

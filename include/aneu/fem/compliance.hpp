@@ -103,6 +103,10 @@ struct CompliantOptions {
     /// Coulomb friction between the blades and the tissue they press (a held clip only; 0: frictionless, as until
     /// session 32). aneusim's blades have 0.3 (scene patch.blade_friction).
     double blade_friction = 0;
+    /// With friction: the pressed candidates of a blade share their two friction rows within square cells of this side
+    /// on the blade's face, each candidate's share of the cell's friction that of its normal force (compliance.cpp);
+    /// 0: two rows for every pressed candidate
+    double friction_cell_mm = 0;
 };
 
 /// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
@@ -125,7 +129,7 @@ struct CompliantFrame {
     BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
     std::vector<double> lambda;        ///< per constraint: its force, normal (a friction row's: tangential) (warm start of the next frame)
     /// per constraint: (candidate, blade ±1), (vertex, 2 + face) for a wall pair, or (candidate, −2 − (2 side + dir))
-    /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it)
+    /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it; a cell's: its first candidate)
     std::vector<std::pair<int, int>> constraint;
     int wall_rows = 0;                 ///< wall pairs within reach (constraints)
     int wall_contacts = 0;             ///< wall pairs pressed together
