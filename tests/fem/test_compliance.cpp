@@ -607,3 +607,39 @@ TEST(CompliantClip, BladeFrictionCellsShareTheirLimitInProportionToTheNormalForc
         EXPECT_EQ(g.loads.sliding[0], sliding);
     }
 }
+
+TEST(CompliantClip, TheLinearisationsComplianceIsItsTangentsInverseOnTheCandidates) {
+    // W comes from the condensation's sparse route (a factor of its own, a forward solve, SYRK); displacement() from
+    // the linearisation's factor by a full solve. On the neo-Hookean block sheared and squeezed (u0 ≠ 0: the tangent
+    // is not the one at rest), every candidate's response to a unit force on any candidate is W's column.
+    const aneu::test::HeldBlock hb;
+    Eigen::VectorXd u0 = Eigen::VectorXd::Zero(hb.solid->dofs());
+    for (Eigen::Index i = 0; i < hb.X.rows(); ++i) {
+        const double s = 5.0 - hb.X(i, 0);  // 0 at the held face
+        u0[3 * i + 1] = 0.15 * s * s - 0.1 * s * hb.X(i, 1);
+        u0[3 * i + 2] = 0.05 * s * hb.X(i, 1);
+    }
+    const std::vector<int>& cand = hb.surface;
+    const fem::Linearisation lin(*hb.solid, hb.X, hb.fixed, u0, cand);
+    const Eigen::Index nc = static_cast<Eigen::Index>(cand.size());
+    const Eigen::VectorXd base = lin.displacement(Eigen::VectorXd::Zero(3 * nc));
+    double wmax = 0, err = 0;
+    for (Eigen::Index b = 0; b < nc; b += 7)
+        for (int ax = 0; ax < 3; ++ax) {
+            Eigen::VectorXd f = Eigen::VectorXd::Zero(3 * nc);
+            f[3 * b + ax] = 1.0;
+            const Eigen::VectorXd du = lin.displacement(f) - base;
+            for (Eigen::Index a = 0; a < nc; ++a) {
+                const Eigen::Vector3d col = lin.compliance(static_cast<int>(a), static_cast<int>(b)).col(ax);
+                wmax = std::max(wmax, col.cwiseAbs().maxCoeff());
+                err = std::max(err, (du.segment<3>(3 * cand[static_cast<size_t>(a)]) - col).cwiseAbs().maxCoeff());
+            }
+        }
+    EXPECT_GT(wmax, 1e-3);
+    EXPECT_LE(err, 1e-10 * wmax);
+    // Symmetric, block by block.
+    for (Eigen::Index a = 0; a < nc; a += 5)
+        for (Eigen::Index b = 0; b < nc; b += 3)
+            EXPECT_LE((lin.compliance(static_cast<int>(a), static_cast<int>(b)) - lin.compliance(static_cast<int>(b), static_cast<int>(a)).transpose()).cwiseAbs().maxCoeff(),
+                      1e-12 * wmax);
+}

@@ -8,7 +8,7 @@
 ///
 /// A Linearisation freezes a body at a state u0: its tangent K0 (factorised once), the free step
 /// Δu_free = K0⁻¹ r0 (r0 = −f_int(u0) on the free DOFs: what Newton would do next with no contact) and the
-/// compliance of the candidate nodes, W = (K0⁻¹)_CC (3|C| × 3|C|, dense: 3|C| back substitutions). Then a clip
+/// compliance of the candidate nodes, W = (K0⁻¹)_CC (3|C| × 3|C|, dense; by fem::condense's sparse route). Then a clip
 /// frame is a small problem on the candidates only:
 ///
 ///     minimise over Δu, θ:  ½ Δuᵀ K0 Δu − r0ᵀ Δu + k (θ²/2 + θ₀ θ)
@@ -64,8 +64,8 @@ public:
     /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
     /// back substitution.
     Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
-    /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance's back
-    /// substitutions.
+    /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance (fem::condense:
+    /// its own factorisation, the forward solve and SYRK).
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
     /// Distinct for every linearisation made in this process (what a frame's gathered compliance was taken from).
     std::uint64_t serial() const;
