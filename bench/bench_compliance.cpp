@@ -73,7 +73,7 @@ double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
 }  // namespace
 
 int main(int argc, char** argv) {
-    // As aneusim: the frames' large buffers (the gathered compliance, the Delassus matrix: megabytes to tens of
+    // As aneusim: the frames' large buffers (the Delassus matrix: megabytes to tens of
     // megabytes, every pass) stay on the heap and are reused, not mapped afresh and page-faulted in at each use
     // (without this, one frame in two took 100-250 ms more on the sample's pressed walls).
     mallopt(M_MMAP_THRESHOLD, 32 << 20);
@@ -282,7 +282,7 @@ int main(int argc, char** argv) {
                          {"contacts", {f.loads.contacts[0], f.loads.contacts[1]}}, {"rows", f.lambda.size()}, {"sweeps", f.sweeps},
                          {"pivots", f.pivots}, {"single_pivots", f.single_pivots}, {"passes", f.passes}, {"complementarity_mm", f.complementarity_mm}, {"walls", {f.wall_rows, f.wall_contacts}},
                          {"wall_force_n", f.wall_force_n}, {"friction_n", {f.loads.friction_n[0], f.loads.friction_n[1]}}, {"sliding", {f.loads.sliding[0], f.loads.sliding[1]}}, {"wall_crossings", f.wall_crossings}, {"ms", frame_ms.back()},
-                         {"split_ms", {1e3 * f.rows_s, 1e3 * f.delassus_s, 1e3 * f.lcp_s, 1e3 * f.search_s}}, {"gathers", f.gathers}, {"gathered_nodes", f.gathered_nodes}, {"refactors", f.refactors}};
+                         {"split_ms", {1e3 * f.rows_s, 1e3 * f.delassus_s, 1e3 * f.lcp_s, 1e3 * f.search_s}}, {"pair_nodes", f.pair_nodes}, {"refactors", f.refactors}};
             if (std::find(check_frames.begin(), check_frames.end(), fi) != check_frames.end())
                 at_check[R][fi] = {0.5 * (f.loads.force_n[0] + f.loads.force_n[1]), f.candidate_u};
             emit(line);

@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -40,22 +39,13 @@ struct Linearisation::Impl {
     Eigen::Index nfree = 0;
     std::vector<double> Wb;  // W in 3 x 3 blocks: block (a, b) at 9 (b |C| + a), column-major
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
-    std::uint64_t serial = 0;
 };
 
-struct GatheredCompliance {
-    std::uint64_t serial = 0;  // the linearisation's
-    std::vector<int> nodes;    // candidates, in the order of Wa's blocks
-    std::vector<int> slot;     // per candidate: its block in Wa, -1 none
-    Eigen::MatrixXd Wa;        // 3|nodes| x 3|nodes|
-};
 
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                              const std::vector<int>& candidates)
     : m(std::make_unique<Impl>()) {
-    static std::atomic<std::uint64_t> made{0};
-    m->serial = ++made;
     const Eigen::Index n = body.dofs();
     if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
     if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
@@ -158,7 +148,6 @@ Eigen::Matrix3d Linearisation::compliance(int a, int b) const {
     return Eigen::Map<const Eigen::Matrix3d>(m->Wb.data() + 9 * (static_cast<size_t>(b) * static_cast<size_t>(n) + static_cast<size_t>(a)));
 }
 const double* Linearisation::compliance_blocks() const { return m->Wb.data(); }
-std::uint64_t Linearisation::serial() const { return m->serial; }
 
 Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
     if (f.size() != 3 * static_cast<Eigen::Index>(m->cand.size()))
@@ -630,57 +619,63 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
     Eigen::MatrixXd A(mz, mz);
     Eigen::VectorXd q(mz);
-    std::shared_ptr<const GatheredCompliance> gathered;
-    int gathers = 0;
+    int pair_nodes = 0;
     {
-        // Through the compliance of the candidates in the rows only, gathered into one contiguous block: per row its
-        // column of W Jᵀ on them, then the rows' gradients on it. The block the last pass or frame gathered on this
-        // linearisation serves while it holds every candidate of the rows and not many more (the products below run
-        // over its rows); else the rows' candidates are gathered afresh. (Gathering the union
-        // with the last block instead, by copying it and adding the new candidates, was tried on the sample: the
-        // blocks grew by a quarter, past glibc's 32 MB mapping threshold, and frames got slower.)
-        std::vector<char> in_rows(static_cast<size_t>(nc), 0);
-        std::vector<int> need;
+        // Node pair by node pair: A_ij = Σ_a Σ_b g_iaᵀ W_ab g_jb over the candidates a of row i and b of row j, each 3 x 3
+        // block of W read in place once (b ≤ a: W is symmetric), column b of blocks in rising a. (Until session 33 the
+        // blocks of the rows' candidates were first gathered into one contiguous matrix, kept for the next pass or
+        // frame where it still covered their rows, and A made from products with its columns. On the sample's planned
+        // clip, frictionless, the pairs take the Delassus matrices' time over 111 frames from 0.95 to 0.58 s, frames
+        // with the walls pressed 42 -> 31 ms (median), held frames, which reused their block, 12 -> 17 ms. Storing W's
+        // blocks in the Z order of the candidates' places, so that those near the blades lie together, did not help.)
+        std::vector<int> local(static_cast<size_t>(nc), -1), nodes;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)
-                if (const int c = r.cand(a); !in_rows[static_cast<size_t>(c)]++) need.push_back(c);
-        if (opt.reuse_gathered && warm && warm->gathered && warm->gathered->serial == lin.serial() && 4 * warm->gathered->nodes.size() <= 5 * need.size() &&
-            std::all_of(need.begin(), need.end(), [&](int c) { return warm->gathered->slot[static_cast<size_t>(c)] >= 0; }))
-            gathered = warm->gathered;
-        if (!gathered) {
-            auto g = std::make_shared<GatheredCompliance>();
-            g->serial = lin.serial();
-            g->slot.assign(static_cast<size_t>(nc), -1);
-            // In the rows' order (the products below then run over about half of the block; sorted by candidate,
-            // which reads W's blocks in rising order, the sample's frames were slower).
-            g->nodes = need;
-            for (size_t a = 0; a < g->nodes.size(); ++a) g->slot[static_cast<size_t>(g->nodes[a])] = static_cast<int>(a);
-            const Eigen::Index p = static_cast<Eigen::Index>(g->nodes.size());
-            g->Wa.resize(3 * p, 3 * p);
-            for (Eigen::Index b = 0; b < p; ++b)
-                for (Eigen::Index a = 0; a < p; ++a)
-                    g->Wa.block<3, 3>(3 * a, 3 * b) = Wblock(g->nodes[static_cast<size_t>(a)], g->nodes[static_cast<size_t>(b)]);
-            gathered = std::move(g);
-            ++gathers;
+                if (int& l = local[static_cast<size_t>(r.cand(a))]; l < 0) {
+                    l = 0;
+                    nodes.push_back(r.cand(a));
+                }
+        std::sort(nodes.begin(), nodes.end());
+        const size_t p = nodes.size();
+        pair_nodes = static_cast<int>(p);
+        for (size_t a = 0; a < p; ++a) local[static_cast<size_t>(nodes[a])] = static_cast<int>(a);
+        // Per node: the rows that touch it and their gradients there (compressed rows).
+        std::vector<int> start(p + 1, 0);
+        for (const Row& r : rows)
+            for (int a = 0; a < r.n; ++a) ++start[static_cast<size_t>(local[static_cast<size_t>(r.cand(a))]) + 1];
+        for (size_t a = 0; a < p; ++a) start[a + 1] += start[a];
+        std::vector<int> row_of(static_cast<size_t>(start[p])), fill(start.begin(), start.end() - 1);
+        Eigen::Matrix3Xd G(3, start[p]);
+        for (Eigen::Index i = 0; i < m; ++i) {
+            const Row& r = rows[static_cast<size_t>(i)];
+            for (int a = 0; a < r.n; ++a) {
+                const int e = fill[static_cast<size_t>(local[static_cast<size_t>(r.cand(a))])]++;
+                row_of[static_cast<size_t>(e)] = static_cast<int>(i);
+                G.col(e) = r.grad(a);
+            }
         }
-        const std::vector<int>& slot = gathered->slot;
-        const Eigen::MatrixXd& Wa = gathered->Wa;
-        Eigen::VectorXd y(Wa.rows());
-        // Row i meets rows 0 … i only (A is symmetric): y is needed on their candidates' blocks, which lie below the
-        // largest block of those rows (a block gathered for these rows comes in their order: about half of y).
-        Eigen::Index reach = 0;
+        A.topLeftCorner(m, m).setZero();
+        for (size_t b = 0; b < p; ++b) {
+            const int b0 = start[b], nb = start[b + 1] - b0;
+            for (size_t a = b; a < p; ++a) {
+                const int a0 = start[a], na = start[a + 1] - a0;
+                const Eigen::Matrix3d Wab = Wblock(nodes[a], nodes[b]);
+                for (int jb = 0; jb < nb; ++jb) {
+                    const Eigen::Vector3d t = Wab * G.col(b0 + jb);
+                    const int j = row_of[static_cast<size_t>(b0 + jb)];
+                    for (int ia = 0; ia < na; ++ia) {
+                        const int i = row_of[static_cast<size_t>(a0 + ia)];
+                        const double v = G.col(a0 + ia).dot(t);
+                        A(i, j) += v;
+                        if (a != b) A(j, i) += v;
+                    }
+                }
+            }
+        }
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
-            for (int a = 0; a < ri.n; ++a) reach = std::max<Eigen::Index>(reach, 3 * slot[static_cast<size_t>(ri.cand(a))] + 3);
-            y.head(reach).noalias() = Wa.block(0, 3 * slot[static_cast<size_t>(ri.cand(0))], reach, 3) * ri.grad(0);
-            for (int a = 1; a < ri.n; ++a) y.head(reach).noalias() += Wa.block(0, 3 * slot[static_cast<size_t>(ri.cand(a))], reach, 3) * ri.grad(a);
-            for (Eigen::Index j = 0; j <= i; ++j) {
-                const Row& rj = rows[static_cast<size_t>(j)];
-                double a = 0;
-                for (int c = 0; c < rj.n; ++c) a += rj.grad(c).dot(y.segment<3>(3 * slot[static_cast<size_t>(rj.cand(c))]));
-                if (free_theta) a += ri.b * rj.b / k;
-                A(i, j) = A(j, i) = a;
-            }
+            if (free_theta)
+                for (Eigen::Index j = 0; j < m; ++j) A(i, j) += ri.b * rows[static_cast<size_t>(j)].b / k;
             q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
         }
     }
@@ -778,9 +773,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     }
     out.wall_rows = wall_rows;
     out.wall_min_distance_mm = wall_min;
-    out.gathered_nodes = static_cast<int>(gathered->nodes.size());
-    out.gathered = std::move(gathered);
-    out.gathers = gathers;
+    out.pair_nodes = pair_nodes;
     out.seconds = sw.seconds();
     out.rows_s = t_rows;
     out.delassus_s = t_delassus - t_rows;
@@ -806,7 +799,6 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
         g.lcp_s += f.lcp_s;
-        g.gathers += f.gathers;
         const double moved = (g.candidate_u - f.candidate_u).lpNorm<Eigen::Infinity>();
         static const bool trace = std::getenv("ANEU_PASS_TRACE") != nullptr;
         if (trace) {  // how the passes settle (or do not): compliance.md, session 32
@@ -877,7 +869,6 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         acc.rows_s += f.rows_s;
         acc.delassus_s += f.delassus_s;
         acc.lcp_s += f.lcp_s;
-        acc.gathers += f.gathers;
         const std::vector<std::pair<int, int>> end = crossings(f.candidate_u);
         std::vector<std::pair<int, int>> left;
         std::set_difference(end.begin(), end.end(), before.begin(), before.end(), std::back_inserter(left));
@@ -886,7 +877,6 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         f.rows_s = acc.rows_s;
         f.delassus_s = acc.delassus_s;
         f.lcp_s = acc.lcp_s;
-        f.gathers = acc.gathers;
         f.search_s = search_s;
         f.seconds = search_s + frames_s;
         if (left.empty() || round == 3) {

@@ -26,7 +26,6 @@
 /// ClipBody (less the barrier's d̂); run asynchronously, the frames use the newest linearisation the other core has
 /// finished, and how far they lag is the trade the benchmark (bench/bench_compliance.cpp) measures.
 #include <array>
-#include <cstdint>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -67,8 +66,6 @@ public:
     /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance (fem::condense:
     /// its own factorisation, the forward solve and SYRK).
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
-    /// Distinct for every linearisation made in this process (what a frame's gathered compliance was taken from).
-    std::uint64_t serial() const;
 
 private:
     struct Impl;
@@ -97,9 +94,6 @@ struct CompliantOptions {
     /// Passes per frame: each re-linearises the gaps where the last ended (a normal turns as its face moves), on the
     /// same compliance; they stop when the candidates move less than 1000 × tolerance_mm between two.
     int geometry_passes = 3;
-    /// Reuse the compliance the last pass or frame gathered on this linearisation while it covers the rows (the same
-    /// figures: tests compare with it off)
-    bool reuse_gathered = true;
     /// Coulomb friction between the blades and the tissue they press (a held clip only; 0: frictionless, as until
     /// session 32). aneusim's blades have 0.3 (scene patch.blade_friction).
     double blade_friction = 0;
@@ -116,10 +110,6 @@ struct CompliantWalls {
     Eigen::MatrixX3i faces;                   ///< triangles, in candidate numbering, normals towards the opposite wall
     std::vector<std::array<int, 2>> pairs;    ///< (vertex, face)
 };
-
-/// The compliance of the candidates a frame's rows touch, gathered into one contiguous block (compliance.cpp); kept
-/// by the frame so that its next passes and the next frames on the same linearisation need not gather it again.
-struct GatheredCompliance;
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {
@@ -147,11 +137,7 @@ struct CompliantFrame {
     /// Its parts [s], summed over passes (and a walls frame's repeats): making the rows, the Delassus matrix, the LCP
     /// (sweeps, pivoting, forces and displacements), and with the walls the pair search and crossing checks.
     double rows_s = 0, delassus_s = 0, lcp_s = 0, search_s = 0;
-    /// W on the candidates of the rows it was gathered for (this frame's last pass's, or an earlier pass's or frame's
-    /// that covered them): what the next pass or frame reuses while it covers their rows
-    std::shared_ptr<const GatheredCompliance> gathered;
-    int gathers = 0;                   ///< gatherings of it in this frame (0: every pass reused the last frame's)
-    int gathered_nodes = 0;            ///< the candidates in it
+    int pair_nodes = 0;                ///< the candidates the last pass's rows touch (its Delassus matrix reads W on their pairs)
     int refactors = 0;                 ///< LcpResult::refactors of the last pass
 };
 
