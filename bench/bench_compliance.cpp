@@ -18,6 +18,9 @@
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
 // or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction); --friction-cell: its cells [mm] (friction_cell_mm, 0: per node);
+// --quadratic-walls: the inner walls' faces split at their mid-edge nodes (aneusim's; default: the corner triangles);
+// --case: the case bundle (same mesh): after each mode's last frame, the neck's occlusion as aneusim measures it;
+// --lumen-obj: and the deformed lumen there as PREFIX_<refresh>.obj (bench/render_channel.py);
 // --max-frames: stop each mode there (with no
 // --checkpoints: no reference), for timing.
 // One JSON line per frame and mode, one per checkpoint, a summary line last (stdout, or --out).
@@ -28,6 +31,7 @@
 #include <fstream>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -43,7 +47,10 @@
 #include "aneu/fem/contact.hpp"
 #include "aneu/fem/static_solve.hpp"
 #include "aneu/fem/hyperelastic.hpp"
+#include "aneu/fem/assembly.hpp"
 #include "aneu/fem/patch.hpp"
+#include "aneu/sim/assessment.hpp"
+#include "aneu/sim/model.hpp"
 #include "bench_util.hpp"
 
 using namespace aneu;
@@ -80,15 +87,27 @@ int main(int argc, char** argv) {
     mallopt(M_TRIM_THRESHOLD, 1 << 30);
     if (argc < 3) {
         std::fprintf(stderr, "usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] "
-                             "[--checkpoints 8,5,3,1.89] [--patch-radius 1.5] [--reach 0.05] [--out FILE.jsonl]\n");
+                             "[--checkpoints 24,16,8,4,1.89] [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] "
+                             "[--friction 0] [--friction-cell 0] [--max-frames N] [--quadratic-walls] [--case CASE.h5 [--lumen-obj PREFIX]] [--out FILE.jsonl]\n");
         return 2;
     }
     double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0, friction_cell = 0;
     int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
+    bool quadratic_walls = false;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
-    std::string out_path;
-    for (int i = 3; i + 1 < argc; i += 2) {
-        const std::string k = argv[i], v = argv[i + 1];
+    std::string out_path, case_path, lumen_obj;
+    for (int i = 3; i < argc; i += 2) {
+        const std::string k = argv[i];
+        if (k == "--quadratic-walls") {
+            quadratic_walls = true;
+            --i;
+            continue;
+        }
+        if (i + 1 >= argc) {
+            std::fprintf(stderr, "aneu_bench_compliance: %s needs a value\n", k.c_str());
+            return 2;
+        }
+        const std::string v = argv[i + 1];
         if (k == "--end-deg") end_deg = std::stod(v);
         else if (k == "--hold") hold = std::stoi(v);
         else if (k == "--refresh") refresh = parse_list(v);
@@ -103,6 +122,8 @@ int main(int argc, char** argv) {
         else if (k == "--accept") accept = std::stod(v);
         else if (k == "--friction") friction = std::stod(v);
         else if (k == "--friction-cell") friction_cell = std::stod(v);
+        else if (k == "--case") case_path = v;
+        else if (k == "--lumen-obj") lumen_obj = v;
         else {
             std::fprintf(stderr, "aneu_bench_compliance: unknown option %s\n", k.c_str());
             return 2;
@@ -178,7 +199,24 @@ int main(int argc, char** argv) {
     const size_t blade_cand = cand.size();
     // The inner walls: the lumen's faces in the patch (the simulator's), and for the frames those whose corners lie
     // within 0.3 mm of the wedge (where the blades flatten the lumen), their corners candidates too.
-    const Eigen::MatrixXi Fin = fem::boundary_faces_in_set(vol.nodes, vol.tets, vol.node_sets.at("inner"));
+    const Eigen::MatrixXi F6 = fem::boundary_faces_in_set(vol.nodes, vol.tets, vol.node_sets.at("inner"));
+    // --quadratic-walls (10-node elements): each face split in four at its mid-edge nodes, as aneusim's patch pairs
+    // them (on the corner triangles alone the quadratic surface between them bulges through the opposite wall). On the
+    // sample's planned clip with friction 0.3 (session 33) the frames were solved exactly to frame 98 (up to 1,041 wall
+    // rows, 2.5 s a frame) and then broke down: at 1.89° 116 wall crossings, pivoting unfinished, 26 s and more a frame.
+    Eigen::MatrixX3i Fin;
+    if (quadratic_walls && F6.cols() == 6) {
+        Fin.resize(4 * F6.rows(), 3);
+        for (Eigen::Index f = 0; f < F6.rows(); ++f) {
+            const int c0 = F6(f, 0), c1 = F6(f, 1), c2 = F6(f, 2), m01 = F6(f, 3), m12 = F6(f, 4), m20 = F6(f, 5);
+            Fin.row(4 * f) << c0, m01, m20;
+            Fin.row(4 * f + 1) << m01, c1, m12;
+            Fin.row(4 * f + 2) << m20, m12, c2;
+            Fin.row(4 * f + 3) << m01, m12, m20;
+        }
+    } else {
+        Fin = F6.leftCols(3);
+    }
     std::vector<Eigen::Vector3i> inner_p, inner_near;
     for (Eigen::Index f = 0; f < Fin.rows(); ++f) {
         const int a = pm.local(Fin(f, 0)), b2 = pm.local(Fin(f, 1)), c = pm.local(Fin(f, 2));
@@ -226,6 +264,25 @@ int main(int argc, char** argv) {
           {"frames", frames.size()},
           {"step_deg", step / DEG}});
 
+    // --case: the case bundle's lumen, split at its mid-edge nodes (aneusim's measure with a 10-node patch).
+    std::optional<sim::SplitLumen> split;
+    int sac_region = -1;
+    if (!case_path.empty()) {
+        sim::LoadOptions lo;
+        lo.geometry_only = true;
+        const sim::SimModel sm = sim::load_model(case_path, lo);
+        if (sm.nodes.rows() != vol.nodes.rows()) {
+            std::fprintf(stderr, "%s: %lld nodes, the FEM bundle %lld: not the same mesh\n", case_path.c_str(), static_cast<long long>(sm.nodes.rows()),
+                         static_cast<long long>(vol.nodes.rows()));
+            return 2;
+        }
+        const fem::MidEdgeNodes mid(vol.tets);
+        split = vol.tets.cols() == 10 ? sim::split_lumen(sm.surface.lumen, [&](int a, int b) { return mid(a, b); }, vol.nodes)
+                                      : sim::SplitLumen{sm.surface.lumen, Eigen::MatrixX2i(0, 2)};
+        const auto& names = sm.surface.region_names;
+        const auto it = std::find(names.begin(), names.end(), "aneurysm");
+        sac_region = it == names.end() ? -1 : static_cast<int>(it - names.begin());
+    }
     std::vector<size_t> check_frames;
     for (double cd : checkpoints) {
         size_t fi = 0;
@@ -286,6 +343,31 @@ int main(int argc, char** argv) {
             if (std::find(check_frames.begin(), check_frames.end(), fi) != check_frames.end())
                 at_check[R][fi] = {0.5 * (f.loads.force_n[0] + f.loads.force_n[1]), f.candidate_u};
             emit(line);
+        }
+        if (!case_path.empty() && lin) {
+            // The neck's occlusion where the frames ended, measured as aneusim measures it (the quadratic lumen, the
+            // scene's 0.05 mm gap), every lumen vertex at its own node's displacement: the patch's, and the exterior's
+            // from the interface (PatchModel::full_displacement).
+            const Eigen::VectorXd full = pm.full_displacement(lin->displacement(f.candidate_forces));
+            const sim::SimLumen& Q = split->lumen;
+            Eigen::MatrixX3d y(Q.X.rows(), 3);
+            for (Eigen::Index l = 0; l < Q.X.rows(); ++l) y.row(l) = Q.X.row(l) + full.segment<3>(3 * Q.node[l]).transpose();
+            const sim::NeckOcclusion occ = sim::neck_occlusion(Q, y, 0.05, Q.wall_mm);
+            const sim::NeckChannel ch = sim::neck_channel(Q, y, sac_region);
+            emit({{"mode_refresh", R}, {"occlusion", {{"theta_deg", f.theta / DEG}, {"neck_closed_fraction", occ.fraction}, {"neck_length_mm", occ.length_mm},
+                                                      {"min_gap_mm", occ.min_gap_mm}, {"max_interpenetration_mm", occ.max_interpenetration_mm},
+                                                      {"channel_mm", ch.width_mm}, {"cut_off_fraction", sim::neck_cut_off_fraction(occ, ch, 0.05)}}}});
+            if (!lumen_obj.empty())
+                if (std::FILE* fo = std::fopen((lumen_obj + "_" + std::to_string(R) + ".obj").c_str(), "w")) {  // bench/render_channel.py's input
+                    for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
+                    for (Eigen::Index fc = 0; fc < Q.F.rows(); ++fc) std::fprintf(fo, "f %d %d %d\n", Q.F(fc, 0) + 1, Q.F(fc, 1) + 1, Q.F(fc, 2) + 1);
+                    for (size_t l = 0; l < occ.points.size(); ++l)
+                        for (size_t k = 0; k < occ.points[l].size(); ++k)
+                            std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
+                    for (size_t fc = 0; fc < ch.face_width_mm.size(); ++fc) std::fprintf(fo, "# width %zu %.6g\n", fc, ch.face_width_mm[fc]);
+                    std::fprintf(fo, "# channel %.6g %.6f %.6f %.6f\n", ch.width_mm, ch.at.x(), ch.at.y(), ch.at.z());
+                    std::fclose(fo);
+                }
         }
         summary["refresh_" + std::to_string(R)] = {{"frame_ms_p50", percentile(frame_ms, 0.5)},
                                                    {"frame_ms_p99", percentile(frame_ms, 0.99)},
