@@ -103,7 +103,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     }
     // W = (K0⁻¹)_CC by the condensation's sparse route (fem::condense: the forward solve L⁻¹ P E_C, whose columns
     // start at their pivots, then W = YᵀY by SYRK per supernode; its own factor, METIS on the node graph), stored in
-    // 3 x 3 node blocks, a column of blocks contiguous: a frame gathers the blocks of the candidates its rows touch, 72
+    // 3 x 3 node blocks, a column of blocks contiguous: a frame reads the blocks of the candidates its rows touch, 72
     // contiguous bytes each. (Before: 3|C| full forward and back substitutions with the factor above. The sample's
     // refresh, 1,448 candidates on 34,662 DOFs: compliance 12.7 -> 7.3 s, factorisation included; W equal to the
     // substitutions' (the test compares them column by column).)
