@@ -19,6 +19,7 @@
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
 // or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction); --friction-cell: its cells [mm] (friction_cell_mm, 0: per node);
 // --quadratic-walls: the inner walls' faces split at their mid-edge nodes (aneusim's; default: the corner triangles);
+// --wall-one-face: one wall row per vertex (CompliantOptions::wall_one_face);
 // --case: the case bundle (same mesh): after each mode's last frame, the neck's occlusion as aneusim measures it;
 // --lumen-obj: and the deformed lumen there as PREFIX_<refresh>.obj (bench/render_channel.py);
 // --max-frames: stop each mode there (with no
@@ -88,18 +89,18 @@ int main(int argc, char** argv) {
     if (argc < 3) {
         std::fprintf(stderr, "usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] "
                              "[--checkpoints 24,16,8,4,1.89] [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] "
-                             "[--friction 0] [--friction-cell 0] [--max-frames N] [--quadratic-walls] [--case CASE.h5 [--lumen-obj PREFIX]] [--out FILE.jsonl]\n");
+                             "[--friction 0] [--friction-cell 0] [--max-frames N] [--quadratic-walls] [--wall-one-face] [--case CASE.h5 [--lumen-obj PREFIX]] [--out FILE.jsonl]\n");
         return 2;
     }
     double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0, friction_cell = 0;
     int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
-    bool quadratic_walls = false;
+    bool quadratic_walls = false, wall_one_face = false;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
     std::string out_path, case_path, lumen_obj;
     for (int i = 3; i < argc; i += 2) {
         const std::string k = argv[i];
-        if (k == "--quadratic-walls") {
-            quadratic_walls = true;
+        if (k == "--quadratic-walls" || k == "--wall-one-face") {
+            (k == "--quadratic-walls" ? quadratic_walls : wall_one_face) = true;
             --i;
             continue;
         }
@@ -309,6 +310,7 @@ int main(int argc, char** argv) {
         co.accept_mm = accept;
         co.blade_friction = friction;
         co.friction_cell_mm = friction_cell;
+        co.wall_one_face = wall_one_face;
         fem::CompliantWallSearch cp;  // the walls' pair search, close vertices and crossings carried from frame to frame
         int refresh_failed = 0;
         for (size_t fi = 0; fi < frames.size(); ++fi) {

@@ -573,6 +573,10 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     int wall_rows = 0;
     double wall_min = std::numeric_limits<double>::infinity();
     if (walls) {
+        // With opt.wall_one_face, per vertex only its best row: of its faces within 0.02 mm of the nearest, the one its
+        // projection lies deepest inside (the largest smallest barycentric coordinate).
+        std::vector<std::pair<double, double>> score;  // per kept wall row: (d, inside), when filtering
+        const size_t wall_start = rows.size();
         for (const auto& [v, f] : walls->pairs) {
             if (v < 0 || v >= nc || f < 0 || f >= walls->faces.rows())
                 throw InputError("compliant clip: wall pair (" + std::to_string(v) + ", " + std::to_string(f) + ") outside the candidates or faces");
@@ -610,7 +614,27 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 r.d += r.g[static_cast<size_t>(a)].dot(Xf.row(r.k[static_cast<size_t>(a)]).transpose() - Xl.row(r.k[static_cast<size_t>(a)]).transpose());
             }
             rows.push_back(r);
+            score.emplace_back(d, std::min({b0, b1, b2}));
             ++wall_rows;
+        }
+        if (opt.wall_one_face && rows.size() > wall_start) {
+            std::map<int, double> nearest;  // vertex -> smallest d
+            for (size_t i = wall_start; i < rows.size(); ++i) {
+                auto [it, fresh] = nearest.try_emplace(rows[i].k[0], score[i - wall_start].first);
+                if (!fresh) it->second = std::min(it->second, score[i - wall_start].first);
+            }
+            std::map<int, size_t> best;  // vertex -> its row
+            for (size_t i = wall_start; i < rows.size(); ++i) {
+                const int v = rows[i].k[0];
+                if (score[i - wall_start].first > nearest[v] + 0.02) continue;
+                auto [it, fresh] = best.try_emplace(v, i);
+                if (!fresh && score[i - wall_start].second > score[it->second - wall_start].second) it->second = i;
+            }
+            std::vector<Row> kept(rows.begin(), rows.begin() + static_cast<std::ptrdiff_t>(wall_start));
+            for (size_t i = wall_start; i < rows.size(); ++i)
+                if (best[rows[i].k[0]] == i) kept.push_back(std::move(rows[i]));
+            wall_rows = static_cast<int>(kept.size() - wall_start);
+            rows = std::move(kept);
         }
     }
     const double t_rows = sw.seconds();
@@ -626,8 +650,9 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         // blocks of the rows' candidates were first gathered into one contiguous matrix, kept for the next pass or
         // frame where it still covered their rows, and A made from products with its columns. On the sample's planned
         // clip, frictionless, the pairs take the Delassus matrices' time over 111 frames from 0.95 to 0.58 s, frames
-        // with the walls pressed 42 -> 31 ms (median), held frames, which reused their block, 12 -> 17 ms. Storing W's
-        // blocks in the Z order of the candidates' places, so that those near the blades lie together, did not help.)
+        // with the walls pressed 42 -> 31 ms (median), the last held frames, which had reused their block, 12-17 ->
+        // 17-22 ms. Storing W's blocks in the Z order of the candidates' places, so that those near the blades lie
+        // together, did not help.)
         std::vector<int> local(static_cast<size_t>(nc), -1), nodes;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)

@@ -215,9 +215,10 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
         fem::CompliantFrame f;
         Eigen::VectorXd u;
     };
-    auto run = [&](bool with_walls) {
+    auto run = [&](bool with_walls, bool one_face = false) {
         fem::CompliantWallSearch cp;  // pairs, close vertices and crossings carried from frame to frame
-        const fem::CompliantOptions opt;
+        fem::CompliantOptions opt;
+        opt.wall_one_face = one_face;
         End e;
         e.u = Eigen::VectorXd::Zero(solid.dofs());
         e.f.theta = theta_touch;
@@ -255,8 +256,16 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
     // again as much force to close to the same gap.
     EXPECT_GT(with.f.loads.force_n[0], 1.5 * without.f.loads.force_n[0]);
     EXPECT_NEAR(with.f.loads.force_n[0], with.f.loads.force_n[1], 0.02 * with.f.loads.force_n[0]);  // symmetric
-    std::printf("tube: blade force %.4f N with the walls' contact (%d pairs pressed, %.4f N through them), %.4f N without\n",
-                with.f.loads.force_n[0], with.f.wall_contacts, with.f.wall_force_n, without.f.loads.force_n[0]);
+    // One wall row per vertex (CompliantOptions::wall_one_face): touching and not through as well, on fewer rows.
+    const End one = run(true, true);
+    EXPECT_LT(deepest(one.u), 1e-3);
+    EXPECT_EQ(one.f.wall_crossings, 0);
+    EXPECT_LE(one.f.complementarity_mm, 1e-9);
+    EXPECT_LT(one.f.wall_rows, with.f.wall_rows);
+    EXPECT_NEAR(one.f.loads.force_n[0], with.f.loads.force_n[0], 0.02 * with.f.loads.force_n[0]);
+    std::printf("tube: blade force %.4f N with the walls' contact (%d pairs pressed, %.4f N through them, %d rows; one face a vertex: %.4f N, %d rows), %.4f N without\n",
+                with.f.loads.force_n[0], with.f.wall_contacts, with.f.wall_force_n, with.f.wall_rows, one.f.loads.force_n[0], one.f.wall_rows,
+                without.f.loads.force_n[0]);
 }
 
 namespace {

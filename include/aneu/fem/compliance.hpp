@@ -98,9 +98,12 @@ struct CompliantOptions {
     /// session 32). aneusim's blades have 0.3 (scene patch.blade_friction).
     double blade_friction = 0;
     /// With friction: the pressed candidates of a blade share their two friction rows within square cells of this side
-    /// on the blade's face, each candidate's share of the cell's friction that of its normal force (compliance.cpp);
-    /// 0: two rows for every pressed candidate
+    /// on the blade's face, each candidate's share of the cell's friction that of its normal force (compliance.cpp;
+    /// BladeLoads::sliding then counts cells); 0: two rows for every pressed candidate
     double friction_cell_mm = 0;
+    /// One wall row per vertex: of the faces it lies over within 0.02 mm of the nearest, the one its projection lies
+    /// deepest inside (nearly parallel rows of one vertex over neighbouring faces make the LCP degenerate)
+    bool wall_one_face = false;
 };
 
 /// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
