@@ -359,17 +359,8 @@ int main(int argc, char** argv) {
             emit({{"mode_refresh", R}, {"occlusion", {{"theta_deg", f.theta / DEG}, {"neck_closed_fraction", occ.fraction}, {"neck_length_mm", occ.length_mm},
                                                       {"min_gap_mm", occ.min_gap_mm}, {"max_interpenetration_mm", occ.max_interpenetration_mm},
                                                       {"channel_mm", ch.width_mm}, {"cut_off_fraction", sim::neck_cut_off_fraction(occ, ch, 0.05)}}}});
-            if (!lumen_obj.empty())
-                if (std::FILE* fo = std::fopen((lumen_obj + "_" + std::to_string(R) + ".obj").c_str(), "w")) {  // bench/render_channel.py's input
-                    for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
-                    for (Eigen::Index fc = 0; fc < Q.F.rows(); ++fc) std::fprintf(fo, "f %d %d %d\n", Q.F(fc, 0) + 1, Q.F(fc, 1) + 1, Q.F(fc, 2) + 1);
-                    for (size_t l = 0; l < occ.points.size(); ++l)
-                        for (size_t k = 0; k < occ.points[l].size(); ++k)
-                            std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
-                    for (size_t fc = 0; fc < ch.face_width_mm.size(); ++fc) std::fprintf(fo, "# width %zu %.6g\n", fc, ch.face_width_mm[fc]);
-                    std::fprintf(fo, "# channel %.6g %.6f %.6f %.6f\n", ch.width_mm, ch.at.x(), ch.at.y(), ch.at.z());
-                    std::fclose(fo);
-                }
+            if (!lumen_obj.empty() && !sim::write_lumen_obj(lumen_obj + "_" + std::to_string(R) + ".obj", Q, y, occ, ch))
+                std::fprintf(stderr, "%s_%d.obj: cannot write\n", lumen_obj.c_str(), R);
         }
         summary["refresh_" + std::to_string(R)] = {{"frame_ms_p50", percentile(frame_ms, 0.5)},
                                                    {"frame_ms_p99", percentile(frame_ms, 0.99)},

@@ -482,6 +482,19 @@ double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channe
     return len > 0 ? cut / len : -1.0;
 }
 
+bool write_lumen_obj(const std::string& path, const SimLumen& lumen, const Eigen::MatrixX3d& y, const NeckOcclusion& occ, const NeckChannel& channel) {
+    std::FILE* fo = std::fopen(path.c_str(), "w");
+    if (!fo) return false;
+    for (Eigen::Index v = 0; v < y.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", y(v, 0), y(v, 1), y(v, 2));
+    for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) std::fprintf(fo, "f %d %d %d\n", lumen.F(f, 0) + 1, lumen.F(f, 1) + 1, lumen.F(f, 2) + 1);
+    for (size_t l = 0; l < occ.points.size(); ++l)
+        for (size_t k = 0; k < occ.points[l].size(); ++k)
+            std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
+    for (size_t f = 0; f < channel.face_width_mm.size(); ++f) std::fprintf(fo, "# width %zu %.6g\n", f, channel.face_width_mm[f]);
+    std::fprintf(fo, "# channel %.6g %.6f %.6f %.6f\n", channel.width_mm, channel.at.x(), channel.at.y(), channel.at.z());
+    return std::fclose(fo) == 0;
+}
+
 Assessment Simulator::Impl::assess() {
     Assessment out = a;
     out.total_time_s = t_phys;
@@ -557,19 +570,7 @@ Assessment Simulator::Impl::assess() {
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
     // Debugging and pictures (bench/render_channel.py): the deformed lumen as a Wavefront OBJ, the neck line's points, the
     // faces' widths and the channel listed after it as comments.
-    if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) {
-        if (std::FILE* fo = std::fopen(obj, "w")) {
-            for (Eigen::Index v = 0; v < ym.rows(); ++v) std::fprintf(fo, "v %.6f %.6f %.6f\n", ym(v, 0), ym(v, 1), ym(v, 2));
-            for (Eigen::Index f = 0; f < measured.F.rows(); ++f)
-                std::fprintf(fo, "f %d %d %d\n", measured.F(f, 0) + 1, measured.F(f, 1) + 1, measured.F(f, 2) + 1);
-            for (size_t l = 0; l < occ.points.size(); ++l)
-                for (size_t k = 0; k < occ.points[l].size(); ++k)
-                    std::fprintf(fo, "# neck %zu %.6f %.6f %.6f %.6g\n", l, occ.points[l][k].x(), occ.points[l][k].y(), occ.points[l][k].z(), occ.gap_mm[l][k]);
-            for (size_t f = 0; f < channel.face_width_mm.size(); ++f) std::fprintf(fo, "# width %zu %.6g\n", f, channel.face_width_mm[f]);
-            std::fprintf(fo, "# channel %.6g %.6f %.6f %.6f\n", channel.width_mm, channel.at.x(), channel.at.y(), channel.at.z());
-            std::fclose(fo);
-        }
-    }
+    if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) write_lumen_obj(obj, measured, ym, occ, channel);
     // The neck line lying between the jaws of a closed clip (where the clip is, not what it achieved).
     double total = 0, closed = 0;
     for (const auto& loop : model.surface.neck_loops) {

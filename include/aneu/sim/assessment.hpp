@@ -3,6 +3,7 @@
 /// @file
 /// Measures of a clipping's result on the deformed vessel (sim/assessment.cpp).
 #include <limits>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -93,5 +94,10 @@ std::vector<double> widest_reach(const Eigen::MatrixX3i& F, const std::vector<do
 /// border open can still seal the sac, and a border closed everywhere can leave a channel round a fold.
 NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm = 2.0, double clear_mm = 1.0,
                          double measure_mm = 6.0);
+
+/// Writes the deformed lumen `y` (SimLumen::X's rows) as a Wavefront OBJ with the neck line's points and gaps, the faces'
+/// widths and the channel after it as comments: what bench/render_channel.py draws (`ANEU_LUMEN_OBJ`, aneu_bench_compliance).
+/// False where the file cannot be written.
+bool write_lumen_obj(const std::string& path, const SimLumen& lumen, const Eigen::MatrixX3d& y, const NeckOcclusion& occ, const NeckChannel& channel);
 
 }  // namespace aneu::sim
