@@ -14,10 +14,12 @@
 // at --checkpoints openings, each solved from the last.
 //
 // Usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] [--checkpoints 24,16,8,4,1.89]
-//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] [--friction 0] [--friction-cell 0] [--max-frames N] [--out FILE.jsonl]
+//                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4]
+//                              [--friction 0] [--friction-cell 0] [--max-frames N] [--out FILE.jsonl]
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
-// or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction); --friction-cell: its cells [mm] (friction_cell_mm, 0: per node);
+// or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction);
+// --friction-cell: its cells [mm] (friction_cell_mm, 0: per node);
 // --quadratic-walls: the inner walls' faces split at their mid-edge nodes (aneusim's; default: the corner triangles);
 // --wall-one-face: one wall row per vertex (CompliantOptions::wall_one_face);
 // --case: the case bundle (same mesh): after each mode's last frame, the neck's occlusion as aneusim measures it;
@@ -205,6 +207,7 @@ int main(int argc, char** argv) {
     // them (on the corner triangles alone the quadratic surface between them bulges through the opposite wall). On the
     // sample's planned clip with friction 0.3 (session 33) the frames were solved exactly to frame 98 (up to 1,041 wall
     // rows, 2.5 s a frame) and then broke down: at 1.89° 116 wall crossings, pivoting unfinished, 26 s and more a frame.
+    // With --wall-one-face they hold through full closure (2-4 s a frame; compliance.md, session 33).
     Eigen::MatrixX3i Fin;
     if (quadratic_walls && F6.cols() == 6) {
         Fin.resize(4 * F6.rows(), 3);
