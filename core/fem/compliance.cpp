@@ -510,11 +510,13 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     };
     std::vector<Cell> cells;
     std::map<std::array<long long, 3>, size_t> cell_of;
-    std::array<Eigen::Vector3d, 2> ft, fw;  // the blades' directions along and across where they are now
-    {
-        Eigen::Vector3d n;
-        blades.frame(1, theta_ref, ft[0], n, fw[0]);
-        blades.frame(-1, theta_ref, ft[1], n, fw[1]);
+    // Per blade (side 0: +1, 1: −1) its directions along, normal to and across it where the frame started (0) and now.
+    std::array<Eigen::Vector3d, 2> ft0, fn0, fw0, ft, fn, fw;
+    for (int side = 0; side < 2; ++side) {
+        const int s = side == 0 ? 1 : -1;
+        const size_t i = static_cast<size_t>(side);
+        blades.frame(s, std::max(theta_start, 0.0), ft0[i], fn0[i], fw0[i]);
+        blades.frame(s, theta_ref, ft[i], fn[i], fw[i]);
     }
     for (Eigen::Index k = 0; k < nc; ++k) {
         const Eigen::Vector3d x = Xl.row(k).transpose();
@@ -531,12 +533,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             rows.push_back(r);
             if (const auto it = pressed.find({static_cast<int>(k), s}); it != pressed.end()) {
                 const int side = s > 0 ? 0 : 1;
-                Eigen::Vector3d t0, n0, w0;
-                blades.frame(s, std::max(theta_start, 0.0), t0, n0, w0);
+                const size_t i = static_cast<size_t>(side);
+                const Eigen::Vector3d& t0 = ft0[i];
+                const Eigen::Vector3d& w0 = fw0[i];
                 const Eigen::Vector3d rel = Xs.row(k).transpose() - blades.hinge;
-                Eigen::Vector3d t, n, w;
-                blades.frame(s, theta_ref, t, n, w);
-                const Eigen::Vector3d stick = blades.hinge + rel.dot(t0) * t + rel.dot(w0) * w + rel.dot(n0) * n;
+                const Eigen::Vector3d stick = blades.hinge + rel.dot(t0) * ft[i] + rel.dot(w0) * fw[i] + rel.dot(fn0[i]) * fn[i];
                 const double h = opt.friction_cell_mm;
                 const std::array<long long, 3> key = h > 0 ? std::array<long long, 3>{side, static_cast<long long>(std::floor(rel.dot(t0) / h)), static_cast<long long>(std::floor(rel.dot(w0) / h))}
                                                            : std::array<long long, 3>{side, static_cast<long long>(k), 0};
@@ -618,23 +619,25 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             ++wall_rows;
         }
         if (opt.wall_one_face && rows.size() > wall_start) {
-            std::map<int, double> nearest;  // vertex -> smallest d
+            std::vector<double> nearest(static_cast<size_t>(nc), std::numeric_limits<double>::infinity());  // per vertex: its smallest d
             for (size_t i = wall_start; i < rows.size(); ++i) {
-                auto [it, fresh] = nearest.try_emplace(rows[i].k[0], score[i - wall_start].first);
-                if (!fresh) it->second = std::min(it->second, score[i - wall_start].first);
+                double& dn = nearest[static_cast<size_t>(rows[i].k[0])];
+                dn = std::min(dn, score[i - wall_start].first);
             }
-            std::map<int, size_t> best;  // vertex -> its row
+            std::vector<long long> best(static_cast<size_t>(nc), -1);  // per vertex: its row
             for (size_t i = wall_start; i < rows.size(); ++i) {
-                const int v = rows[i].k[0];
+                const size_t v = static_cast<size_t>(rows[i].k[0]);
                 if (score[i - wall_start].first > nearest[v] + 0.02) continue;
-                auto [it, fresh] = best.try_emplace(v, i);
-                if (!fresh && score[i - wall_start].second > score[it->second - wall_start].second) it->second = i;
+                if (best[v] < 0 || score[i - wall_start].second > score[static_cast<size_t>(best[v]) - wall_start].second) best[v] = static_cast<long long>(i);
             }
-            std::vector<Row> kept(rows.begin(), rows.begin() + static_cast<std::ptrdiff_t>(wall_start));
+            size_t w = wall_start;  // the kept rows moved down in place
             for (size_t i = wall_start; i < rows.size(); ++i)
-                if (best[rows[i].k[0]] == i) kept.push_back(std::move(rows[i]));
-            wall_rows = static_cast<int>(kept.size() - wall_start);
-            rows = std::move(kept);
+                if (best[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i)) {
+                    if (w != i) rows[w] = std::move(rows[i]);
+                    ++w;
+                }
+            rows.resize(w);
+            wall_rows = static_cast<int>(w - wall_start);
         }
     }
     const double t_rows = sw.seconds();
