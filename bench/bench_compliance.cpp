@@ -15,7 +15,7 @@
 //
 // Usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] [--checkpoints 24,16,8,4,1.89]
 //                              [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4]
-//                              [--friction 0] [--friction-cell 0] [--max-frames N] [--out FILE.jsonl]
+//                              [--friction 0] [--friction-cell 0] [--hold-refresh 0] [--max-frames N] [--out FILE.jsonl]
 // --passes: geometry passes per frame (CompliantOptions::geometry_passes); --sweeps, --pivots: the LCP's sweeps before
 // pivoting and its pivoting solves at most (max_sweeps, max_pivots); --accept: further sweeps (at most 100) until no gap
 // or complementarity is off by more than this [mm] (accept_mm); --friction: the blades' Coulomb friction (blade_friction);
@@ -24,6 +24,8 @@
 // --wall-one-face: one wall row per vertex (CompliantOptions::wall_one_face);
 // --case: the case bundle (same mesh): after each mode's last frame, the neck's occlusion as aneusim measures it;
 // --lumen-obj: and the deformed lumen there as PREFIX_<refresh>.obj (bench/render_channel.py);
+// --hold-refresh K: while held, refresh every K frames as well (1: a Newton step a frame at the held opening, which
+// converges on the nonlinear model's equilibrium with the hard contact);
 // --max-frames: stop each mode there (with no
 // --checkpoints: no reference), for timing.
 // One JSON line per frame and mode, one per checkpoint, a summary line last (stdout, or --out).
@@ -91,11 +93,11 @@ int main(int argc, char** argv) {
     if (argc < 3) {
         std::fprintf(stderr, "usage: aneu_bench_compliance FEM.h5 PLAN.json [--end-deg 1.89] [--hold 10] [--refresh 0,10] "
                              "[--checkpoints 24,16,8,4,1.89] [--patch-radius 1.5] [--reach 0.05] [--passes 3] [--sweeps 4] [--pivots 200] [--accept 1e-4] "
-                             "[--friction 0] [--friction-cell 0] [--max-frames N] [--quadratic-walls] [--wall-one-face] [--case CASE.h5 [--lumen-obj PREFIX]] [--out FILE.jsonl]\n");
+                             "[--friction 0] [--friction-cell 0] [--hold-refresh 0] [--max-frames N] [--quadratic-walls] [--wall-one-face] [--case CASE.h5 [--lumen-obj PREFIX]] [--out FILE.jsonl]\n");
         return 2;
     }
     double end_deg = 1.89, patch_radius = 1.5, reach = 0.05, accept = 1e-4, friction = 0, friction_cell = 0;
-    int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200;
+    int hold = 10, max_frames = 0, passes = 3, sweeps = 4, pivots = 200, hold_refresh = 0;
     bool quadratic_walls = false, wall_one_face = false;
     std::vector<double> refresh{0, 10}, checkpoints{24, 16, 8, 4, 1.89};
     std::string out_path, case_path, lumen_obj;
@@ -113,6 +115,7 @@ int main(int argc, char** argv) {
         const std::string v = argv[i + 1];
         if (k == "--end-deg") end_deg = std::stod(v);
         else if (k == "--hold") hold = std::stoi(v);
+        else if (k == "--hold-refresh") hold_refresh = std::stoi(v);
         else if (k == "--refresh") refresh = parse_list(v);
         else if (k == "--checkpoints") checkpoints = parse_list(v);
         else if (k == "--patch-radius") patch_radius = std::stod(v);
@@ -318,7 +321,8 @@ int main(int argc, char** argv) {
         int refresh_failed = 0;
         for (size_t fi = 0; fi < frames.size(); ++fi) {
             if (max_frames > 0 && static_cast<int>(fi) >= max_frames) break;
-            if (!lin || (R > 0 && since >= R)) {
+            const bool held_frame = fi + static_cast<size_t>(hold) + 1 >= frames.size();
+            if (!lin || (R > 0 && since >= R) || (held_frame && hold_refresh > 0 && since >= hold_refresh)) {
                 // The state the frames reached (one back substitution), linearised there. A state the lagging
                 // frames took past an element's inversion cannot be: the frames go on with the old linearisation.
                 const Eigen::VectorXd un = lin ? lin->displacement(f.candidate_forces) : u;

@@ -551,6 +551,14 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                                     {"min_wall_distance_mm", std::isfinite(p.min_wall_distance_mm) ? nlohmann::json(p.min_wall_distance_mm) : nlohmann::json()},
                                     {"wall_pairs_touching", p.wall_pairs_touching}, {"wall_resolves", p.wall_resolves},
                                     {"restarts", p.restarts}});
+        if (scene.patch.solver == PatchSpec::Solver::COMPLIANCE)
+            for (size_t k = 0; k < a.patches.size(); ++k) {
+                const auto& p = a.patches[k];
+                j["patches"][k]["solver"] = "compliance";
+                j["patches"][k]["linearisations"] = p.linearisations;
+                j["patches"][k]["linearise_s"] = p.linearise_s;
+                j["patches"][k]["linearisations_failed"] = p.linearisations_failed;
+            }
     }
     j["skipped_inputs"] = a.skipped_inputs;
     j["physics_frames"] = a.frames;

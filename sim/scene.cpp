@@ -240,6 +240,8 @@ Scene read_scene(const std::string& path) {
         s.patch.tolerance = o.num("tolerance", s.patch.tolerance, 1e-14, 1e-1);
         s.patch.wall_contact = o.flag("wall_contact", s.patch.wall_contact);
         s.patch.blade_friction = o.num("blade_friction", s.patch.blade_friction, 0, 5);
+        s.patch.solver = o.choice("patch_solver", {"newton", "compliance"}) == 0 ? PatchSpec::Solver::NEWTON : PatchSpec::Solver::COMPLIANCE;
+        s.patch.refresh_frames = static_cast<int>(o.num("refresh_frames", s.patch.refresh_frames, 0, 1e6));
         o.done();
     }
     if (top.has("haptic")) {

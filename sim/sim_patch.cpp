@@ -475,8 +475,102 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             }
             return res;
         };
+        // PatchSpec::Solver::COMPLIANCE: the frame on the patch's linearisation (made at its first frame, again every
+        // refresh_frames frames at the state reached): the blades' contact (with friction) and the inner walls' (one
+        // row a vertex, on the quadratic surface with 10-node elements) hard, as a complementarity problem on the
+        // compliance of the nodes they can touch (fem::solve_compliant_clip_walls). A held clip stands at the applier's
+        // opening unless the tissue pushes it open harder than its spring closes it (the applier only holds a clip
+        // open); a released spring clip's opening is an unknown of the frame, at the balance of spring and tissue.
+        const bool compliance = scene.patch.solver == PatchSpec::Solver::COMPLIANCE;
+        auto compliant_frame = [&]() {
+            fem::NewtonResult res;
+            res.u = v0;
+            std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
+            const Eigen::VectorXd u0 = v0.head(nb);
+            if (!C) {
+                // The nodes the blades can reach as they close from here (within 0.1 mm of their wedge), and the inner
+                // walls they flatten (faces whose corners lie within 0.3 mm of it), the faces' corners candidates too
+                // (aneu_bench_compliance's rule).
+                C = std::make_shared<PatchRun::Compliant>();
+                const double th = v0[nb];
+                auto at = [&](int a) { return Eigen::Vector3d(P.X.row(a).transpose() + u0.segment<3>(3 * static_cast<Eigen::Index>(a))); };
+                std::vector<int> slot(pm.nodes().size(), -1);
+                for (int a : P.cand)
+                    if (slot[static_cast<size_t>(a)] < 0 && blades.near_wedge(th, at(a), 0.1)) {
+                        slot[static_cast<size_t>(a)] = static_cast<int>(C->cand.size());
+                        C->cand.push_back(a);
+                    }
+                std::vector<Eigen::Vector3i> near;
+                if (scene.patch.wall_contact)
+                    for (Eigen::Index f = 0; f < P.inner.rows(); ++f)
+                        if (blades.near_wedge(th, at(P.inner(f, 0)), 0.3) && blades.near_wedge(th, at(P.inner(f, 1)), 0.3) &&
+                            blades.near_wedge(th, at(P.inner(f, 2)), 0.3))
+                            near.emplace_back(P.inner.row(f).transpose());
+                C->faces.resize(static_cast<Eigen::Index>(near.size()), 3);
+                for (size_t f = 0; f < near.size(); ++f)
+                    for (int k = 0; k < 3; ++k) {
+                        int& sl = slot[static_cast<size_t>(near[f][k])];
+                        if (sl < 0) {
+                            sl = static_cast<int>(C->cand.size());
+                            C->cand.push_back(near[f][k]);
+                        }
+                        C->faces(static_cast<Eigen::Index>(f), k) = sl;
+                    }
+                C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
+                for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
+            }
+            if (!C->lin || (scene.patch.refresh_frames > 0 && C->since >= scene.patch.refresh_frames)) {
+                const Stopwatch lw;
+                try {
+                    C->lin = std::make_unique<fem::Linearisation>(pm, P.X, pm.fixed_dofs(), u0, C->cand);
+                    ++P.stats.linearisations;
+                } catch (const NumericalError&) {
+                    // An element the frames took past inversion: this state cannot be linearised. The frames go on
+                    // with the last linearisation (a first one that fails ends the run).
+                    if (!C->lin) throw;
+                    ++P.stats.linearisations_failed;
+                }
+                P.stats.linearise_s += lw.seconds();
+                C->since = 0;
+            }
+            fem::CompliantOptions co;
+            co.blade_friction = scene.patch.blade_friction;
+            co.wall_one_face = true;
+            const double th0 = v0[nb];
+            std::optional<double> hold;
+            if (held) hold = th0 + std::clamp(theta_applier - th0, -step_max, step_max);
+            else if (!cm.spring) hold = c.opening_deg * DEG;
+            int repeats = 0;
+            auto solve = [&](std::optional<double> h, const fem::CompliantFrame* warm) {
+                int rep = 0;
+                fem::CompliantFrame f = C->faces.rows() > 0
+                                            ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, h, th0, warm, co, &rep)
+                                            : fem::solve_compliant_clip(*C->lin, blades, spring, h, th0, warm, co);
+                repeats += rep;
+                return f;
+            };
+            fem::CompliantFrame f = solve(hold, C->warm ? &C->last : nullptr);
+            if (held && cm.spring && 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]) > f.loads.spring_torque_nmm) f = solve(std::nullopt, &f);
+            res.u.head(nb) = C->lin->displacement(f.candidate_forces);
+            res.u[nb] = f.theta;
+            res.iterations = f.passes;
+            res.converged = f.complementarity_mm <= 1e-3;
+            if (!res.converged) res.failure = "complementarity " + std::to_string(f.complementarity_mm) + " mm left";
+            loads = f.loads;
+            wall_min = f.wall_min_distance_mm;
+            touching = f.wall_contacts;
+            P.stats.wall_resolves += repeats;
+            its += f.passes;
+            C->last = std::move(f);
+            C->warm = true;
+            ++C->since;
+            return res;
+        };
         fem::NewtonResult r;
-        if (scene.patch.wall_contact && P.inner.rows() > 0) {
+        if (compliance) {
+            r = compliant_frame();
+            P.course.theta_bal = r.u[nb];
+        } else if (scene.patch.wall_contact && P.inner.rows() > 0) {
             fem::ContactParams cp;
             cp.stiffness = P.kappa_wall;
             cp.pattern_cache = P.wall_patterns;

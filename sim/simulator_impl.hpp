@@ -21,6 +21,7 @@
 
 #include "aneu/core/common.hpp"
 #include "aneu/fem/clip.hpp"
+#include "aneu/fem/compliance.hpp"
 #include "aneu/fem/patch.hpp"
 #include "aneu/sim/simulator.hpp"
 
@@ -162,6 +163,19 @@ struct Simulator::Impl {
             double theta_step = std::numeric_limits<double>::infinity();
         } course;
         bool alive = true;                    // false once its clip fell away
+        /// PatchSpec::Solver::COMPLIANCE: the linearisation the frames solve on and what they carry between frames
+        /// (made at the first frame, again every refresh_frames frames and when the patch is remade).
+        struct Compliant {
+            std::unique_ptr<fem::Linearisation> lin;
+            Eigen::MatrixX3d Xc;              // its candidates' rest positions (patch nodes: Compliant::cand)
+            std::vector<int> cand;            // the blades' candidates, then the wall faces' other corners
+            Eigen::MatrixX3i faces;           // the inner walls near the jaws, in candidate numbering
+            fem::CompliantWallSearch search;
+            fem::CompliantFrame last;         // the warm start
+            bool warm = false;
+            int since = 0;                    // frames solved on lin
+        };
+        std::shared_ptr<Compliant> compliant;
         Assessment::PatchEnd stats;
         double iterations_sum = 0, solve_ms_sum = 0;
     };

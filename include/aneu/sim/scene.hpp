@@ -107,6 +107,15 @@ struct PatchSpec {
     /// serrated to hold; frictionless blades of a hinged clip squeeze a pressed vessel out of the V, which has no
     /// static equilibrium.
     double blade_friction = 0.3;
+    /// How a frame is solved. NEWTON: the neo-Hookean patch with the blades' and walls' barriers, a warm-started
+    /// Newton solve a frame. COMPLIANCE (issue #15, the rate acceptance): hard contact (blades with friction, the inner
+    /// walls one row a vertex on the quadratic surface) solved as a linear complementarity problem on the patch's
+    /// compliance at a linearisation (fem::Linearisation, solve_compliant_clip_walls): the linear model's stiffness
+    /// about where the patch was linearised, remade every `refresh_frames` frames at the state reached.
+    enum class Solver { NEWTON, COMPLIANCE } solver = Solver::NEWTON;
+    /// COMPLIANCE: frames between linearisations (0: the one made with the patch, where it starts). Each is a Newton
+    /// step of the nonlinear patch with the contact, made in the frame's thread (seconds on the sample).
+    int refresh_frames = 0;
 };
 
 struct Scene {

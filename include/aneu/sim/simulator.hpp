@@ -130,6 +130,11 @@ struct Assessment {
         /// Second unconverged frames in a row: the patch went back to the last converged frame's state and the
         /// opening's change a frame was halved (sim_patch.cpp)
         long restarts = 0;
+        /// PatchSpec::Solver::COMPLIANCE: linearisations made (the first, refreshes, remade patches) and their time
+        int linearisations = 0;
+        double linearise_s = 0;
+        int linearisations_failed = 0;       ///< refreshes refused (an element inverted at the state reached): the frames
+                                             ///< went on with the last one
     };
     std::vector<PatchEnd> patches;
     long frames = 0, haptic_ticks = 0;
