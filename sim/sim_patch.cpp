@@ -8,7 +8,8 @@
 // spring, the balance of spring and tissue that the frames approach, never below what the applier holds open)
 // and the inner walls' contact (fem::ContactBody) in one Newton problem, warm-started from the last frame. The
 // rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
-// solve's).
+// solve's). With PatchSpec::Solver::COMPLIANCE a frame is instead the hard contact of blades and walls on the
+// patch's compliance at a linearisation (fem::solve_compliant_clip_walls), remade every refresh_frames frames.
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -684,6 +685,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         cl.opening_deg = theta / DEG;
         if (held && cm.spring) cl.spring_deg = P.course.theta_bal / DEG;
         cl.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
+        cl.friction_n = 0.5 * (loads.friction_n[0] + loads.friction_n[1]);
         cl.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
         cl.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
         P.force = net;

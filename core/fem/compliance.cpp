@@ -488,7 +488,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         for (Eigen::Index k = 0; k < nc; ++k) Xl.row(k) += (warm->candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
     Eigen::MatrixX3d Xs = Xf;  // where the frame started
     for (Eigen::Index k = 0; k < nc; ++k) Xs.row(k) += (start.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
-    // Friction (opt.blade_friction, a held clip): a candidate the last pass or frame pressed on a blade with normal force
+    // Friction (opt.blade_friction): a candidate the last pass or frame pressed on a blade with normal force
     // λ_n is held where it stood on that blade when the frame started (carried by the blade's turn since), by tangential
     // rows whose forces stay within ±μ λ_n (Coulomb's box; λ_n from the last pass: the passes iterate on it).
     // With opt.friction_cell_mm > 0 the pressed candidates of a blade are gathered in square cells of the blade's face
@@ -499,7 +499,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // Not followed: the hinge's own motion within the frame (the stick point turns with the blade about where the hinge
     // is now), and the friction forces' small moment about the hinge (the loads' moment is the normal forces').
     std::map<std::pair<int, int>, double> pressed;
-    if (opt.blade_friction > 0 && theta_held && warm)
+    if (opt.blade_friction > 0 && warm)
         for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i)
             if ((warm->constraint[i].second == 1 || warm->constraint[i].second == -1) && warm->lambda[i] > 0) pressed[warm->constraint[i]] = warm->lambda[i];
     struct Cell {

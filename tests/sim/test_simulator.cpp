@@ -873,6 +873,9 @@ TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalances
         EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
         EXPECT_GT(c.spring_torque_nmm, 0);
         EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-6 * c.spring_torque_nmm);
+        // Released, the blades still hold the tissue by friction (a released clip's frames had none until session 34:
+        // the sample's neck then slid out from between the jaws as the spring took over).
+        EXPECT_GT(s.clips().at(0).friction_n, 0.01 * c.grip_force_n);
         if (run == 0)
             std::printf("compliance frames, released: open %.3f deg (held at %.3f), spring %.5f N mm, tissue %.5f N mm, grip %.4f N\n", c.opening_deg,
                         FLAT_END_DEG, c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n);

@@ -94,8 +94,10 @@ struct CompliantOptions {
     /// Passes per frame: each re-linearises the gaps where the last ended (a normal turns as its face moves), on the
     /// same compliance; they stop when the candidates move less than 1000 × tolerance_mm between two.
     int geometry_passes = 3;
-    /// Coulomb friction between the blades and the tissue they press (a held clip only; 0: frictionless, as until
-    /// session 32). aneusim's blades have 0.3 (scene patch.blade_friction).
+    /// Coulomb friction between the blades and the tissue they press (0: frictionless, as until session 32); held or
+    /// released (a released clip's friction rows do not follow θ within the frame: a stick point on a blade face moves
+    /// along it by (closed gap / 2) Δθ / 2 as the blade turns, 0 for blades that close flat). aneusim's blades have
+    /// 0.3 (scene patch.blade_friction).
     double blade_friction = 0;
     /// With friction: the pressed candidates of a blade share their two friction rows within square cells of this side
     /// on the blade's face, each candidate's share of the cell's friction that of its normal force (compliance.cpp;

@@ -41,6 +41,7 @@ struct Clip {
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< translation since release (moves with the vessel)
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();  ///< Σ contact forces on the vessel [N]
     double grip_force_n = 0.0;      ///< ½ Σ |f_i| over its nodes [N]
+    double friction_n = 0.0;        ///< the blades' friction on the tissue, mean over the two [N] (a patch's clip)
     int n_nodes = 0;
 };
 
