@@ -479,9 +479,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // PatchSpec::Solver::COMPLIANCE: the frame on the patch's linearisation (made at its first frame, again every
         // refresh_frames frames at the state reached): the blades' contact (with friction) and the inner walls' (one
         // row a vertex, on the quadratic surface with 10-node elements) hard, as a complementarity problem on the
-        // compliance of the nodes they can touch (fem::solve_compliant_clip_walls). A held clip stands at the applier's
-        // opening unless the tissue pushes it open harder than its spring closes it (the applier only holds a clip
-        // open); a released spring clip's opening is an unknown of the frame, at the balance of spring and tissue.
+        // compliance of the nodes they can touch (fem::solve_compliant_clip_walls). The opening is held at theta_kept, as
+        // in the Newton frames: a spring clip's balance is approached by the same secant steps on R = τ − M. (With θ an
+        // unknown of the frame, at the balance (the compliance frames' released clip), the sample's held clip, pushed open
+        // past the applier, swung 3.2 -> 5.8 -> 4.6 -> 5.5 deg in successive frames and its walls went 4-5 mm through each
+        // other: each frame's blades linearised where the last one left them.)
         const bool compliance = scene.patch.solver == PatchSpec::Solver::COMPLIANCE;
         auto compliant_frame = [&]() {
             fem::NewtonResult res;
@@ -538,22 +540,14 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             co.blade_friction = scene.patch.blade_friction;
             co.wall_one_face = true;
             const double th0 = v0[nb];
-            std::optional<double> hold;
-            if (held) hold = th0 + std::clamp(theta_applier - th0, -step_max, step_max);
-            else if (!cm.spring) hold = c.opening_deg * DEG;
             int repeats = 0;
-            auto solve = [&](std::optional<double> h, const fem::CompliantFrame* warm) {
-                int rep = 0;
-                fem::CompliantFrame f = C->faces.rows() > 0
-                                            ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, h, th0, warm, co, &rep)
-                                            : fem::solve_compliant_clip(*C->lin, blades, spring, h, th0, warm, co);
-                repeats += rep;
-                return f;
-            };
-            fem::CompliantFrame f = solve(hold, C->warm ? &C->last : nullptr);
-            if (held && cm.spring && 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]) > f.loads.spring_torque_nmm) f = solve(std::nullopt, &f);
+            const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
+            fem::CompliantFrame f = C->faces.rows() > 0
+                                        ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
+                                        : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
             res.u.head(nb) = C->lin->displacement(f.candidate_forces);
             res.u[nb] = f.theta;
+            res.reaction = Eigen::VectorXd::Constant(1, f.loads.spring_torque_nmm - 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]));
             res.iterations = f.passes;
             res.converged = f.complementarity_mm <= 1e-3;
             if (!res.converged) res.failure = "complementarity " + std::to_string(f.complementarity_mm) + " mm left";
@@ -570,7 +564,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         fem::NewtonResult r;
         if (compliance) {
             r = compliant_frame();
-            P.course.theta_bal = r.u[nb];
         } else if (scene.patch.wall_contact && P.inner.rows() > 0) {
             fem::ContactParams cp;
             cp.stiffness = P.kappa_wall;

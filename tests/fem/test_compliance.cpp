@@ -525,6 +525,22 @@ TEST(CompliantClip, BladeFrictionHoldsANodeWithinTheLimitAndLetsItSlideBeyond) {
             EXPECT_NEAR(f.loads.friction_n[0], MU * Fn, 1e-6 * Fn);
             EXPECT_EQ(f.loads.sliding[0], 1);
         }
+        if (ratio < 1) {
+            // Released there (θ free on the spring): the blades still grip. The frames settle on the spring's balance
+            // with the node held across the blade where it stood (the across direction is the hinge's: the blade's
+            // turn does not move a stick point across it), while the pull stays within the balance's μ λ.
+            fem::CompliantFrame r = f;
+            for (int k = 0; k < 40; ++k) r = fem::solve_compliant_clip(lin, blades, spring, std::nullopt, r.theta, &r, o);
+            const double Fr = r.loads.force_n[0];
+            ASSERT_LT(Block::K * delta, MU * Fr) << "the balance's grip is too weak for this test's pull";
+            EXPECT_NEAR(r.candidate_u.segment<3>(0).dot(w), delta, 1e-8) << "released: sticks where it stood";
+            // Its friction: K δ across, and along the blade what holds the node where the turned blade's normal force
+            // would push it; within the limit.
+            EXPECT_GE(r.loads.friction_n[0], Block::K * delta - 1e-6 * Fr);
+            EXPECT_LE(r.loads.friction_n[0], MU * Fr * (1 + 1e-9));
+            EXPECT_EQ(r.loads.sliding[0], 0);
+            EXPECT_NEAR(r.loads.moment_nmm[0], r.loads.spring_torque_nmm, 1e-6 * r.loads.spring_torque_nmm);
+        }
         o.blade_friction = 0;
         const fem::CompliantFrame g = fem::solve_compliant_clip(lin, blades, spring, held, held, &start, o);
         EXPECT_NEAR(g.candidate_u.segment<3>(0).dot(w), 0.0, 1e-8) << "frictionless: back to the spring's rest";

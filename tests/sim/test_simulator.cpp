@@ -852,8 +852,8 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
 
 TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
     // The spring clip of the test below on the compliance solver (relinearised every frame): the applier holds it
-    // open no further than it asks; released, the opening is an unknown of each frame's contact problem, which
-    // puts it where the tissue's moment about the hinge equals the spring's torque. Two runs, the same log.
+    // open no further than it asks; the frames step the opening onto the balance of the tissue's moment about the
+    // hinge and the spring's torque (secant steps on τ − M, as the Newton frames). Two runs, the same log.
     test::TempDir d("compspring");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     std::string logs[2];
@@ -872,7 +872,7 @@ TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalances
         EXPECT_LT(c.opening_deg, 30.0);
         EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
         EXPECT_GT(c.spring_torque_nmm, 0);
-        EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-6 * c.spring_torque_nmm);
+        EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-3 * c.spring_torque_nmm);
         // Released, the blades still hold the tissue by friction (a released clip's frames had none until session 34:
         // the sample's neck then slid out from between the jaws as the spring took over).
         EXPECT_GT(s.clips().at(0).friction_n, 0.01 * c.grip_force_n);
