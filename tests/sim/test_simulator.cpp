@@ -827,7 +827,13 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
         const auto& p = a.patches[0];
         EXPECT_EQ(p.builds, 1);
         EXPECT_EQ(p.unconverged_frames, 0);
-        EXPECT_EQ(p.linearisations, refresh ? static_cast<int>(p.frames) : 1);
+        // Relinearised after every frame that presses the tube (those closing through the air before it do not count).
+        if (refresh) {
+            EXPECT_GT(p.linearisations, 10);
+            EXPECT_LT(p.linearisations, p.frames);
+        } else {
+            EXPECT_EQ(p.linearisations, 1);
+        }
         EXPECT_EQ(p.linearisations_failed, 0);
         // The walls brought together (as near as the reference's barrier leaves them), not through each other by more
         // than the acceptance's 0.02 mm; nothing behind a blade's face.

@@ -113,8 +113,9 @@ struct PatchSpec {
     /// compliance at a linearisation (fem::Linearisation, solve_compliant_clip_walls): the linear model's stiffness
     /// about where the patch was linearised, remade every `refresh_frames` frames at the state reached.
     enum class Solver { NEWTON, COMPLIANCE } solver = Solver::NEWTON;
-    /// COMPLIANCE: frames between linearisations (0: the one made with the patch, where it starts). Each is a Newton
-    /// step of the nonlinear patch with the contact, made in the frame's thread (seconds on the sample).
+    /// COMPLIANCE: frames between linearisations (0: the one made with the patch, where it starts), counting those in
+    /// which the blades or walls press something. Each is a Newton step of the nonlinear patch with the contact, made in
+    /// the frame's thread (seconds on the sample).
     int refresh_frames = 0;
 };
 
