@@ -51,9 +51,10 @@ fields = [
         "%.3f" % report["neck_channel_edge_mm"] if report.get("neck_channel_edge_mm") is not None else "-"),
     "peak_clip_force_n=%.3f range_n=%.2f-%.2f within=%s haptic_peak_n=%.3f" % (
         blade, lo, hi, "yes" if lo <= blade <= hi else "no", report.get("peak_force_n", float("nan"))),
-    "patch_frames=%s unconverged=%s restarts=%s builds=%s mean_solve_s=%.1f walls_min_mm=%s" % (
+    "patch_frames=%s unconverged=%s restarts=%s builds=%s mean_solve_s=%.1f walls_min_mm=%s solver=%s%s" % (
         p.get("frames", "-"), p.get("unconverged_frames", "-"), p.get("restarts", "-"), p.get("builds", "-"), p.get("mean_solve_ms", float("nan")) / 1000,
-        "%.4f" % p["min_wall_distance_mm"] if p.get("min_wall_distance_mm") is not None else "-"),
+        "%.4f" % p["min_wall_distance_mm"] if p.get("min_wall_distance_mm") is not None else "-", p.get("solver", "newton"),
+        " linearisations=%s (%.0f s, %s refused)" % (p["linearisations"], p.get("linearise_s", 0), p.get("linearisations_failed", 0)) if "linearisations" in p else ""),
     "scene_t=%.3f run_s=%d" % (report.get("total_time_s", float("nan")), secs),
 ]
 print("\t".join(fields))

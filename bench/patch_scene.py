@@ -4,7 +4,11 @@
 (model.wall = "patch", 40 Newton iterations a frame), for bench/run_patch_case.sh and bench/run_patch_realtime.sh.
 
 usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring-scale S] [--slow DURATION_S]
+                      [--solver newton|compliance] [--refresh-frames N] [--duration S]
   --spring-scale S  multiplies the planned clip's two spring forces (an experiment; its source says so)
+  --solver          model.patch_solver: the Newton frames [newton] or contact on the patch's compliance
+  --refresh-frames  model.refresh_frames for the compliance frames [0: linearised once, where the patch starts]
+  --duration S      the scene's duration_s (1.40: the sample's planned clip held, before its release at 1.5 s)
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
@@ -19,12 +23,19 @@ ap.add_argument("--log", default="scene_log.csv")
 ap.add_argument("--report", default="scene_report.json")
 ap.add_argument("--spring-scale", type=float, default=1.0)
 ap.add_argument("--slow", type=float, default=0.0)
+ap.add_argument("--solver", choices=["newton", "compliance"], default="newton")
+ap.add_argument("--refresh-frames", type=int, default=0)
+ap.add_argument("--duration", type=float, default=0.0)
 a = ap.parse_args()
 text = "\n".join(l for l in open(a.plan).read().splitlines() if not l.lstrip().startswith("//"))
 s = json.loads(text)
 s["bundle"] = a.bundle
 s["model"] = {"wall": "patch", "newton_per_frame": 40}
+if a.solver == "compliance":
+    s["model"].update(patch_solver="compliance", refresh_frames=a.refresh_frames)
 s["outputs"] = {"log": a.log, "report": a.report}
+if a.duration > 0:
+    s["duration_s"] = a.duration
 if a.spring_scale != 1:
     for m in s["clip_models"].values():
         sp = m["spring"]
