@@ -542,9 +542,20 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             const double th0 = v0[nb];
             int repeats = 0;
             const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
-            fem::CompliantFrame f = C->faces.rows() > 0
-                                        ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
+            fem::CompliantFrame f;
+            try {
+                f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
                                         : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
+            } catch (const NumericalError& e) {
+                // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays
+                // where it was; a second in a row restarts from the last converged one with a smaller step).
+                res.converged = false;
+                res.failure = e.what();
+                loads = C->last.loads;
+                wall_min = C->last.wall_min_distance_mm;
+                touching = C->last.wall_contacts;
+                return res;
+            }
             res.u.head(nb) = C->lin->displacement(f.candidate_forces);
             res.u[nb] = f.theta;
             res.reaction = Eigen::VectorXd::Constant(1, f.loads.spring_torque_nmm - 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]));
