@@ -856,21 +856,27 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
     EXPECT_GT(grip[0], 1.5 * f_ref);
 }
 
-TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
-    // The spring clip of the test below on the compliance solver (relinearised every frame): the applier holds it
-    // open no further than it asks; the frames step the opening onto the balance of the tissue's moment about the
-    // hinge and the spring's torque (secant steps on τ − M, as the Newton frames). Two runs, the same log.
-    test::TempDir d("compspring");
+namespace {
+/// The spring clip on the tube (flattening_scene with a 0.3 N spring, released) on the patch solver `solver`, run
+/// twice: the applier can only hold it open, so the clip stops where the tissue's moment about the hinge equals the
+/// spring's torque (the frames step the opening onto τ = M by secant steps on the solve's τ − M), and stays there
+/// released, still gripping by friction; the two runs' logs are identical. Returns the opening [deg] and grip [N].
+std::pair<double, double> spring_clip_balance(const std::string& solver) {
+    test::TempDir d("patchspring_" + solver);
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     std::string logs[2];
+    std::pair<double, double> out{0, 0};
     for (int run = 0; run < 2; ++run) {
         json j = flattening_scene(bundle, "patch", true);
-        j["model"]["patch_solver"] = "compliance";
-        j["model"]["refresh_frames"] = 1;
+        if (solver == "compliance") {
+            j["model"]["patch_solver"] = "compliance";
+            j["model"]["refresh_frames"] = 1;  // relinearised after every pressing frame: the neo-Hookean patch's balance
+        }
         j["outputs"]["log"] = "log" + std::to_string(run) + ".csv";
         sim::Simulator s = make(j, d.file(""), "spring" + std::to_string(run) + ".json");
         const sim::Assessment a = sim::run_scene(s, {});
-        ASSERT_EQ(a.patches.size(), 1u);
+        EXPECT_EQ(a.patches.size(), 1u);
+        if (a.patches.size() != 1) return out;
         EXPECT_EQ(a.patches[0].unconverged_frames, 0);
         const sim::Clip& c = s.clips().at(0);
         EXPECT_EQ(c.state, sim::Clip::State::DEPOSITED);
@@ -879,16 +885,27 @@ TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalances
         EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
         EXPECT_GT(c.spring_torque_nmm, 0);
         EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-3 * c.spring_torque_nmm);
-        // Released, the blades still hold the tissue by friction (a released clip's frames had none until session 34:
-        // the sample's neck then slid out from between the jaws as the spring took over).
-        EXPECT_GT(s.clips().at(0).friction_n, 0.01 * c.grip_force_n);
-        if (run == 0)
-            std::printf("compliance frames, released: open %.3f deg (held at %.3f), spring %.5f N mm, tissue %.5f N mm, grip %.4f N\n", c.opening_deg,
-                        FLAT_END_DEG, c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n);
+        // Released, the blades still hold the tissue by friction (the compliance frames of a released clip had none
+        // until session 34: the sample's neck then slid out from between the jaws as the spring took over).
+        EXPECT_GT(c.friction_n, 0.01 * c.grip_force_n);
+        if (run == 0) {
+            std::printf("%s frames, released: open %.3f deg (held at %.3f), spring %.5f N mm, tissue %.5f N mm, grip %.4f N, friction %.4f N\n",
+                        solver.c_str(), c.opening_deg, FLAT_END_DEG, c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n, c.friction_n);
+            out = {c.opening_deg, c.grip_force_n};
+        }
         logs[run] = slurp(d.file("log" + std::to_string(run) + ".csv"));
     }
-    ASSERT_GT(logs[0].size(), 100u);
+    EXPECT_GT(logs[0].size(), 100u);
     EXPECT_EQ(logs[0], logs[1]);
+    return out;
+}
+}  // namespace
+
+TEST(SimulatorPatch, OnTheComplianceSolverASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
+    // Measured: 7.931 deg, 0.2706 N; the Newton frames (the test below): 7.938 deg, 0.2703 N.
+    const auto [deg, grip] = spring_clip_balance("compliance");
+    EXPECT_NEAR(deg, 7.938, 0.05);
+    EXPECT_NEAR(grip, 0.2703, 0.01 * 0.2703);
 }
 
 TEST(SimulatorPatch, OnTenNodeElementsTheWallsTouchAlongTheQuadraticSurface) {
@@ -1026,30 +1043,7 @@ TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepea
     // of the flattening the applier asks for; released, it stays there. The patch's solve gives that balance
     // (its reaction on the opening is τ − M; the frames step the opening onto τ = M). The same scene run twice
     // gives the same log, byte for byte.
-    test::TempDir d("patchspring");
-    const std::string bundle = tube_bundle(Precision::FLOAT64);
-    std::string logs[2];
-    for (int run = 0; run < 2; ++run) {
-        json j = flattening_scene(bundle, "patch", true);
-        j["outputs"]["log"] = "log" + std::to_string(run) + ".csv";
-        sim::Simulator s = make(j, d.file(""), "spring" + std::to_string(run) + ".json");
-        const sim::Assessment a = sim::run_scene(s, {});
-        ASSERT_EQ(a.patches.size(), 1u);
-        EXPECT_EQ(a.patches[0].unconverged_frames, 0);
-        const sim::Clip& c = s.clips().at(0);
-        EXPECT_EQ(c.state, sim::Clip::State::DEPOSITED);
-        EXPECT_GT(c.opening_deg, FLAT_END_DEG + 0.5);
-        EXPECT_LT(c.opening_deg, 30.0);
-        EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
-        EXPECT_GT(c.spring_torque_nmm, 0);
-        EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-3 * c.spring_torque_nmm);
-        if (run == 0)
-            std::printf("released: open %.3f deg (held at %.3f), spring %.5f N mm, tissue %.5f N mm, grip %.4f N\n", c.opening_deg, FLAT_END_DEG,
-                        c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n);
-        logs[run] = slurp(d.file("log" + std::to_string(run) + ".csv"));
-    }
-    ASSERT_GT(logs[0].size(), 100u);
-    EXPECT_EQ(logs[0], logs[1]);
+    spring_clip_balance("newton");
 }
 
 TEST(SimulatorPatch, InRealTimeAClipReleasedWhileItsPatchIsMadeOrSolvedEndsCleanly) {
