@@ -173,7 +173,7 @@ struct Simulator::Impl {
             fem::CompliantWallSearch search;
             fem::CompliantFrame last;         // the warm start
             bool warm = false;
-            int since = 0;                    // frames solved on lin
+            int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
         };
         std::shared_ptr<Compliant> compliant;
         Assessment::PatchEnd stats;
