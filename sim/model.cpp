@@ -206,7 +206,11 @@ SplitLumen split_lumen(const SimLumen& lumen, const std::function<int(int, int)>
         std::vector<int> q;
         for (size_t k = 0; k < loop.size(); ++k) {
             q.push_back(loop[k]);
-            q.push_back(edge_vertex(loop[k], loop[(k + 1) % loop.size()]));
+            // Between consecutive vertices that share a lumen edge, its mid-edge vertex (every face's edges are split
+            // above). A step that is not an edge has none: a neck border that the lumen's edge (the working region's
+            // cut) ends is a chain whose two ends close the loop (C0043's lumen: the split threw here, session 34).
+            const auto it = vertex_of_edge.find(std::minmax(loop[k], loop[(k + 1) % loop.size()]));
+            if (it != vertex_of_edge.end()) q.push_back(it->second);
         }
         Q.neck_loops.push_back(q);
     }

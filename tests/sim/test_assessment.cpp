@@ -275,6 +275,14 @@ TEST(SplitLumen, FourChildrenPerFaceTheNeckThroughTheMidEdgeVerticesAndItsPoints
             ASSERT_GE(e, 0);
             EXPECT_EQ(std::minmax(sp.between(e, 0), sp.between(e, 1)), std::minmax(loop[k - 1], loop[(k + 1) % loop.size()]));
         }
+        // A loop with a step that is not an edge (a neck border that the lumen's edge ends, closed by its two ends):
+        // no mid-edge vertex there, and no error (C0043's lumen, session 34: the split threw).
+        SimLumen cut = s;
+        cut.neck_loops[0].erase(cut.neck_loops[0].begin() + 1);
+        const SplitLumen sc = split_lumen(cut, mid, nodes);
+        ASSERT_EQ(sc.lumen.neck_loops.size(), 1u);
+        EXPECT_EQ(sc.lumen.neck_loops[0].size(), 2 * cut.neck_loops[0].size() - 1);
+        EXPECT_EQ(sc.lumen.neck_loops[0][1], cut.neck_loops[0][1]);  // the step 0 -> 2 of the old loop: no vertex between
         // On the chords' midpoints the children are the parent's own plane: every neck point stays where it was.
         ASSERT_EQ(q.neck_line.size(), 1u);
         ASSERT_EQ(q.neck_line[0].size(), s.neck_line[0].size());
