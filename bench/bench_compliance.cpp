@@ -198,11 +198,6 @@ int main(int argc, char** argv) {
     for (Eigen::Index a = 0; a < np; ++a) X.row(a) = vol.nodes.row(pm.nodes()[static_cast<size_t>(a)]);
     std::vector<char> is_outer(static_cast<size_t>(vol.nodes.rows()), 0);
     for (int o : outer_list) is_outer[static_cast<size_t>(o)] = 1;
-    std::vector<int> cand;  // the outer nodes of the patch the blades can reach as they close: within 0.1 mm of the wedge
-    for (Eigen::Index a = 0; a < np; ++a)
-        if (is_outer[static_cast<size_t>(pm.nodes()[static_cast<size_t>(a)])] && blades.near_wedge(theta_build, X.row(a).transpose(), 0.1))
-            cand.push_back(static_cast<int>(a));
-    const size_t blade_cand = cand.size();
     // The inner walls: the lumen's faces in the patch (the simulator's), and for the frames those whose corners lie
     // within 0.3 mm of the wedge (where the blades flatten the lumen), their corners candidates too.
     const Eigen::MatrixXi F6 = fem::boundary_faces_in_set(vol.nodes, vol.tets, vol.node_sets.at("inner"));
@@ -224,29 +219,23 @@ int main(int argc, char** argv) {
     } else {
         Fin = F6.leftCols(3);
     }
-    std::vector<Eigen::Vector3i> inner_p, inner_near;
+    std::vector<Eigen::Vector3i> inner_p;
     for (Eigen::Index f = 0; f < Fin.rows(); ++f) {
         const int a = pm.local(Fin(f, 0)), b2 = pm.local(Fin(f, 1)), c = pm.local(Fin(f, 2));
         if (a < 0 || b2 < 0 || c < 0) continue;
         inner_p.emplace_back(a, b2, c);
-        if (blades.near_wedge(theta_build, X.row(a).transpose(), 0.3) && blades.near_wedge(theta_build, X.row(b2).transpose(), 0.3) &&
-            blades.near_wedge(theta_build, X.row(c).transpose(), 0.3))
-            inner_near.emplace_back(a, b2, c);
     }
     Eigen::MatrixX3i inner(static_cast<Eigen::Index>(inner_p.size()), 3);
     for (size_t f = 0; f < inner_p.size(); ++f) inner.row(static_cast<Eigen::Index>(f)) = inner_p[f].transpose();
-    std::vector<int> slot(static_cast<size_t>(np), -1);
-    for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
-    Eigen::MatrixX3i faces_c(static_cast<Eigen::Index>(inner_near.size()), 3);
-    for (size_t f = 0; f < inner_near.size(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            int& sl = slot[static_cast<size_t>(inner_near[f][k])];
-            if (sl < 0) {
-                sl = static_cast<int>(cand.size());
-                cand.push_back(inner_near[f][k]);
-            }
-            faces_c(static_cast<Eigen::Index>(f), k) = sl;
-        }
+    // The candidates: the outer nodes of the patch within 0.1 mm of the open jaws' wedge, then the corners of the
+    // inner faces within 0.3 mm of it (fem::compliant_setup, as aneusim's patch).
+    std::vector<int> outer_p;
+    for (Eigen::Index a = 0; a < np; ++a)
+        if (is_outer[static_cast<size_t>(pm.nodes()[static_cast<size_t>(a)])]) outer_p.push_back(static_cast<int>(a));
+    fem::CompliantSetup setup = fem::compliant_setup(blades, theta_build, X, outer_p, inner);
+    std::vector<int> cand = std::move(setup.candidates);
+    const size_t blade_cand = setup.blade_candidates;
+    const Eigen::MatrixX3i faces_c = std::move(setup.faces);
     Eigen::MatrixX3d Xc(static_cast<Eigen::Index>(cand.size()), 3);
     for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = X.row(cand[k]);
     std::vector<int> blade_nodes(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(blade_cand));

@@ -493,32 +493,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             if (!C) {
                 // The nodes the blades can reach as they close from here (within 0.1 mm of their wedge), and the inner
                 // walls they flatten (faces whose corners lie within 0.3 mm of it), the faces' corners candidates too
-                // (aneu_bench_compliance's rule).
+                // (fem::compliant_setup, as aneu_bench_compliance's frames).
                 C = std::make_shared<PatchRun::Compliant>();
-                const double th = v0[nb];
-                auto at = [&](int a) { return Eigen::Vector3d(P.X.row(a).transpose() + u0.segment<3>(3 * static_cast<Eigen::Index>(a))); };
-                std::vector<int> slot(pm.nodes().size(), -1);
-                for (int a : P.cand)
-                    if (slot[static_cast<size_t>(a)] < 0 && blades.near_wedge(th, at(a), 0.1)) {
-                        slot[static_cast<size_t>(a)] = static_cast<int>(C->cand.size());
-                        C->cand.push_back(a);
-                    }
-                std::vector<Eigen::Vector3i> near;
-                if (scene.patch.wall_contact)
-                    for (Eigen::Index f = 0; f < P.inner.rows(); ++f)
-                        if (blades.near_wedge(th, at(P.inner(f, 0)), 0.3) && blades.near_wedge(th, at(P.inner(f, 1)), 0.3) &&
-                            blades.near_wedge(th, at(P.inner(f, 2)), 0.3))
-                            near.emplace_back(P.inner.row(f).transpose());
-                C->faces.resize(static_cast<Eigen::Index>(near.size()), 3);
-                for (size_t f = 0; f < near.size(); ++f)
-                    for (int k = 0; k < 3; ++k) {
-                        int& sl = slot[static_cast<size_t>(near[f][k])];
-                        if (sl < 0) {
-                            sl = static_cast<int>(C->cand.size());
-                            C->cand.push_back(near[f][k]);
-                        }
-                        C->faces(static_cast<Eigen::Index>(f), k) = sl;
-                    }
+                Eigen::MatrixX3d x = P.X;
+                for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u0.segment<3>(3 * a).transpose();
+                fem::CompliantSetup cs = fem::compliant_setup(blades, v0[nb], x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i());
+                C->cand = std::move(cs.candidates);
+                C->faces = std::move(cs.faces);
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
             }

@@ -33,6 +33,7 @@ namespace aneu::fem {
 
 struct Linearisation::Impl {
     Eigen::VectorXd u0, r0, free_u;
+    Eigen::VectorXd free_body_u;  // the whole body's displacement at the free state, u0 + Δu_free
     Eigen::MatrixX3d free_x;
     std::vector<int> cand;
     std::vector<int> free_index;  // per body DOF: its index among the free ones, −1 fixed
@@ -90,6 +91,9 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     factorise_s = sw.lap();
 
     const Eigen::VectorXd du = mf > 0 ? Eigen::VectorXd(m->llt.solve(m->r0)) : Eigen::VectorXd();
+    m->free_body_u = u0;
+    for (Eigen::Index i = 0; i < n; ++i)
+        if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->free_body_u[i] += du[a];
     m->free_x.resize(static_cast<Eigen::Index>(candidates.size()), 3);
     m->free_u.resize(3 * static_cast<Eigen::Index>(candidates.size()));
     for (size_t k = 0; k < candidates.size(); ++k) {
@@ -135,6 +139,45 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     compliance_s = sw.lap();
 }
 
+CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
+                               const Eigen::MatrixX3i& inner) {
+    const Eigen::Index n = x.rows();
+    auto check = [&](int a) {
+        if (a < 0 || a >= n) throw InputError("compliant setup: node " + std::to_string(a) + " outside the body's " + std::to_string(n));
+    };
+    CompliantSetup out;
+    std::vector<int> slot(static_cast<size_t>(n), -1);
+    for (int a : reach) {
+        check(a);
+        if (slot[static_cast<size_t>(a)] < 0 && blades.near_wedge(theta, x.row(a).transpose(), 0.1)) {
+            slot[static_cast<size_t>(a)] = static_cast<int>(out.candidates.size());
+            out.candidates.push_back(a);
+        }
+    }
+    out.blade_candidates = out.candidates.size();
+    std::vector<Eigen::Index> near;
+    for (Eigen::Index f = 0; f < inner.rows(); ++f) {
+        bool in = true;
+        for (int k = 0; k < 3; ++k) {
+            check(inner(f, k));
+            in = in && blades.near_wedge(theta, x.row(inner(f, k)).transpose(), 0.3);
+        }
+        if (in) near.push_back(f);
+    }
+    out.faces.resize(static_cast<Eigen::Index>(near.size()), 3);
+    for (size_t f = 0; f < near.size(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            const int a = inner(near[f], k);
+            int& sl = slot[static_cast<size_t>(a)];
+            if (sl < 0) {
+                sl = static_cast<int>(out.candidates.size());
+                out.candidates.push_back(a);
+            }
+            out.faces(static_cast<Eigen::Index>(f), k) = sl;
+        }
+    return out;
+}
+
 Linearisation::~Linearisation() = default;
 
 const Eigen::VectorXd& Linearisation::u0() const { return m->u0; }
@@ -152,6 +195,9 @@ const double* Linearisation::compliance_blocks() const { return m->Wb.data(); }
 Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
     if (f.size() != 3 * static_cast<Eigen::Index>(m->cand.size()))
         throw InputError("linearisation: " + std::to_string(f.size()) + " candidate forces, expected " + std::to_string(3 * m->cand.size()));
+    // No force on any candidate (the blades closing through the air): the free state, kept from the constructor's
+    // solve, the same numbers (the sample's patch: a 20-30 ms back substitution a frame, most of an air frame's time).
+    if (f.isZero(0.0)) return m->free_body_u;
     Eigen::VectorXd rhs = m->r0;
     for (size_t k = 0; k < m->cand.size(); ++k)
         for (int ax = 0; ax < 3; ++ax)
@@ -198,13 +244,31 @@ double blade_distance(const ClipBlades& b, int s, double theta, const Eigen::Vec
 
 namespace {
 
+/// A dense n x n matrix in a buffer the thread keeps: the frames' Delassus matrices and their active rows' factors
+/// (35 MB each at the sample's 2,100 rows) were allocated afresh in every pass, each a fresh mapping whose pages the
+/// kernel zeroed on first touch (a tenth of the pressed frames' time). Its contents are undefined.
+Eigen::Map<Eigen::MatrixXd> scratch_square(std::vector<double>& buf, Eigen::Index n) {
+    const size_t need = static_cast<size_t>(n) * static_cast<size_t>(n);
+    if (buf.size() < need) buf.resize(need);
+    return Eigen::Map<Eigen::MatrixXd>(buf.data(), n, n);
+}
+std::vector<double>& factor_scratch() {
+    thread_local std::vector<double> buf;
+    return buf;
+}
+std::vector<double>& delassus_scratch() {
+    thread_local std::vector<double> buf;
+    return buf;
+}
+
 /// The Cholesky factor L Lᵀ = A_SS of the active rows S of an SPD matrix, kept as the pivoting flips rows in and out:
 /// a row taken in is appended (a forward substitution, O(|S|²)), a row let go is cut out and the factor below it
 /// mended by a rank-one update (O(|S|²)); many flips at once, or an append whose pivot has lost its digits (nearly
 /// redundant rows), factorise A_SS afresh (O(|S|³)).
 class ActiveFactor {
 public:
-    explicit ActiveFactor(const Eigen::MatrixXd& A) : A_(A), L_(A.rows(), A.rows()), pos_(static_cast<size_t>(A.rows()), -1) {}
+    explicit ActiveFactor(const Eigen::Ref<const Eigen::MatrixXd>& A)
+        : A_(A), L_(scratch_square(factor_scratch(), A.rows())), pos_(static_cast<size_t>(A.rows()), -1) {}
 
     /// Factorise A_SS afresh for the rows marked in `act`, in index order.
     void refactor(const std::vector<char>& act) {
@@ -290,15 +354,15 @@ public:
     int updates = 0;  ///< rows appended or removed since the last factorisation from scratch (round-off accumulates)
 
 private:
-    const Eigen::MatrixXd& A_;
-    Eigen::MatrixXd L_;                 // lower, its leading |S| x |S| in use
+    const Eigen::Ref<const Eigen::MatrixXd> A_;
+    Eigen::Map<Eigen::MatrixXd> L_;     // lower, its leading |S| x |S| in use (the thread's scratch)
     std::vector<Eigen::Index> S_;       // the active rows in the factor's order
     std::vector<Eigen::Index> pos_;     // per row: its place in S_, -1 out
 };
 
 }  // namespace
 
-LcpResult solve_box_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
+LcpResult solve_box_lcp(const Eigen::Ref<const Eigen::MatrixXd>& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
                         const LcpOptions& opt) {
     const Eigen::Index mz = q.size();
     if (A.rows() != mz || A.cols() != mz || z.size() != mz || lo.size() != mz || hi.size() != mz)
@@ -435,7 +499,7 @@ LcpResult solve_box_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, cons
     return out;
 }
 
-LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
+LcpResult solve_lcp(const Eigen::Ref<const Eigen::MatrixXd>& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt) {
     return solve_box_lcp(A, q, Eigen::VectorXd::Zero(q.size()), Eigen::VectorXd::Constant(q.size(), std::numeric_limits<double>::infinity()), z, opt);
 }
 
@@ -644,18 +708,17 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     const Eigen::Index m = static_cast<Eigen::Index>(rows.size()), mz = m + (free_theta ? 1 : 0);
     const double k = spring.k_nmm_per_rad, th0 = spring.preload_rad;
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
-    Eigen::MatrixXd A(mz, mz);
+    Eigen::Map<Eigen::MatrixXd> A = scratch_square(delassus_scratch(), mz);
     Eigen::VectorXd q(mz);
     int pair_nodes = 0;
     {
-        // Node pair by node pair: A_ij = Σ_a Σ_b g_iaᵀ W_ab g_jb over the candidates a of row i and b of row j, each 3 x 3
-        // block of W read in place once (b ≤ a: W is symmetric), column b of blocks in rising a. (Until session 33 the
-        // blocks of the rows' candidates were first gathered into one contiguous matrix, kept for the next pass or
-        // frame where it still covered their rows, and A made from products with its columns. On the sample's planned
-        // clip, frictionless, the pairs take the Delassus matrices' time over 111 frames from 0.95 to 0.58 s, frames
-        // with the walls pressed 42 -> 31 ms (median), the last held frames, which had reused their block, 12-17 ->
-        // 17-22 ms. Storing W's blocks in the Z order of the candidates' places, so that those near the blades lie
-        // together, did not help.)
+        // Column by column: for each node b, with the rows j that touch it (gradient g_jb there), t = W_ab g_jb for
+        // every node a, added to A_ij as g_iaᵀ t for the rows i that touch a, only where i ≥ j; then the upper triangle
+        // mirrored. W's column of blocks b is read once, in rising a, and each column j of A is written where its rows
+        // lie. (Until session 35 node pair by node pair, b ≤ a, writing A_ij and A_ji: every A_ji a write across the
+        // matrix, a cache miss each; on the sample's held walls, 2,100 rows on 1,281 nodes, 270 ms a pass. Until session
+        // 33 the blocks of the rows' candidates were first gathered into one contiguous matrix, and A made from
+        // products with its columns; storing W's blocks in the Z order of the candidates' places did not help.)
         std::vector<int> local(static_cast<size_t>(nc), -1), nodes;
         for (const Row& r : rows)
             for (int a = 0; a < r.n; ++a)
@@ -685,25 +748,35 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         A.topLeftCorner(m, m).setZero();
         for (size_t b = 0; b < p; ++b) {
             const int b0 = start[b], nb = start[b + 1] - b0;
-            for (size_t a = b; a < p; ++a) {
+            for (size_t a = 0; a < p; ++a) {
                 const int a0 = start[a], na = start[a + 1] - a0;
                 const Eigen::Matrix3d Wab = Wblock(nodes[a], nodes[b]);
                 for (int jb = 0; jb < nb; ++jb) {
-                    const Eigen::Vector3d t = Wab * G.col(b0 + jb);
                     const int j = row_of[static_cast<size_t>(b0 + jb)];
+                    const Eigen::Vector3d t = Wab * G.col(b0 + jb);
+                    double* Aj = &A(0, j);
                     for (int ia = 0; ia < na; ++ia) {
                         const int i = row_of[static_cast<size_t>(a0 + ia)];
-                        const double v = G.col(a0 + ia).dot(t);
-                        A(i, j) += v;
-                        if (a != b) A(j, i) += v;
+                        if (i >= j) Aj[i] += G.col(a0 + ia).dot(t);
                     }
                 }
             }
         }
+        // The upper triangle from the lower, in tiles (a transposed copy column by column would read across A).
+        constexpr Eigen::Index TILE = 64;
+        for (Eigen::Index j0 = 0; j0 < m; j0 += TILE)
+            for (Eigen::Index i0 = j0; i0 < m; i0 += TILE) {
+                const Eigen::Index j1 = std::min(m, j0 + TILE), i1 = std::min(m, i0 + TILE);
+                for (Eigen::Index i = i0; i < i1; ++i)
+                    for (Eigen::Index j = j0; j < std::min(j1, i); ++j) A(j, i) = A(i, j);
+            }
+        if (free_theta)  // θ's own give, b bᵀ / k, column by column
+            for (Eigen::Index j = 0; j < m; ++j) {
+                const double bj = rows[static_cast<size_t>(j)].b / k;
+                for (Eigen::Index i = 0; i < m; ++i) A(i, j) += rows[static_cast<size_t>(i)].b * bj;
+            }
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
-            if (free_theta)
-                for (Eigen::Index j = 0; j < m; ++j) A(i, j) += ri.b * rows[static_cast<size_t>(j)].b / k;
             q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
         }
     }

@@ -61,7 +61,7 @@ public:
     /// All of W, in 3 x 3 blocks: block (a, b) is the 9 values from 9 (b |C| + a), column-major.
     const double* compliance_blocks() const;
     /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
-    /// back substitution.
+    /// back substitution; none for f = 0 (the free state, kept).
     Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
     /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance (fem::condense:
     /// its own factorisation, the forward solve and SYRK).
@@ -115,6 +115,22 @@ struct CompliantWalls {
     Eigen::MatrixX3i faces;                   ///< triangles, in candidate numbering, normals towards the opposite wall
     std::vector<std::array<int, 2>> pairs;    ///< (vertex, face)
 };
+
+/// What the compliance frames of one clip act on: the candidates (the nodes whose compliance a Linearisation keeps)
+/// and the inner-wall faces between them.
+struct CompliantSetup {
+    std::vector<int> candidates;   ///< body nodes: first those the blades reach, then the walls' other corners
+    size_t blade_candidates = 0;   ///< how many of them come first, within reach of the blades
+    Eigen::MatrixX3i faces;        ///< the walls' faces, in candidate numbering (CompliantWalls::faces)
+};
+/// The candidates and wall faces for a clip at opening θ, where the body's nodes stand at `x` (one row a node): of
+/// `reach` (the nodes a blade can touch: the outer surface's) those within 0.1 mm of the jaws' wedge, and of
+/// `inner` (the lumen's triangles, body nodes, normals into the lumen) those whose three corners lie within 0.3 mm
+/// of it, where the blades flatten the lumen, their corners candidates too. aneusim's patch and
+/// aneu_bench_compliance make their frames' problem so. Repeated nodes in `reach` count once.
+/// @throws InputError a node outside x
+CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
+                               const Eigen::MatrixX3i& inner);
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {
@@ -196,12 +212,12 @@ struct LcpResult {
 /// safeguard: every wrong row flipped at once while their count falls, a single one (Murty's rule) after three
 /// solves without a fall. z is the best solution found (the smaller violation of the sweeps' and the pivoting's).
 /// @throws InputError sizes that do not match
-LcpResult solve_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt = {});
+LcpResult solve_lcp(const Eigen::Ref<const Eigen::MatrixXd>& A, const Eigen::VectorXd& q, Eigen::VectorXd& z, const LcpOptions& opt = {});
 /// The same with bounds lo ≤ z ≤ hi per row (a box-constrained LCP, the bound-constrained QP min ½ zᵀ A z + qᵀ z):
 /// w ≥ 0 where z = lo, w ≤ 0 where z = hi, w = 0 between. What Coulomb friction rows need (|λ_t| ≤ μ λ_n, the
 /// bound taken from the last pass's normal force); solve_lcp is lo = 0, hi = ∞.
 /// @throws InputError sizes that do not match, lo > hi, lo = ∞ or hi = −∞
-LcpResult solve_box_lcp(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
+LcpResult solve_box_lcp(const Eigen::Ref<const Eigen::MatrixXd>& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi, Eigen::VectorXd& z,
                         const LcpOptions& opt = {});
 
 /// How far in front of blade s (±1) at opening θ the point x lies, the blade a solid whose sides and tip are rounded
