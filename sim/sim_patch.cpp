@@ -485,6 +485,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // past the applier, swung 3.2 -> 5.8 -> 4.6 -> 5.5 deg in successive frames and its walls went 4-5 mm through each
         // other: each frame's blades linearised where the last one left them.)
         const bool compliance = scene.patch.solver == PatchSpec::Solver::COMPLIANCE;
+        // The compliance frame's parts [s], for the trace: a linearisation made in it, the rows, the Delassus matrix,
+        // the LCP, the wall pairs' search and crossing checks, the patch's displacement from the forces.
+        double c_lin = 0, c_rows = 0, c_delassus = 0, c_lcp = 0, c_search = 0, c_disp = 0;
         auto compliant_frame = [&]() {
             fem::NewtonResult res;
             res.u = v0;
@@ -515,10 +518,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     ++P.stats.linearisations_failed;
                 }
                 P.stats.linearise_s += lw.seconds();
+                c_lin = lw.seconds();
                 C->since = 0;
             }
             fem::CompliantOptions co;
             co.blade_friction = scene.patch.blade_friction;
+            co.friction_cell_mm = scene.patch.friction_cell_mm;
             co.wall_one_face = true;
             const double th0 = v0[nb];
             int repeats = 0;
@@ -537,7 +542,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 touching = C->last.wall_contacts;
                 return res;
             }
+            c_rows = f.rows_s;
+            c_delassus = f.delassus_s;
+            c_lcp = f.lcp_s;
+            c_search = f.search_s;
+            const Stopwatch dw;
             res.u.head(nb) = C->lin->displacement(f.candidate_forces);
+            c_disp = dw.seconds();
             res.u[nb] = f.theta;
             res.reaction = Eigen::VectorXd::Constant(1, f.loads.spring_torque_nmm - 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]));
             res.iterations = f.passes;
@@ -654,7 +665,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
         const int merges = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first - merges_before;
-        if (std::getenv("ANEU_PATCH_TRACE"))
+        if (std::getenv("ANEU_PATCH_TRACE") && compliance)
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (compliance: linearise %.1f, rows %.1f, delassus %.1f, lcp %.1f, search %.1f, displacement %.1f)\n",
+                         fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", loads.force_n[0], loads.force_n[1],
+                         loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1], loads.sliding[0], loads.sliding[1], wall_min, touching, ms,
+                         1e3 * c_lin, 1e3 * c_rows, 1e3 * c_delassus, 1e3 * c_lcp, 1e3 * c_search, 1e3 * c_disp);
+        else if (std::getenv("ANEU_PATCH_TRACE"))
             std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s%s, tangent %.1f, %d factorisations %.1f (%d not positive definite: %.1f), %d chord steps, back %.1f%s)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,
                          r.residual, loads.force_n[0], loads.force_n[1], loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1],

@@ -450,6 +450,12 @@ TEST(SimulatorInput, BadScenesAreClearErrors) {
     j = good;
     j["clip_models"]["straight"] = {{"file", "no_such_clip.json"}};
     expect_error(j, "no_such_clip.json: cannot open the clip file");
+    j = good;
+    j["model"] = {{"wall", "patch"}, {"patch_solver", "compliance"}, {"friction_cell_mm", -0.5}};
+    expect_error(j, "friction_cell_mm");
+    j["model"]["friction_cell_mm"] = 0.5;
+    put(d.file("s.json"), j.dump());
+    EXPECT_EQ(sim::read_scene(d.file("s.json")).patch.friction_cell_mm, 0.5);
     put(d.file("broken.json"), "{ \"bundle\": ");
     EXPECT_THROW(sim::read_scene(d.file("broken.json")), InputError);
 

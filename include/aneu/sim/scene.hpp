@@ -117,6 +117,10 @@ struct PatchSpec {
     /// which the blades or walls press something. Each is a Newton step of the nonlinear patch with the contact, made in
     /// the frame's thread (seconds on the sample).
     int refresh_frames = 0;
+    /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
+    /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
+    /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).
+    double friction_cell_mm = 0;
 };
 
 struct Scene {
