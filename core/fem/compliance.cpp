@@ -1000,7 +1000,9 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         acc.rows_s += f.rows_s;
         acc.delassus_s += f.delassus_s;
         acc.lcp_s += f.lcp_s;
-        const std::vector<std::pair<int, int>> end = crossings(f.candidate_u);
+        // Nothing moved (the blades closing through the air, no force on any candidate): what is behind a face is
+        // what was (the sample's air frames: 8.7 of their 9.4 ms were this check).
+        const std::vector<std::pair<int, int>> end = f.candidate_u == u0 ? before : crossings(f.candidate_u);
         std::vector<std::pair<int, int>> left;
         std::set_difference(end.begin(), end.end(), before.begin(), before.end(), std::back_inserter(left));
         f.wall_crossings = static_cast<int>(left.size());
