@@ -656,9 +656,36 @@ TEST(CompliantClip, TheLinearisationsComplianceIsItsTangentsInverseOnTheCandidat
         }
     EXPECT_GT(wmax, 1e-3);
     EXPECT_LE(err, 1e-10 * wmax);
+    // No force: the free state kept from the constructor's solve (no back substitution), the candidates' rows exactly
+    // free_candidate_u.
+    for (Eigen::Index a = 0; a < nc; ++a)
+        for (int ax = 0; ax < 3; ++ax) EXPECT_EQ(base[3 * cand[static_cast<size_t>(a)] + ax], lin.free_candidate_u()[3 * a + ax]);
     // Symmetric, block by block.
     for (Eigen::Index a = 0; a < nc; a += 5)
         for (Eigen::Index b = 0; b < nc; b += 3)
             EXPECT_LE((lin.compliance(static_cast<int>(a), static_cast<int>(b)) - lin.compliance(static_cast<int>(b), static_cast<int>(a)).transpose()).cwiseAbs().maxCoeff(),
                       1e-12 * wmax);
+}
+
+TEST(CompliantClip, TheSetupTakesTheNodesNearTheJawsAndTheWallFacesBetweenThem) {
+    // Hinge at the origin, axis x, up y, 7 x 1 mm blades open 0.4 rad: within 0.1 mm of the wedge a node is a blade
+    // candidate; a lumen face whose three corners lie within 0.3 mm of it is a wall face, its corners candidates after.
+    const fem::ClipBlades b;
+    Eigen::MatrixX3d x(8, 3);
+    x << 3, 0, 0,      // in the wedge
+        3, 0, 2,       // 1.5 mm beside the jaws' width
+        3, 0, 0.55,    // 0.05 mm beside it
+        20, 0, 0,      // past the tips
+        2, 0, 0.7, 2.5, 0, 0.75, 3, 0, 0.7,  // a face 0.2-0.25 mm beside the width
+        20, 0, 0.1;
+    Eigen::MatrixX3i inner(2, 3);
+    inner << 4, 5, 6, 0, 4, 7;
+    const fem::CompliantSetup s = fem::compliant_setup(b, 0.4, x, {0, 1, 2, 3, 0}, inner);
+    EXPECT_EQ(s.candidates, (std::vector<int>{0, 2, 4, 5, 6}));
+    EXPECT_EQ(s.blade_candidates, 2u);
+    ASSERT_EQ(s.faces.rows(), 1);
+    EXPECT_EQ(s.faces.row(0), Eigen::RowVector3i(2, 3, 4));
+    // Closed, the wedge is the blades' thickness: the same face is still beside the width, the node in it still in.
+    EXPECT_EQ(fem::compliant_setup(b, 0.0, x, {0}, inner).candidates, (std::vector<int>{0, 4, 5, 6}));
+    EXPECT_THROW(fem::compliant_setup(b, 0.4, x, {9}, inner), InputError);
 }

@@ -145,8 +145,8 @@ struct CompliantFrame {
     int wall_rows = 0;                 ///< wall pairs within reach (constraints)
     int wall_contacts = 0;             ///< wall pairs pressed together
     double wall_force_n = 0;           ///< Σ their normal forces [N]
-    /// the smallest distance from its face's plane of a paired vertex lying over its face, where the frame ended
-    /// (inf: none)
+    /// the smallest distance from its face's plane of a paired vertex lying over its face, where the frame ended, of
+    /// the pairs not behind by more than CompliantOptions::wall_behind_mm where it started (creases; inf: none)
     double wall_min_distance_mm = 0;
     int wall_crossings = 0;            ///< solve_compliant_clip_walls: wall vertices newly behind a face after its last solve
     int sweeps = 0;
