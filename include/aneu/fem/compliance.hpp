@@ -85,8 +85,8 @@ struct CompliantOptions {
     /// A released clip closes at most this much in one frame (θ ≥ θ_start − it): the frames approach the balance of
     /// spring and tissue, each linearising the blades' rotation where the last frame left them.
     double max_closing_rad = 0.02;
-    /// A wall pair whose vertex lies further than this behind its face where the frame starts is not a constraint
-    /// (a crease of the wall, the far side of a fold: ContactBody's rule); nearer, the frame pushes it back out.
+    /// A wall pair whose vertex lies further than this behind its face's plane where the frame starts is not a
+    /// constraint (a crease of the wall, the far side of a fold); nearer, the frame pushes it back out.
     double wall_behind_mm = 0.005;
     /// Wall pairs nearer than this where the frame starts are constraints: more than the two walls' approach in a
     /// frame (each moves as far as a blade)
@@ -146,7 +146,7 @@ struct CompliantFrame {
     int wall_contacts = 0;             ///< wall pairs pressed together
     double wall_force_n = 0;           ///< Σ their normal forces [N]
     /// the smallest distance from its face's plane of a paired vertex lying over its face, where the frame ended, of
-    /// the pairs not behind by more than CompliantOptions::wall_behind_mm where it started (creases; inf: none)
+    /// the pairs not behind that plane by more than CompliantOptions::wall_behind_mm where it started (creases; inf: none)
     double wall_min_distance_mm = 0;
     int wall_crossings = 0;            ///< solve_compliant_clip_walls: wall vertices newly behind a face after its last solve
     int sweeps = 0;
