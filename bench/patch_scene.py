@@ -10,6 +10,8 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
   --refresh-frames  model.refresh_frames for the compliance frames [0: linearised once, where the patch starts]
   --friction-cell   model.friction_cell_mm for the compliance frames [0: two friction rows a pressed node]
   --duration S      the scene's duration_s (1.40: the sample's planned clip held, before its release at 1.5 s)
+  --shift-mm D      moves the applier's path D mm along the neck's normal (the plan's header; towards the sac
+                    positive): an experiment on where the jaws' width sits on the neck line
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
@@ -28,7 +30,9 @@ ap.add_argument("--solver", choices=["newton", "compliance"], default="newton")
 ap.add_argument("--refresh-frames", type=int, default=0)
 ap.add_argument("--friction-cell", type=float, default=0.0)
 ap.add_argument("--duration", type=float, default=0.0)
+ap.add_argument("--shift-mm", type=float, default=0.0)
 a = ap.parse_args()
+raw = open(a.plan).read()
 text = "\n".join(l for l in open(a.plan).read().splitlines() if not l.lstrip().startswith("//"))
 s = json.loads(text)
 s["bundle"] = a.bundle
@@ -46,6 +50,15 @@ if a.spring_scale != 1:
         sp["label_force_n"] *= a.spring_scale
         sp["open_force_n"] *= a.spring_scale
         sp["source"] = "experiment: %g x the planned clip's spring (%s)" % (a.spring_scale, sp.get("source", ""))
+if a.shift_mm != 0:
+    import re
+    m = re.search(r"normal towards the sac \(([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\)", raw)
+    if not m:
+        raise SystemExit(a.plan + ": no 'normal towards the sac (x, y, z)' in the plan's header (expected `aneusim plan` output)")
+    n = [float(v) for v in m.groups()]
+    for k in s["instruments"][0]["keyframes"]:
+        if "position" in k:
+            k["position"] = [round(p + a.shift_mm * q, 4) for p, q in zip(k["position"], n)]
 if a.slow > 0:
     k = s["instruments"][0]["keyframes"]
     at = dict(k[1])  # at the neck, open (the planned approach's end)

@@ -449,6 +449,13 @@ SimModel load_model(const std::string& bundle_path, const LoadOptions& opt) {
     const Eigen::VectorXi inner_set = inner == b.volume->node_sets.end() ? Eigen::VectorXi() : inner->second;
     m.surface.thickness = wall_thickness(m.surface, m.nodes, b.volume->tets, inner_set);
     m.surface.lumen = extract_lumen(m.surface, m.nodes, b.volume->tets, b.volume->tet_region, inner_set);
+    if (const auto fixed = b.volume->node_sets.find("fixed"); fixed != b.volume->node_sets.end()) {
+        for (Eigen::Index k = 0; k < fixed->second.size(); ++k)
+            if (fixed->second[k] < 0 || fixed->second[k] >= m.nodes.rows())
+                throw InputError(bundle_path + ": /volume/node_sets/fixed[" + std::to_string(k) + "] = " + std::to_string(fixed->second[k]) +
+                                 ", but /volume has " + std::to_string(m.nodes.rows()) + " nodes (expected 0 <= node < #nodes)");
+        m.fixed_nodes = fixed->second;
+    }
     m.load_seconds = t0.seconds();
     return m;
 }

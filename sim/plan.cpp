@@ -160,6 +160,21 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             }
         return f;
     };
+    // The domain's clamped ends (the bundle's "fixed" nodes: where the mesh was cut, held at zero). Jaws that close
+    // on one press tissue that cannot give: on C0095 the planned jaws straddled a branch's cut end 2 mm from the
+    // neck, a blade met the clamped ring at 18° and the spring's balance held the clip open there with 13-27 kN on
+    // it. The end is where the model stops, not where the vessel does: a pose is counted in the way for each
+    // clamped node in the space the closing jaws sweep (between the open blades, along their length and width)
+    // or within a wall's thickness (EDGE_MM) of it, and for each within CLEAR of the open blades on the way in.
+    constexpr double EDGE_MM = 0.5;
+    std::vector<Eigen::Vector3d> clamped;
+    {
+        const double reach = nf.length_mm + 15.0 + o.approach_mm + 5.0;
+        for (Eigen::Index k = 0; k < m.fixed_nodes.size(); ++k) {
+            const Eigen::Vector3d x = m.nodes.row(m.fixed_nodes[k]).transpose();
+            if ((x - nf.centre).norm() <= reach) clamped.push_back(x);
+        }
+    }
     // Outer-surface vertices within CLEAR of either open blade (boxes: length, width, thickness) with the hinge at
     // `hinge`, anywhere along the approach (the hinge every 0.25 mm back to approach_mm before it).
     auto approach_hits = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
@@ -174,10 +189,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             Eigen::Vector3d t, nn, ww;
             bl.frame(sb, f.opening * PI / 180.0, t, nn, ww);
             const double dr = axis.dot(t), da = axis.dot(ww), dp = axis.dot(nn);
-            for (Eigen::Index v = 0; v < s.size(); ++v) {
+            for (Eigen::Index v = 0; v < s.size() + static_cast<Eigen::Index>(clamped.size()); ++v) {
                 // Along the approach the hinge is at hinge − b·axis: the vertex's coordinates in the blade's frame
-                // shift by b·(axis·t, axis·ww, axis·nn).
-                const Eigen::Vector3d rel0 = s.X.row(v).transpose() - hinge;
+                // shift by b·(axis·t, axis·ww, axis·nn). The clamped nodes after the surface's vertices.
+                const Eigen::Vector3d rel0 = (v < s.size() ? Eigen::Vector3d(s.X.row(v).transpose()) : clamped[static_cast<size_t>(v - s.size())]) - hinge;
                 const double r0 = rel0.dot(t), a0 = rel0.dot(ww), p0 = rel0.dot(nn);
                 for (double b = 0; b <= o.approach_mm + 1e-9; b += 0.25) {
                     const double r = r0 + b * dr, across = a0 + b * da, p = p0 + b * dp;
@@ -233,6 +248,19 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             const double along = r.dot(axis);
             const double h = r.dot(side);
             if (along >= 0 && along <= length && h >= 0 && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= along * tan_half) ++n_in;
+        }
+        return n_in;
+    };
+    auto clamped_gripped = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+        if (clamped.empty()) return 0;
+        const Eigen::Vector3d side = axis.cross(f.w).normalized();
+        const double tan_half = std::tan(0.5 * f.opening * PI / 180.0);
+        int n_in = 0;
+        for (const Eigen::Vector3d& x : clamped) {
+            const Eigen::Vector3d r = x - hinge;
+            const double along = r.dot(axis);
+            if (along < -EDGE_MM || along > length + EDGE_MM || std::abs(r.dot(side)) > 0.5 * JAW_W + EDGE_MM) continue;
+            if (std::abs(r.dot(f.w)) <= std::max(along, 0.0) * tan_half + JAW_T + EDGE_MM) ++n_in;
         }
         return n_in;
     };
@@ -333,6 +361,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     const Candidate* chosen = nullptr;
     const Candidate* widest = nullptr;  // the best-covering pose a standard blade spans, clear or not
     int fewest = std::numeric_limits<int>::max(), checked = 0, widest_hits = 0, chosen_in_way = 0, chosen_pinched = 0;
+    const Candidate* first_gripped = nullptr;  // the best-covering pose that closes on a clamped node
+    int first_gripped_nodes = 0;
     Eigen::Vector3d axis, hinge;
     double blade = 0;
     bool short_tips = false;
@@ -341,6 +371,17 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         double l = 0;
         bool short_k = false;
         if (!pose_of(k, ax, hi, l, short_k)) continue;
+        // A pose that closes on a clamped node is never taken, clear or not: its scene would press tissue that
+        // cannot give (C0095: 13-27 kN on the blade, the clip held open).
+        const int gripped = clamped_gripped(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        if (gripped > 0) {
+            if (!first_gripped) {
+                first_gripped = &k;
+                first_gripped_nodes = gripped;
+            }
+            if (++checked >= 60000) break;
+            continue;
+        }
         const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
         const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, l);
         const int h = in_way + pinched;
@@ -360,6 +401,15 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         }
         if (h == 0 || ++checked >= 60000) break;
     }
+    if (!chosen && first_gripped) {
+        char why[768];
+        std::snprintf(why, sizeof why,
+                      "%s: every straight clip pose that spans the neck (%.2f x %.2f mm) closes on the domain's clamped ends: the best-covering one (%.0f %% of the "
+                      "neck line) has %d clamped nodes (the bundle's 'fixed' set, where the vessels were cut) within %.1f mm of the space its jaws close on. "
+                      "The model ends there and a clip would press tissue that cannot give; build the case with the vessels cut further from the neck, or plan it by hand (docs/scene_format.md)",
+                      m.case_id.c_str(), nf.length_mm, nf.width_mm, 100.0 * first_gripped->covered, first_gripped_nodes, EDGE_MM);
+        throw InputError(why);
+    }
     if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
                          " mm; the longest straight clip planned (15 mm, open up to " + std::to_string(o.max_opening_deg) + " deg) does not span it");
@@ -373,7 +423,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             std::snprintf(best, sizeof best, "the clear poses cover at most %.0f %%", 100.0 * chosen->covered);
         else
             std::snprintf(best, sizeof best, "no pose is clear, the one with the fewest vertices in the way or between the jaws (%d) covers %.0f %%", fewest, 100.0 * chosen->covered);
-        char why[768];
+        char why[1024];
         std::snprintf(why, sizeof why,
                       "%s: no straight clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
                       "without cutting into the vessel on the way in or between its closing jaws: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
@@ -423,16 +473,17 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     su["keyframes"].push_back({{"t", 0.0}, {"position", vec(park)}, {"axis", vec(w)}, {"up", vec(n)}});
     su["keyframes"].push_back({{"t", t_out}, {"position", vec(park)}});
     j["instruments"] = nlohmann::ordered_json::array({ap, su});
-    char head[1024];
+    char head[1280];
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (border %.1f mm, label edges %.1f mm),\n"
                   "// normal towards the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
                   "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line (its border);\n"
                   "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach; %d lumen vertices of the parent\n"
-                  "// (over %.0f mm from the neck) lie half the jaws' width or more between them. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
+                  "// (over %.0f mm from the neck) lie half the jaws' width or more between them; no clamped node (the domain's cut ends) lies within\n"
+                  "// %.1f mm of the space the jaws close on. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM);
+                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
     if (short_tips)
         header += "// No standard blade reaches past the far fold of the neck flattened between the jaws: the 15 mm clip's tips stop short,\n"

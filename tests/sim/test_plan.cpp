@@ -185,3 +185,78 @@ TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAsk
         EXPECT_NE(w.find("the clear poses cover at most " + std::to_string(cover) + " %"), std::string::npos) << w;
     }
 }
+
+// The domain's clamped ends: a sac 2-5 mm from the fixed end of the 8 mm tube (z = 0). The planner sees the bundle's
+// "fixed" node set and keeps the clamped nodes out of the space its jaws close on (and half a millimetre round it):
+// there the model stops and the tissue cannot give (C0095: a blade on a clamped branch end, 13-27 kN). The same
+// bundle without the set plans a pose whose jaws close on them: the set is what moves it.
+TEST(Plan, TheJawsKeepOffTheDomainsClampedEnds) {
+    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_clamped_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    test::TubeCase tc = test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.0, 5.0, 25.0);
+    std::vector<int> fixed_nodes;
+    for (Eigen::Index v = 0; v < tc.mesh.V.rows(); ++v)
+        if (tc.mesh.V(v, 2) < 1e-9 || tc.mesh.V(v, 2) > 8.0 - 1e-9) fixed_nodes.push_back(static_cast<int>(v));
+    const fs::path with = dir / "with.h5", without = dir / "without.h5";
+    write_bundle(without.string(), tc.bundle);
+    tc.bundle.volume->node_sets["fixed"] = Eigen::Map<Eigen::VectorXi>(fixed_nodes.data(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    write_bundle(with.string(), tc.bundle);
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m_with = sim::load_model(with.string(), lo), m_without = sim::load_model(without.string(), lo);
+    EXPECT_EQ(m_with.fixed_nodes.size(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    EXPECT_EQ(m_without.fixed_nodes.size(), 0);
+    // Clamped nodes in the space the jaws close on (between the open blades, within their length and width) or
+    // within 0.5 mm of it, for the planned pose.
+    auto gripped = [&](const std::string& text) {
+        const fs::path p = dir / "scene.json";
+        std::ofstream(p) << text;
+        const sim::Scene sc = sim::read_scene(p.string());
+        const sim::ClipModel& cm = sc.clip_models.begin()->second;
+        const sim::Pose& at = sc.instruments[0].keys[1].pose;
+        const double tan_half = std::tan(0.5 * sc.instruments[0].keys[1].opening_deg * M_PI / 180);
+        const Eigen::Vector3d side = at.axis.cross(at.up).normalized();
+        int n = 0;
+        for (int v : fixed_nodes) {
+            const Eigen::Vector3d r = tc.mesh.V.row(v).transpose() - at.position;
+            const double along = r.dot(at.axis);
+            if (along < -0.5 || along > cm.jaw_length_mm + 0.5 || std::abs(r.dot(side)) > 0.5 * cm.jaw_width_mm + 0.5) continue;
+            if (std::abs(r.dot(at.up)) <= std::max(along, 0.0) * tan_half + cm.jaw_thickness_mm + 0.5) ++n;
+        }
+        return n;
+    };
+    const std::string planned = sim::plan_scene(m_with, "with.h5", "planned");
+    const std::string blind = sim::plan_scene(m_without, "without.h5", "planned");
+    const int in_planned = gripped(planned), in_blind = gripped(blind);
+    fs::remove_all(dir);
+    EXPECT_EQ(in_planned, 0) << planned.substr(0, 1200);
+    EXPECT_NE(planned.find("no clamped node (the domain's cut ends) lies within"), std::string::npos) << planned.substr(0, 1200);
+    EXPECT_GT(in_blind, 0) << "without the fixed set the plan closes on the clamped end:\n" << blind.substr(0, 1200);
+}
+
+// A sac at the clamped end itself (z 0.5-3.5 mm of the 8 mm tube, the end at z = 0): every pose that spans the neck
+// closes on the clamped nodes, and the planner refuses with an input error that says so (no scene that presses
+// tissue which cannot give).
+TEST(Plan, ANeckAtAClampedEndIsRefused) {
+    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_at_end_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    test::TubeCase tc = test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 0.5, 3.5, 25.0);
+    std::vector<int> fixed_nodes;
+    for (Eigen::Index v = 0; v < tc.mesh.V.rows(); ++v)
+        if (tc.mesh.V(v, 2) < 1e-9 || tc.mesh.V(v, 2) > 8.0 - 1e-9) fixed_nodes.push_back(static_cast<int>(v));
+    tc.bundle.volume->node_sets["fixed"] = Eigen::Map<Eigen::VectorXi>(fixed_nodes.data(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    const fs::path bundle = dir / "tube.h5";
+    write_bundle(bundle.string(), tc.bundle);
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(bundle.string(), lo);
+    fs::remove_all(dir);
+    try {
+        const std::string text = sim::plan_scene(m, "tube.h5", "planned");
+        ADD_FAILURE() << "planned a neck at the clamped end:\n" << text.substr(0, 1200);
+    } catch (const InputError& e) {
+        const std::string w = e.what();
+        EXPECT_NE(w.find("closes on the domain's clamped ends"), std::string::npos) << w;
+        EXPECT_NE(w.find("clamped nodes (the bundle's 'fixed' set"), std::string::npos) << w;
+    }
+}

@@ -121,6 +121,9 @@ struct SimModel {
     /// the bundle when its scene asks for the patch and they are not here).
     std::shared_ptr<const VolumeData> volume;
     std::shared_ptr<const FemData> fem;
+    /// The mesh nodes held at zero displacement (the bundle's "fixed" node set: the domain's cut ends, clamped);
+    /// empty when the bundle has none. The planner keeps the jaws off them (plan.hpp).
+    Eigen::VectorXi fixed_nodes;
     std::string case_id;
     double load_seconds = 0.0;
     bool is_float() const { return precision == Precision::FLOAT32; }

@@ -43,8 +43,12 @@ struct PlanOptions {
 /// outputs are named after `stem` beside the scene. The clip opens to 80 % of `max_opening_deg`; its hinge stands
 /// far enough before the neck that every neck point passes between the open jaws with its wall and 0.5 mm to
 /// spare (at least 1 mm); the blades are the shortest of 3, 5, …, 15 mm that reach 0.5 mm past the neck.
-/// @throws InputError no neck, a neck longer than the longest clip, or no pose that covers min_cover of the neck's
-///         border (clear of the vessel, or the fewest vertices in the way when no pose is clear)
+/// A pose is clear when its open blades touch no outer-surface vertex along the approach and its jaws would not
+/// close on the parent's lumen. A pose with a clamped node (SimModel::fixed_nodes: the domain's cut ends) in or
+/// within half a millimetre of the space the jaws close on is never taken: the model ends there, the vessel does not.
+/// @throws InputError no neck, a neck longer than the longest clip, every spanning pose closing on a clamped end,
+///         or no pose that covers min_cover of the neck's border (clear, or the fewest vertices in the way when no
+///         pose is clear)
 std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const std::string& stem, const PlanOptions& o = {});
 
 }  // namespace aneu::sim
