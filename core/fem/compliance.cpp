@@ -513,6 +513,30 @@ double plane_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const 
     return l > 0 ? n.dot(p - a) / l : 0.0;
 }
 
+/// A wall pair's vertex p over its face abc: the face's unit normal nh ((b − a) × (c − a)), p's signed distance d from
+/// the face's plane and its projection's barycentric coordinates b. A pair is a contact where the vertex lies over
+/// the face: its projection inside it, or within a tenth of the face beyond an edge (OVER); the distance to the closed
+/// triangle, ≥ 0 beside it, would let a vertex pressed to an edge slide round it and under the face, and beyond the
+/// tenth its neighbour's pair holds it. One rule for the frames' rows and their measure (wall_min_distance).
+struct OverFace {
+    Eigen::Vector3d nh;
+    double d = 0, b0 = 0, b1 = 0, b2 = 0;
+};
+bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, OverFace& o) {
+    constexpr double OVER = -0.1;
+    const Eigen::Vector3d e1 = b - a, e2 = c - a, nn = e1.cross(e2);
+    const double area2 = nn.norm();
+    if (!(area2 > 0)) return false;
+    const Eigen::Vector3d w = p - a;
+    o.nh = nn / area2;
+    const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2), den = d11 * d22 - d12 * d12;
+    o.b1 = (d22 * w1 - d12 * w2) / den;
+    o.b2 = (d11 * w2 - d12 * w1) / den;
+    o.b0 = 1 - o.b1 - o.b2;
+    o.d = o.nh.dot(w);
+    return o.b0 >= OVER && o.b1 >= OVER && o.b2 >= OVER;
+}
+
 /// One pass of a frame: the constraints linearised where `warm` left the candidates (else at the free state), those
 /// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
 CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
@@ -658,20 +682,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             r.k = {v, walls->faces(f, 0), walls->faces(f, 1), walls->faces(f, 2)};
             for (int a = 1; a < 4; ++a)
                 if (r.k[static_cast<size_t>(a)] < 0 || r.k[static_cast<size_t>(a)] >= nc) throw InputError("compliant clip: wall face " + std::to_string(f) + " names a node outside the candidates");
-            // Hard contact on the face's plane where the vertex lies over the face (its projection inside it, or
-            // within a tenth of the face beyond an edge): the distance to the closed triangle, ≥ 0 beside it, would
-            // let a vertex pressed to an edge slide round it and under the face; beyond that its neighbour's pair holds it.
-            const Eigen::Vector3d xa = Xl.row(r.k[1]).transpose(), xb = Xl.row(r.k[2]).transpose(), xc = Xl.row(r.k[3]).transpose();
-            const Eigen::Vector3d xv = Xl.row(r.k[0]).transpose();
-            const Eigen::Vector3d e1 = xb - xa, e2 = xc - xa, nn = e1.cross(e2);
-            const double area2 = nn.norm();
-            if (!(area2 > 0)) continue;
-            const Eigen::Vector3d nh = nn / area2, w = xv - xa;
-            const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2), den = d11 * d22 - d12 * d12;
-            const double b1 = (d22 * w1 - d12 * w2) / den, b2 = (d11 * w2 - d12 * w1) / den, b0 = 1 - b1 - b2;
-            constexpr double OVER = -0.1;
-            const double d = nh.dot(w);
-            if (b0 < OVER || b1 < OVER || b2 < OVER) continue;
+            // Hard contact on the face's plane where the vertex lies over the face (over_face).
+            OverFace of;
+            if (!over_face(Xl.row(r.k[0]).transpose(), Xl.row(r.k[1]).transpose(), Xl.row(r.k[2]).transpose(), Xl.row(r.k[3]).transpose(), of)) continue;
+            const Eigen::Vector3d& nh = of.nh;
+            const double d = of.d, b0 = of.b0, b1 = of.b1, b2 = of.b2;
             wall_min = std::min(wall_min, d);
             // Within reach, and not far behind the face's plane where the frame started (a crease, the far side of a
             // fold). The plane's distance, as the row's gap: until session 35 the distance to the closed triangle, signed
@@ -900,8 +915,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     return out;
 }
 
-/// The smallest distance from its face's plane of a wall pair's vertex that lies over its face (solve_pass's rule:
-/// its projection inside the face or within a tenth of it beyond an edge), the candidates displaced by u (inf: none).
+/// The smallest distance from its face's plane of a wall pair's vertex that lies over its face (over_face), the
+/// candidates displaced by u (inf: none).
 /// Pairs whose vertex lay further than opt.wall_behind_mm behind its face's plane where the frame started (`start`: a
 /// crease, the far side of a fold; solve_pass makes them no constraint) are left out.
 double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, const Eigen::VectorXd& u, const Eigen::VectorXd& start,
@@ -913,14 +928,8 @@ double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, 
     double out = std::numeric_limits<double>::infinity();
     for (const auto& [v, f] : walls.pairs) {
         if (plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2))) < -opt.wall_behind_mm) continue;
-        const Eigen::Vector3d xa = at(walls.faces(f, 0)), e1 = at(walls.faces(f, 1)) - xa, e2 = at(walls.faces(f, 2)) - xa, w = at(v) - xa;
-        const Eigen::Vector3d nn = e1.cross(e2);
-        const double area2 = nn.norm();
-        if (!(area2 > 0)) continue;
-        const double d11 = e1.dot(e1), d12 = e1.dot(e2), d22 = e2.dot(e2), w1 = w.dot(e1), w2 = w.dot(e2), den = d11 * d22 - d12 * d12;
-        const double b1 = (d22 * w1 - d12 * w2) / den, b2 = (d11 * w2 - d12 * w1) / den, b0 = 1 - b1 - b2;
-        if (b0 < -0.1 || b1 < -0.1 || b2 < -0.1) continue;
-        out = std::min(out, nn.dot(w) / area2);
+        OverFace of;
+        if (over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of)) out = std::min(out, of.d);
     }
     return out;
 }
