@@ -161,11 +161,12 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         return f;
     };
     // The domain's clamped ends (the bundle's "fixed" nodes: where the mesh was cut, held at zero). Jaws that close
-    // on one press tissue that cannot give: on C0095 the planned jaws straddled a branch's cut end 2 mm from the
+    // on one press tissue that cannot give: on C0095 the planned jaws straddled the cut end of a branch beside the
     // neck, a blade met the clamped ring at 18° and the spring's balance held the clip open there with 13-27 kN on
-    // it. The end is where the model stops, not where the vessel does: a pose is counted in the way for each
-    // clamped node in the space the closing jaws sweep (between the open blades, along their length and width)
-    // or within a wall's thickness (EDGE_MM) of it, and for each within CLEAR of the open blades on the way in.
+    // it. The end is where the model stops, not where the vessel does: a pose with a clamped node in the space the
+    // closing jaws sweep (between the open blades, along their length and width) or within about a wall's thickness
+    // (EDGE_MM) of it is never taken (clamped_gripped), and a clamped node within CLEAR of the open blades on the
+    // way in counts as a vertex in the way.
     constexpr double EDGE_MM = 0.5;
     std::vector<Eigen::Vector3d> clamped;
     {

@@ -186,6 +186,22 @@ TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAsk
     }
 }
 
+// The 8 mm tube with its sac between z0 and z1 (±25°), and the nodes of its two clamped ends (z = 0 and 8 mm: the
+// fixture's fixed DOFs), which the fixture does not put in the bundle's "fixed" node set.
+namespace {
+struct ClampedTube {
+    test::TubeCase tc;
+    std::vector<int> fixed_nodes;
+    ClampedTube(double z0, double z1) : tc(test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, z0, z1, 25.0)) {
+        for (Eigen::Index v = 0; v < tc.mesh.V.rows(); ++v)
+            if (tc.mesh.V(v, 2) < 1e-9 || tc.mesh.V(v, 2) > 8.0 - 1e-9) fixed_nodes.push_back(static_cast<int>(v));
+    }
+    void set_fixed() {
+        tc.bundle.volume->node_sets["fixed"] = Eigen::Map<Eigen::VectorXi>(fixed_nodes.data(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    }
+};
+}  // namespace
+
 // The domain's clamped ends: a sac 2-5 mm from the fixed end of the 8 mm tube (z = 0). The planner sees the bundle's
 // "fixed" node set and keeps the clamped nodes out of the space its jaws close on (and half a millimetre round it):
 // there the model stops and the tissue cannot give (C0095: a blade on a clamped branch end, 13-27 kN). The same
@@ -193,13 +209,12 @@ TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAsk
 TEST(Plan, TheJawsKeepOffTheDomainsClampedEnds) {
     const fs::path dir = fs::temp_directory_path() / ("aneu_plan_clamped_" + std::to_string(::getpid()));
     fs::create_directories(dir);
-    test::TubeCase tc = test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.0, 5.0, 25.0);
-    std::vector<int> fixed_nodes;
-    for (Eigen::Index v = 0; v < tc.mesh.V.rows(); ++v)
-        if (tc.mesh.V(v, 2) < 1e-9 || tc.mesh.V(v, 2) > 8.0 - 1e-9) fixed_nodes.push_back(static_cast<int>(v));
+    ClampedTube ct(2.0, 5.0);
+    const test::TubeCase& tc = ct.tc;
+    const std::vector<int>& fixed_nodes = ct.fixed_nodes;
     const fs::path with = dir / "with.h5", without = dir / "without.h5";
     write_bundle(without.string(), tc.bundle);
-    tc.bundle.volume->node_sets["fixed"] = Eigen::Map<Eigen::VectorXi>(fixed_nodes.data(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    ct.set_fixed();
     write_bundle(with.string(), tc.bundle);
     sim::LoadOptions lo;
     lo.geometry_only = true;
@@ -240,13 +255,10 @@ TEST(Plan, TheJawsKeepOffTheDomainsClampedEnds) {
 TEST(Plan, ANeckAtAClampedEndIsRefused) {
     const fs::path dir = fs::temp_directory_path() / ("aneu_plan_at_end_" + std::to_string(::getpid()));
     fs::create_directories(dir);
-    test::TubeCase tc = test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 0.5, 3.5, 25.0);
-    std::vector<int> fixed_nodes;
-    for (Eigen::Index v = 0; v < tc.mesh.V.rows(); ++v)
-        if (tc.mesh.V(v, 2) < 1e-9 || tc.mesh.V(v, 2) > 8.0 - 1e-9) fixed_nodes.push_back(static_cast<int>(v));
-    tc.bundle.volume->node_sets["fixed"] = Eigen::Map<Eigen::VectorXi>(fixed_nodes.data(), static_cast<Eigen::Index>(fixed_nodes.size()));
+    ClampedTube ct(0.5, 3.5);
+    ct.set_fixed();
     const fs::path bundle = dir / "tube.h5";
-    write_bundle(bundle.string(), tc.bundle);
+    write_bundle(bundle.string(), ct.tc.bundle);
     sim::LoadOptions lo;
     lo.geometry_only = true;
     const sim::SimModel m = sim::load_model(bundle.string(), lo);
