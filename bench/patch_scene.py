@@ -33,7 +33,7 @@ ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
 a = ap.parse_args()
 raw = open(a.plan).read()
-text = "\n".join(l for l in open(a.plan).read().splitlines() if not l.lstrip().startswith("//"))
+text = "\n".join(l for l in raw.splitlines() if not l.lstrip().startswith("//"))
 s = json.loads(text)
 s["bundle"] = a.bundle
 s["model"] = {"wall": "patch", "newton_per_frame": 40}
