@@ -488,6 +488,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // The compliance frame's parts [s], for the trace: a linearisation made in it, the rows, the Delassus matrix,
         // the LCP, the wall pairs' search and crossing checks, the patch's displacement from the forces.
         double c_lin = 0, c_rows = 0, c_delassus = 0, c_lcp = 0, c_search = 0, c_disp = 0;
+        int c_repeats = 0, c_nrows = 0, c_pivots = 0, c_sweeps = 0;
         auto compliant_frame = [&]() {
             fem::NewtonResult res;
             res.u = v0;
@@ -546,6 +547,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             c_delassus = f.delassus_s;
             c_lcp = f.lcp_s;
             c_search = f.search_s;
+            c_repeats = repeats;
+            c_nrows = static_cast<int>(f.constraint.size());
+            c_pivots = f.pivots;
+            c_sweeps = f.sweeps;
             const Stopwatch dw;
             res.u.head(nb) = C->lin->displacement(f.candidate_forces);
             c_disp = dw.seconds();
@@ -666,10 +671,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         const double ms = 1e3 * sw.seconds();
         const int merges = fem::pattern_cache_counts(*P.wall_patterns).first + fem::pattern_cache_counts(*P.clip_patterns).first - merges_before;
         if (std::getenv("ANEU_PATCH_TRACE") && compliance)
-            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (compliance: linearise %.1f, rows %.1f, delassus %.1f, lcp %.1f, search %.1f, displacement %.1f)\n",
+            std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (compliance: linearise %.1f, rows %.1f, delassus %.1f, lcp %.1f, search %.1f, displacement %.1f; repeats %d, rows %d, sweeps %d, pivots %d)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", loads.force_n[0], loads.force_n[1],
                          loads.contacts[0], loads.contacts[1], loads.friction_n[0], loads.friction_n[1], loads.sliding[0], loads.sliding[1], wall_min, touching, ms,
-                         1e3 * c_lin, 1e3 * c_rows, 1e3 * c_delassus, 1e3 * c_lcp, 1e3 * c_search, 1e3 * c_disp);
+                         1e3 * c_lin, 1e3 * c_rows, 1e3 * c_delassus, 1e3 * c_lcp, 1e3 * c_search, 1e3 * c_disp, c_repeats, c_nrows, c_sweeps, c_pivots);
         else if (std::getenv("ANEU_PATCH_TRACE"))
             std::fprintf(stderr, "patch t=%.4f theta %.3f->%.3f deg (%s) its %d %s s=%.3g res %.2e blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N sliding %d/%d wall %.4f mm %d pairs %.1f ms (wall %.1f clip %.1f newton %.1f: setup %.1f%s%s, tangent %.1f, %d factorisations %.1f (%d not positive definite: %.1f), %d chord steps, back %.1f%s)\n",
                          fr.t, v0[nb] / DEG, r.u[nb] / DEG, held ? "held" : "deposited", its, r.converged ? "ok" : "NOT converged", r.load_fraction,

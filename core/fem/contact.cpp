@@ -412,6 +412,17 @@ void pair_crossings_closely(ContactParams& cp, const Eigen::MatrixX3i& faces, co
     cp.close_search_mm = std::max(cp.close_search_mm, reach);
 }
 
+bool crossings_need_pairs(const std::vector<std::pair<int, int>>& crossings, const std::vector<std::array<int, 2>>& pairs,
+                          const std::vector<int>& close_vertices) {
+    if (crossings.empty()) return false;
+    std::vector<std::array<int, 2>> sorted = pairs;
+    std::sort(sorted.begin(), sorted.end());
+    return std::any_of(crossings.begin(), crossings.end(), [&](const std::pair<int, int>& c) {
+        return !std::binary_search(close_vertices.begin(), close_vertices.end(), c.first) ||
+               !std::binary_search(sorted.begin(), sorted.end(), std::array<int, 2>{c.first, c.second});
+    });
+}
+
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
                                                double depth) {
     if (u.size() != 3 * X.rows()) throw InputError("surface_crossings: the displacement has the wrong size");

@@ -208,6 +208,27 @@ TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated)
     EXPECT_NEAR(pushing_force(next.result), pushing_force(cs.result), 1e-6 * pushing_force(cs.result));
 }
 
+TEST(WallContact, ACrossingIsWorthAnotherSolveOnlyWhereClosePairingChangesThePairs) {
+    // Crossings (vertex, face); the pairs in no order; the close vertices sorted (pair_crossings_closely's).
+    const std::vector<std::array<int, 2>> pairs = {{7, 3}, {2, 9}, {5, 1}};
+    const std::vector<int> close = {2, 5, 8};
+    EXPECT_FALSE(fem::crossings_need_pairs({}, pairs, close));                  // nothing went through
+    EXPECT_FALSE(fem::crossings_need_pairs({{2, 9}}, pairs, close));            // paired closely already: a crease
+    EXPECT_FALSE(fem::crossings_need_pairs({{5, 1}, {2, 9}}, pairs, close));
+    EXPECT_TRUE(fem::crossings_need_pairs({{2, 4}}, pairs, close));             // close, but not with that face
+    EXPECT_TRUE(fem::crossings_need_pairs({{7, 3}}, pairs, close));             // paired, its ring not yet
+    EXPECT_TRUE(fem::crossings_need_pairs({{2, 9}, {6, 0}}, pairs, close));     // one of them new
+    EXPECT_TRUE(fem::crossings_need_pairs({{2, 9}}, {}, close));
+    // After pair_crossings_closely the vertex is close; with its pair found, nothing is left to gain.
+    fem::ContactParams cp;
+    cp.close_vertices = close;
+    const Eigen::MatrixX3i faces = (Eigen::MatrixX3i(4, 3) << 0, 1, 6, 1, 7, 6, 2, 3, 4, 3, 5, 4).finished();
+    const Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * 9);
+    fem::pair_crossings_closely(cp, faces, u, u, {{7, 3}});
+    EXPECT_FALSE(fem::crossings_need_pairs({{7, 3}}, pairs, cp.close_vertices));
+    EXPECT_TRUE(std::binary_search(cp.close_vertices.begin(), cp.close_vertices.end(), 6));  // its ring
+}
+
 TEST(WallContact, NeighboursAreNotPairs) {
     // A flat face never pushes on itself. With the whole 4 × 4 grid in reach, a ring count wider than the grid
     // leaves no pair; with two rings, or none, the far vertices of the same wall are not pairs either: their

@@ -143,6 +143,13 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
 void pair_crossings_closely(ContactParams& cp, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0, const Eigen::VectorXd& u1,
                             const std::vector<std::pair<int, int>>& crossings);
 
+/// Whether pairing `crossings` (vertex, face) closely would give a solve anything new: some crossing's vertex is not
+/// yet one of `close_vertices` (sorted), or is not paired with the face it went through (`pairs`: (vertex, face),
+/// any order). A crossing of a face the vertex is closely paired with had its pair already, and its row was left out
+/// on purpose (the vertex started behind the face's plane: a crease); solved again, the frame comes out the same.
+bool crossings_need_pairs(const std::vector<std::pair<int, int>>& crossings, const std::vector<std::array<int, 2>>& pairs,
+                          const std::vector<int>& close_vertices);
+
 /// A solve with wall contact that no vertex passes through. `solve` is run with a ContactBody made at `u0` (the
 /// body's DOFs; the solve's own state may append more, e.g. a clip's opening). Where its end state has a vertex
 /// behind a face it was not behind at u0 (surface_crossings, `depth`), the vertex went through a face its pairs
