@@ -29,6 +29,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/clip.hpp"
@@ -54,6 +55,7 @@ struct Outcome {
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     if (argc < 3) {
         std::fprintf(stderr, "usage: %s FEM.h5 --case artery|sac [options]\n", argv[0]);
         return 2;

@@ -48,6 +48,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "bench_util.hpp"
@@ -186,6 +187,7 @@ fem::NewtonResult solve_through(const fem::ElasticBody& body, const Eigen::Vecto
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     if (argc < 2) {
         std::fprintf(stderr, "usage: %s FEM.h5 [--centre x,y,z] [--blade-width-mm 0.8] [--blade-length-mm 7] [--full-gap-mm 0.2] "
                              "[--region-mm 3] [--closures c1,c2,...]\n", argv[0]);

@@ -45,6 +45,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/clip.hpp"
@@ -85,6 +86,7 @@ double min_distance(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     // As aneusim: the frames' large buffers (the Delassus matrix: megabytes to tens of
     // megabytes, every pass) stay on the heap and are reused, not mapped afresh and page-faulted in at each use
     // (without this, one frame in two took 100-250 ms more on the sample's pressed walls).

@@ -40,6 +40,7 @@ double dgemm_gflops() {
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     std::string method = "sparse", precision = "float64";
     int threads = 2, n_theta = 52, n_z = 106;
     for (int i = 1; i + 1 < argc; i += 2) {

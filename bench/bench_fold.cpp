@@ -31,6 +31,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/bundle.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
@@ -56,6 +57,7 @@ std::vector<double> parse_list(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     int layers = 1, around = 24, along = 16;
     double r_in = 1.5, wall = 0.28, length = 6.0, jaw = 1.0, E = 1.0, nu = 0.45;
     std::vector<double> gaps = {0.9, 0.8, 0.7, 0.6};

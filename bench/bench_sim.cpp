@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/sim/model.hpp"
 #include "aneu/sim/solver.hpp"
@@ -21,6 +22,7 @@ using namespace aneu;
 
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     if (argc < 2) {
         std::fprintf(stderr, "usage: %s BUNDLE [--region x,y,z,r] [--margin MM] [--reps N]\n", argv[0]);
         return 2;

@@ -21,6 +21,7 @@
 #include <Eigen/SparseCore>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/bundle_io.hpp"
 #include "aneu/fem/static_solve.hpp"
@@ -69,6 +70,7 @@ struct Probe {
 }  // namespace
 
 int main(int argc, char** argv) {
+    aneu::reexec_with_blas_kernels(argv);  // OpenBLAS's kernels for this CPU (aneu/core/dependency_info.hpp)
     if (argc < 2) {
         std::fprintf(stderr, "usage: %s FEM.h5 [--case CASE.h5] [--centre x,y,z] [--radius-mm 1.5] [--depth-mm 0.2]\n", argv[0]);
         return 2;

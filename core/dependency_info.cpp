@@ -1,6 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "aneu/core/dependency_info.hpp"
 
+#include <strings.h>
+#include <unistd.h>
+
+#include <cstdlib>
+
 #include <cholmod.h>
 #include <omp.h>
 
@@ -16,6 +21,29 @@ int openblas_get_num_threads(void);
 namespace aneu {
 
 std::string openblas_kernels() { return openblas_get_corename(); }
+
+std::string blas_kernels_for_this_cpu() {
+    if (std::getenv("OPENBLAS_CORETYPE") != nullptr) return "";  // the user's choice (or ours, already applied)
+    const char* core = openblas_get_corename();
+    if (core == nullptr || strcasecmp(core, "Prescott") != 0) return "";
+    __builtin_cpu_init();  // (libgcc's checks include the OS's support of the AVX and AVX-512 states)
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512bw") &&
+        __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl"))
+        return "SkylakeX";
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return "Haswell";
+    if (__builtin_cpu_supports("avx")) return "Sandybridge";
+    return "";
+}
+
+bool set_blas_kernels_env() {
+    const std::string k = blas_kernels_for_this_cpu();
+    return !k.empty() && ::setenv("OPENBLAS_CORETYPE", k.c_str(), 1) == 0;
+}
+
+void reexec_with_blas_kernels(char** argv) {
+    if (set_blas_kernels_env()) ::execv("/proc/self/exe", argv);
+    // exec failed (or nothing to change): go on with the kernels OpenBLAS chose; children still get the variable
+}
 
 std::vector<std::pair<std::string, std::string>> core_dependency_versions() {
     unsigned maj = 0, min = 0, rel = 0;

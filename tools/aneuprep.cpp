@@ -59,7 +59,7 @@ int parse_aneuprep(CLI::App& app, int argc, const char* const* argv) {
 
 int main(int argc, char** argv) {
     using namespace aneu::tools;
-    reexec_with_huge_pages(argv);
+    reexec_for_this_machine(argv, true);
     CLI::App app{"aneuclip offline pipeline: CT angiography -> case bundle", "aneuprep"};
     LoggingOptions log;
     const auto args = args_of(argc, argv);

@@ -10,6 +10,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/version.hpp"
@@ -38,6 +39,7 @@ void on_stop_signal(int sig) {
 
 int main(int argc, char** argv) {
     using namespace aneu::tools;
+    reexec_for_this_machine(argv, false);  // OpenBLAS's kernels for this CPU (dependency_info.hpp)
     // The nonlinear patch's physics frames allocate and free tangents of ~10⁶ entries (tens of MB) many times a
     // second. Above glibc's mmap threshold each would be a fresh mapping, page-faulted in on first touch and
     // unmapped when freed; keeping them on the heap, never trimmed, reuses the same pages (measured on the study
@@ -45,7 +47,7 @@ int main(int argc, char** argv) {
     mallopt(M_MMAP_THRESHOLD, 32 << 20);
     mallopt(M_TRIM_THRESHOLD, 1 << 30);
     CLI::App app{"aneuclip real-time clipping simulator", "aneusim"};
-    app.set_version_flag("--version", std::string("aneusim ") + aneu::tool_version() + " (" + aneu::git_revision() + ")");
+    app.set_version_flag("--version", std::string("aneusim ") + aneu::tool_version() + " (" + aneu::git_revision() + "), OpenBLAS kernels " + aneu::openblas_kernels());
     app.require_subcommand(1);
     app.fallthrough();  // logging options after the subcommand too (`aneusim run SCENE -q`)
     LoggingOptions log;

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "cli_common.hpp"
 
+#include "aneu/core/dependency_info.hpp"
+
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
@@ -13,6 +15,7 @@
 #include <spdlog/sinks/basic_file_sink.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/core/provenance.hpp"
 
@@ -98,20 +101,33 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
 
 std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
 
-void reexec_with_huge_pages(char** argv) {
+namespace {
+/// reexec_with_huge_pages's tunable set; true if it was.
+bool set_huge_pages_env() {
     const char* opt = std::getenv("ANEU_HUGE_PAGES");
-    if (opt != nullptr && std::string(opt) == "0") return;
+    if (opt != nullptr && std::string(opt) == "0") return false;
     const char* old = std::getenv("GLIBC_TUNABLES");
     const std::string tunables = old != nullptr ? old : "";
-    if (tunables.find("glibc.malloc.hugetlb") != std::string::npos) return;  // set already (or by the user: kept)
+    if (tunables.find("glibc.malloc.hugetlb") != std::string::npos) return false;  // set already (or by the user: kept)
     // Only where the kernel gives huge pages on request: with "[always]" it does so without being asked.
     std::ifstream in("/sys/kernel/mm/transparent_hugepage/enabled");
     std::string mode((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (mode.find("[madvise]") == std::string::npos) return;
+    if (mode.find("[madvise]") == std::string::npos) return false;
     const std::string value = (tunables.empty() ? "" : tunables + ":") + "glibc.malloc.hugetlb=1";
-    if (::setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
-    ::execv("/proc/self/exe", argv);
+    return ::setenv("GLIBC_TUNABLES", value.c_str(), 1) == 0;
+}
+}  // namespace
+
+void reexec_with_huge_pages(char** argv) {
+    if (set_huge_pages_env()) ::execv("/proc/self/exe", argv);
     // exec failed: go on as we are, with the variable set (children still benefit)
+}
+
+void reexec_for_this_machine(char** argv, bool huge_pages) {
+    const bool pages = huge_pages && set_huge_pages_env();
+    const bool blas = aneu::set_blas_kernels_env();
+    if (pages || blas) ::execv("/proc/self/exe", argv);
+    // exec failed: go on as we are, with the variables set (children still benefit)
 }
 
 

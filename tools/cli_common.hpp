@@ -51,6 +51,12 @@ int run_guarded(const std::string& name, const std::function<void()>& body);
 /// assemble 9.4 -> 3.7 s, condense 26.4 -> 16.6 s, same peak memory (bench/results/huge_pages.md).
 void reexec_with_huge_pages(char** argv);
 
+/// What the program needs in its environment before the libraries load, set and the program executed again once
+/// (Linux: /proc/self/exe, the same argv) where anything changed: with `huge_pages`, reexec_with_huge_pages's
+/// tunable; always, OPENBLAS_CORETYPE where OpenBLAS fell back to its SSE3 kernels on a CPU it does not know
+/// (aneu::set_blas_kernels_env: dgemm 5x faster on this project's Xeon). Returns where nothing changed or exec failed.
+void reexec_for_this_machine(char** argv, bool huge_pages);
+
 /// argv as a vector of strings.
 std::vector<std::string> args_of(int argc, char** argv);
 
