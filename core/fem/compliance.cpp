@@ -671,7 +671,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     double wall_min = std::numeric_limits<double>::infinity();
     if (walls) {
         // With opt.wall_one_face, per vertex only its best row: of its faces within 0.02 mm of the nearest, the one its
-        // projection lies deepest inside (the largest smallest barycentric coordinate).
+        // projection lies deepest inside (the largest smallest barycentric coordinate), unless the face its row had in
+        // `warm` (the last pass, or the last frame) is still one of them: a vertex over the edge between two faces
+        // then keeps its face. (Without it the sample's held walls chattered: a vertex over an edge took one face in a
+        // pass, moved 6 µm along its plane, took the other in the next and moved back, with six others, so the
+        // geometry passes never settled and every frame ended on one of two states.)
         std::vector<std::pair<double, double>> score;  // per kept wall row: (d, inside), when filtering
         const size_t wall_start = rows.size();
         for (const auto& [v, f] : walls->pairs) {
@@ -714,11 +718,21 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 double& dn = nearest[static_cast<size_t>(rows[i].k[0])];
                 dn = std::min(dn, score[i - wall_start].first);
             }
+            std::vector<int> kept(static_cast<size_t>(nc), -1);  // per vertex: its row's face (2 + f) in `warm`
+            if (warm)
+                for (const auto& [v, sf] : warm->constraint)
+                    if (sf >= 2 && v >= 0 && v < nc) kept[static_cast<size_t>(v)] = sf;
             std::vector<long long> best(static_cast<size_t>(nc), -1);  // per vertex: its row
+            std::vector<char> stays(static_cast<size_t>(nc), 0);       // ... its face in `warm`
             for (size_t i = wall_start; i < rows.size(); ++i) {
                 const size_t v = static_cast<size_t>(rows[i].k[0]);
-                if (score[i - wall_start].first > nearest[v] + 0.02) continue;
-                if (best[v] < 0 || score[i - wall_start].second > score[static_cast<size_t>(best[v]) - wall_start].second) best[v] = static_cast<long long>(i);
+                if (score[i - wall_start].first > nearest[v] + 0.02 || stays[v]) continue;
+                if (rows[i].s == kept[v]) {
+                    best[v] = static_cast<long long>(i);
+                    stays[v] = 1;
+                } else if (best[v] < 0 || score[i - wall_start].second > score[static_cast<size_t>(best[v]) - wall_start].second) {
+                    best[v] = static_cast<long long>(i);
+                }
             }
             size_t w = wall_start;  // the kept rows moved down in place
             for (size_t i = wall_start; i < rows.size(); ++i)
