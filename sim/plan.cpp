@@ -486,6 +486,27 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
+    // How much of the jaws' width the neck line fills, and how near an edge it comes: a saddle that fills the band is
+    // squeezed out of it as the jaws close (the sample's 0.89 of 1.0 mm, at the lower edge: about half of the line
+    // stays open; bench/results/study/compliance.md, session 37).
+    {
+        const Eigen::Vector3d nprime = std::sin(chosen->alpha) * way.side * way.u + std::cos(chosen->alpha) * n;
+        double lo = 1e300, hi = -1e300;
+        for (const auto& [q, len] : seg) {
+            const double h = (q - lift * n).dot(nprime);
+            if (std::abs(h) > 0.5 * JAW_W) continue;  // not between the jaws
+            lo = std::min(lo, h);
+            hi = std::max(hi, h);
+        }
+        if (hi >= lo) {
+            char span[320];
+            std::snprintf(span, sizeof span,
+                          "// Across the jaws' width the neck line they cover spans %.2f mm of their %.1f mm, %.2f mm inside the nearer edge at its closest:\n"
+                          "// a line that nearly fills the width is partly squeezed out of the jaws as they close.\n",
+                          hi - lo, JAW_W, 0.5 * JAW_W - std::max(hi, -lo));
+            header += span;
+        }
+    }
     if (short_tips)
         header += "// No standard blade reaches past the far fold of the neck flattened between the jaws: the 15 mm clip's tips stop short,\n"
                   "// expect the far end of the neck to stay open (a longer clip, or a second one, would close it).\n";

@@ -3,6 +3,7 @@
 // on the lumen (r 1.5 mm: a chord of 1.15 mm), so the neck's long axis is z, its normal +x.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
@@ -97,6 +98,17 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     ASSERT_LT(h_hi - h_lo, cm.jaw_width_mm);
     EXPECT_NEAR((closed.position - nf.centre).dot(nf.normal) - 0.5 * cm.jaw_width_mm, h_lo, 1e-3) << h_lo << " … " << h_hi << "\n" << text.substr(0, 900);
     EXPECT_NE(text.find("they cover 100 % of the neck line"), std::string::npos) << text.substr(0, 600);
+    // The header says how much of the jaws' width the line fills and how near it comes to an edge: here all of the
+    // line, its lower edge at the line's lowest point (0 mm inside it, to the 0.05 mm grid of heights).
+    {
+        const auto at = text.find("the neck line they cover spans ");
+        ASSERT_NE(at, std::string::npos) << text.substr(0, 900);
+        double span = 0, width = 0, inside = -1;
+        ASSERT_EQ(std::sscanf(text.c_str() + at, "the neck line they cover spans %lf mm of their %lf mm, %lf mm inside", &span, &width, &inside), 3);
+        EXPECT_NEAR(span, h_hi - h_lo, 0.006);
+        EXPECT_DOUBLE_EQ(width, cm.jaw_width_mm);
+        EXPECT_NEAR(inside, 0.0, 0.006);
+    }
     // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
     const double half = 0.5 * keys[0].opening_deg * M_PI / 180;
     EXPECT_GE((margin + 0.5 * nf.length_mm) * std::tan(half), 0.5 * nf.width_mm + 0.4 + 0.5 - 0.3);
