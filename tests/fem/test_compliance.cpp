@@ -177,39 +177,68 @@ TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalan
     }
 }
 
-TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough) {
-    // A tube (radii 1 and 1.3 mm, 4 mm long, ends held, 1 MPa, ν 0.45) between blades that close across its middle
-    // from its outer diameter to 0.5 mm apart: less than its two walls (0.6 mm), so the lumen closes and the inner
-    // walls press on each other. The blades hinge 100 mm away (nearly parallel) and are 2 mm wide along the tube.
-    const fem::StructuredMesh m = fem::tube_mesh(1.0, 1.3, 4.0, 2, 24, 12);
-    const fem::NeoHookeanSolid solid(m.V, m.T, Eigen::VectorXi::Zero(m.T.rows()), {{"wall", 1.0, 0.45}});
-    constexpr double FAR = 100.0, GAP_END = 0.5;
-    std::vector<int> fd, cand, inner;
-    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
-        const double z = m.V(i, 2), r = std::hypot(m.V(i, 0), m.V(i, 1));
-        if (z < 1e-9 || z > 4.0 - 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        else if (std::abs(z - 2.0) <= 1.2 && (r > 1.3 - 1e-9 || r < 1.0 + 1e-9)) cand.push_back(static_cast<int>(i));
-        if (r < 1.0 + 1e-9 && std::abs(z - 2.0) <= 1.2) inner.push_back(static_cast<int>(i));
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
-    const Eigen::VectorXi set = Eigen::Map<Eigen::VectorXi>(inner.data(), static_cast<Eigen::Index>(inner.size()));
-    const Eigen::MatrixXi F = fem::boundary_faces_in_set(m.V, m.T, set);  // outward of the wall: into the lumen
-    std::vector<int> slot(static_cast<size_t>(m.V.rows()), -1);
-    for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
-    fem::CompliantWalls walls;
-    walls.faces.resize(F.rows(), 3);
-    for (Eigen::Index f = 0; f < F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) walls.faces(f, k) = slot[static_cast<size_t>(F(f, k))];
-    Eigen::MatrixX3d Xc(static_cast<Eigen::Index>(cand.size()), 3);
-    for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = m.V.row(cand[k]);
+namespace {
 
-    fem::ClipBlades blades;  // along x (across the tube), opening along y, 2 mm wide along z
-    blades.hinge = Eigen::Vector3d(-FAR, 0.0, 2.0);
-    blades.length_mm = FAR + 3.0;
-    blades.width_mm = 2.0;
+/// A tube (radii 1 and 1.3 mm, 4 mm long, `round` nodes round, ends held, 1 MPa, ν 0.45) between blades that close
+/// across its middle from its outer diameter (theta_touch) to 0.5 mm apart (theta_end): less than its two walls
+/// (0.6 mm), so the lumen closes and the inner walls press on each other. The blades hinge 100 mm away (nearly
+/// parallel) and are 2 mm wide along the tube. Candidates: the outer and inner surfaces' nodes within 1.2 mm of the
+/// middle; the inner faces there (F in body numbering, outward of the wall: into the lumen; `faces` in candidates').
+struct BladesOnATube {
+    static constexpr double FAR = 100.0, GAP_END = 0.5;
+    fem::StructuredMesh m;
+    fem::NeoHookeanSolid solid;
+    Eigen::VectorXi fixed;
+    std::vector<int> cand;
+    Eigen::MatrixXi F;
+    Eigen::MatrixX3i faces;
+    Eigen::MatrixX3d Xc;
+    fem::ClipBlades blades;
+    double theta_touch = 0, theta_end = 0;
+
+    explicit BladesOnATube(int round)
+        : m(fem::tube_mesh(1.0, 1.3, 4.0, 2, round, 12)), solid(m.V, m.T, Eigen::VectorXi::Zero(m.T.rows()), {{"wall", 1.0, 0.45}}) {
+        std::vector<int> fd, inner;
+        for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
+            const double z = m.V(i, 2), r = std::hypot(m.V(i, 0), m.V(i, 1));
+            if (z < 1e-9 || z > 4.0 - 1e-9)
+                for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+            else if (std::abs(z - 2.0) <= 1.2 && (r > 1.3 - 1e-9 || r < 1.0 + 1e-9)) cand.push_back(static_cast<int>(i));
+            if (r < 1.0 + 1e-9 && std::abs(z - 2.0) <= 1.2) inner.push_back(static_cast<int>(i));
+        }
+        fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+        F = fem::boundary_faces_in_set(m.V, m.T, Eigen::Map<Eigen::VectorXi>(inner.data(), static_cast<Eigen::Index>(inner.size())));
+        std::vector<int> slot(static_cast<size_t>(m.V.rows()), -1);
+        for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
+        faces.resize(F.rows(), 3);
+        for (Eigen::Index f = 0; f < F.rows(); ++f)
+            for (int k = 0; k < 3; ++k) faces(f, k) = slot[static_cast<size_t>(F(f, k))];
+        Xc.resize(static_cast<Eigen::Index>(cand.size()), 3);
+        for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = m.V.row(cand[k]);
+        blades.hinge = Eigen::Vector3d(-FAR, 0.0, 2.0);  // along x (across the tube), opening along y, 2 mm wide along z
+        blades.length_mm = FAR + 3.0;
+        blades.width_mm = 2.0;
+        theta_touch = 2 * std::asin(1.3 / FAR) + 1e-4;
+        theta_end = 2 * std::asin(0.5 * GAP_END / FAR);
+    }
+};
+
+}  // namespace
+
+TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough) {
+    // The tube between the blades (BladesOnATube, 24 nodes round) closed to 0.5 mm.
+    const BladesOnATube tube(24);
+    const fem::StructuredMesh& m = tube.m;
+    const fem::NeoHookeanSolid& solid = tube.solid;
+    const Eigen::VectorXi& fixed = tube.fixed;
+    const std::vector<int>& cand = tube.cand;
+    const Eigen::MatrixXi& F = tube.F;
+    const Eigen::MatrixX3d& Xc = tube.Xc;
+    const fem::ClipBlades& blades = tube.blades;
+    fem::CompliantWalls walls;
+    walls.faces = tube.faces;
     const fem::ClipSpring spring = test_spring();
-    const double theta_touch = 2 * std::asin(1.3 / FAR) + 1e-4, theta_end = 2 * std::asin(0.5 * GAP_END / FAR);
+    const double theta_touch = tube.theta_touch, theta_end = tube.theta_end;
 
     struct End {
         fem::CompliantFrame f;
@@ -276,52 +305,27 @@ TEST(CompliantClip, HeldOnOneLinearisationAVertexOverAnEdgeKeepsItsFaceAndThePas
     // keeps the face its row had before while that face is still among its nearest. (Taking the face its projection
     // lies deepest inside in every pass, some vertices switched faces in every pass and moved back and forth along
     // the two planes: 3 passes, the most, in every held frame. The sample's held clip did the same, 6 µm a pass.)
-    const fem::StructuredMesh m = fem::tube_mesh(1.0, 1.3, 4.0, 2, 23, 12);
-    const fem::NeoHookeanSolid solid(m.V, m.T, Eigen::VectorXi::Zero(m.T.rows()), {{"wall", 1.0, 0.45}});
-    constexpr double FAR = 100.0, GAP_END = 0.5;
-    std::vector<int> fd, cand, inner;
-    for (Eigen::Index i = 0; i < m.V.rows(); ++i) {
-        const double z = m.V(i, 2), r = std::hypot(m.V(i, 0), m.V(i, 1));
-        if (z < 1e-9 || z > 4.0 - 1e-9)
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        else if (std::abs(z - 2.0) <= 1.2 && (r > 1.3 - 1e-9 || r < 1.0 + 1e-9)) cand.push_back(static_cast<int>(i));
-        if (r < 1.0 + 1e-9 && std::abs(z - 2.0) <= 1.2) inner.push_back(static_cast<int>(i));
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
-    const Eigen::VectorXi set = Eigen::Map<Eigen::VectorXi>(inner.data(), static_cast<Eigen::Index>(inner.size()));
-    const Eigen::MatrixXi F = fem::boundary_faces_in_set(m.V, m.T, set);
-    std::vector<int> slot(static_cast<size_t>(m.V.rows()), -1);
-    for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
-    Eigen::MatrixX3i faces(F.rows(), 3);
-    for (Eigen::Index f = 0; f < F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) faces(f, k) = slot[static_cast<size_t>(F(f, k))];
-    Eigen::MatrixX3d Xc(static_cast<Eigen::Index>(cand.size()), 3);
-    for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = m.V.row(cand[k]);
-    fem::ClipBlades blades;
-    blades.hinge = Eigen::Vector3d(-FAR, 0.0, 2.0);
-    blades.length_mm = FAR + 3.0;
-    blades.width_mm = 2.0;
+    const BladesOnATube tube(23);
     const fem::ClipSpring spring = test_spring();
-    const double theta_touch = 2 * std::asin(1.3 / FAR) + 1e-4, theta_end = 2 * std::asin(0.5 * GAP_END / FAR);
     fem::CompliantWallSearch ws;
     fem::CompliantOptions opt;
     opt.wall_one_face = true;
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(solid.dofs());
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(tube.solid.dofs());
     fem::CompliantFrame f;
-    f.theta = theta_touch;
+    f.theta = tube.theta_touch;
     for (int frame = 0; frame < 30; ++frame) {
-        const double th = theta_touch + (theta_end - theta_touch) * std::min(1.0, (frame + 1) / 20.0);
-        const fem::Linearisation lin(solid, m.V, fixed, u, cand);
+        const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * std::min(1.0, (frame + 1) / 20.0);
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
         const fem::CompliantFrame last = f;
-        f = fem::solve_compliant_clip_walls(lin, Xc, faces, ws, blades, spring, th, last.theta, frame ? &last : nullptr, opt);
+        f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, frame ? &last : nullptr, opt);
         u = lin.displacement(f.candidate_forces);
     }
     ASSERT_GT(f.wall_contacts, 20);
-    const fem::Linearisation lin(solid, m.V, fixed, u, cand);
+    const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
     std::vector<int> passes;
     for (int frame = 0; frame < 4; ++frame) {
         const fem::CompliantFrame last = f;
-        f = fem::solve_compliant_clip_walls(lin, Xc, faces, ws, blades, spring, theta_end, last.theta, &last, opt);
+        f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, tube.theta_end, last.theta, &last, opt);
         passes.push_back(f.passes);
     }
     EXPECT_LT(passes.back(), opt.geometry_passes) << "the passes did not settle";
