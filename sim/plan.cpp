@@ -487,7 +487,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
     // How much of the jaws' width the neck line fills, and how near an edge it comes: a saddle that fills the band is
-    // squeezed out of it as the jaws close (the sample's 0.89 of 1.0 mm, at the lower edge: about half of the line
+    // squeezed out of it as the jaws close (the sample's 0.88 of 1.0 mm, at the lower edge: about half of the line
     // stays open; bench/results/study/compliance.md, session 37).
     {
         const Eigen::Vector3d nprime = std::sin(chosen->alpha) * way.side * way.u + std::cos(chosen->alpha) * n;

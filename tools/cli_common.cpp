@@ -102,7 +102,7 @@ int run_guarded(const std::string& name, const std::function<void()>& body) {
 std::vector<std::string> args_of(int argc, char** argv) { return {argv, argv + argc}; }
 
 namespace {
-/// reexec_with_huge_pages's tunable set; true if it was.
+/// glibc.malloc.hugetlb=1 added to GLIBC_TUNABLES (reexec_for_this_machine); true if it was.
 bool set_huge_pages_env() {
     const char* opt = std::getenv("ANEU_HUGE_PAGES");
     if (opt != nullptr && std::string(opt) == "0") return false;
@@ -117,11 +117,6 @@ bool set_huge_pages_env() {
     return ::setenv("GLIBC_TUNABLES", value.c_str(), 1) == 0;
 }
 }  // namespace
-
-void reexec_with_huge_pages(char** argv) {
-    if (set_huge_pages_env()) ::execv("/proc/self/exe", argv);
-    // exec failed: go on as we are, with the variable set (children still benefit)
-}
 
 void reexec_for_this_machine(char** argv, bool huge_pages) {
     const bool pages = huge_pages && set_huge_pages_env();

@@ -42,19 +42,17 @@ Reporter make_log_reporter();
 /// Success returns 0.
 int run_guarded(const std::string& name, const std::function<void()>& body);
 
-/// glibc's malloc gives large blocks to the kernel 4 KiB page by page, and on a virtual machine every first touch
-/// of a page is a costly fault: the stiffness matrix, the factor (1.1 GB for C0001) and W are written once each.
-/// With the tunable glibc.malloc.hugetlb=1 (glibc ≥ 2.35), malloc asks for transparent huge pages (madvise) for
-/// them. A tunable is read at start-up only, so the first call sets it and executes the program again, once,
-/// before anything else runs (Linux; only where the kernel's THP mode is "madvise"; never when
-/// GLIBC_TUNABLES names the tunable already; ANEU_HUGE_PAGES=0 turns it off). Measured on C0001 (2 cores):
-/// assemble 9.4 -> 3.7 s, condense 26.4 -> 16.6 s, same peak memory (bench/results/huge_pages.md).
-void reexec_with_huge_pages(char** argv);
-
 /// What the program needs in its environment before the libraries load, set and the program executed again once
-/// (Linux: /proc/self/exe, the same argv) where anything changed: with `huge_pages`, reexec_with_huge_pages's
-/// tunable; always, OPENBLAS_CORETYPE where OpenBLAS fell back to its SSE3 kernels on a CPU it does not know
-/// (aneu::set_blas_kernels_env: dgemm 5x faster on this project's Xeon). Returns where nothing changed or exec failed.
+/// (Linux: /proc/self/exe, the same argv) where anything changed, before anything else runs; returns where nothing
+/// changed or exec failed.
+/// - With `huge_pages`: glibc's malloc gives large blocks to the kernel 4 KiB page by page, and on a virtual machine
+///   every first touch of a page is a costly fault: the stiffness matrix, the factor (1.1 GB for C0001) and W are
+///   written once each. With the tunable glibc.malloc.hugetlb=1 (glibc ≥ 2.35), malloc asks for transparent huge
+///   pages (madvise) for them; a tunable is read at start-up only. Only where the kernel's THP mode is "madvise";
+///   never when GLIBC_TUNABLES names the tunable already; ANEU_HUGE_PAGES=0 turns it off. Measured on C0001 (2
+///   cores): assemble 9.4 -> 3.7 s, condense 26.4 -> 16.6 s, same peak memory (bench/results/huge_pages.md).
+/// - Always: OPENBLAS_CORETYPE where OpenBLAS fell back to its SSE3 kernels on a CPU it does not know
+///   (aneu::set_blas_kernels_env: dgemm 5x faster on this project's Xeon).
 void reexec_for_this_machine(char** argv, bool huge_pages);
 
 /// argv as a vector of strings.
