@@ -3,7 +3,7 @@
 """The neck line of an aneusim report in the clip's frame: per point its distance along the blades from the hinge,
 its offset along the closing direction, its height across the jaws' width (+ towards the parent, - towards the sac;
 the jaws span +-jaw_width/2) and its gap. The clip's pose from the scene's applier: axis and up (the closing
-direction) from its first keyframe, the hinge from its last (where the applier holds the clip; planned scenes).
+direction) from its first keyframe, the hinge from the first that closes it (opening 0: where the applier holds it).
 
 usage: neck_line_heights.py SCENE.json REPORT.json"""
 import json
@@ -24,8 +24,9 @@ def cross(a, b): return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a
 
 
 scene, report = load_json(sys.argv[1]), load_json(sys.argv[2])
-k0 = next(i for i in scene['instruments'] if i['kind'] == 'clip_applier')['keyframes'][0]
-hinge = next(i for i in scene['instruments'] if i['kind'] == 'clip_applier')['keyframes'][-1]['position']
+keys = next(i for i in scene['instruments'] if i['kind'] == 'clip_applier')['keyframes']
+k0 = keys[0]
+hinge = next(k for k in keys if k.get('opening_deg') == 0)['position']  # where the applier closes the clip
 axis = unit(k0['axis'])
 up = unit(sub(k0['up'], scale(axis, dot(k0['up'], axis))))
 width = cross(axis, up)
