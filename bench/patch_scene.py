@@ -12,6 +12,10 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
   --duration S      the scene's duration_s (1.40: the sample's planned clip held, before its release at 1.5 s)
   --shift-mm D      moves the applier's path D mm along the neck's normal (the plan's header; towards the sac
                     positive): an experiment on where the jaws' width sits on the neck line
+  --jaw-width-mm W  the planned clip's jaws W mm wide (an experiment: how much of a saddle-shaped neck line
+                    a wider blade keeps between its jaws as they close)
+  --blade-friction M  model.blade_friction (the blades' Coulomb friction on the tissue; the default is 0.3): an
+                    experiment on how much of the neck line the grip holds between the jaws
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
@@ -31,6 +35,8 @@ ap.add_argument("--refresh-frames", type=int, default=0)
 ap.add_argument("--friction-cell", type=float, default=0.0)
 ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
+ap.add_argument("--jaw-width-mm", type=float, default=0.0)
+ap.add_argument("--blade-friction", type=float, default=-1.0)
 a = ap.parse_args()
 raw = open(a.plan).read()
 text = "\n".join(l for l in raw.splitlines() if not l.lstrip().startswith("//"))
@@ -41,6 +47,8 @@ if a.solver == "compliance":
     s["model"].update(patch_solver="compliance", refresh_frames=a.refresh_frames)
     if a.friction_cell > 0:
         s["model"]["friction_cell_mm"] = a.friction_cell
+if a.blade_friction >= 0:
+    s["model"]["blade_friction"] = a.blade_friction
 s["outputs"] = {"log": a.log, "report": a.report}
 if a.duration > 0:
     s["duration_s"] = a.duration
@@ -50,6 +58,9 @@ if a.spring_scale != 1:
         sp["label_force_n"] *= a.spring_scale
         sp["open_force_n"] *= a.spring_scale
         sp["source"] = "experiment: %g x the planned clip's spring (%s)" % (a.spring_scale, sp.get("source", ""))
+if a.jaw_width_mm > 0:
+    for m in s["clip_models"].values():
+        m["jaw_width_mm"] = a.jaw_width_mm
 if a.shift_mm != 0:
     import re
     m = re.search(r"normal towards the sac \(([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\)", raw)

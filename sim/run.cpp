@@ -558,6 +558,14 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["linearisations"] = p.linearisations;
                 j["patches"][k]["linearise_s"] = p.linearise_s;
                 j["patches"][k]["linearisations_failed"] = p.linearisations_failed;
+                // How far the frames took the surface from the state they were linearised at, over the wall's thickness
+                // (the linear model's measure against linear_limit).
+                j["patches"][k]["max_lag_to_thickness"] = p.max_lag_to_thickness;
+                j["patches"][k]["max_lag_mm"] = p.max_lag_mm;
+                j["patches"][k]["max_lag_thickness_mm"] = p.max_lag_thickness_mm;
+                j["patches"][k]["max_lag_t"] = p.max_lag_t;
+                j["patches"][k]["max_lag_at"] = {p.max_lag_at.x(), p.max_lag_at.y(), p.max_lag_at.z()};
+                j["patches"][k]["end_lag_to_thickness"] = p.end_lag_to_thickness;
             }
     }
     j["skipped_inputs"] = a.skipped_inputs;
@@ -681,6 +689,12 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                       std::isfinite(p.min_wall_distance_mm) ? ("inner walls " + std::to_string(p.min_wall_distance_mm) + " mm apart at the closest").c_str()
                                                             : "no opposite inner walls came near");
         o << buf;
+        if (p.max_lag_to_thickness > 0) {
+            std::snprintf(buf, sizeof buf, "  clip %-2d frames' reach      %.3g mm from their linearisation on %.3g mm of wall (%.2g x, at the end %.2g x; trusted to %.2g x)%s\n",
+                          p.clip, p.max_lag_mm, p.max_lag_thickness_mm, p.max_lag_to_thickness, p.end_lag_to_thickness, scene.linear_limit,
+                          scene.linear_limit > 0 && p.max_lag_to_thickness > scene.linear_limit ? "  BEYOND" : "");
+            o << buf;
+        }
     }
     if (a.max_displacement_to_thickness > 0) {
         std::snprintf(buf, sizeof buf, "  largest push / wall        %.3g mm on %.3g mm (%.2g x; linear model trusted to %.2g x)%s\n",

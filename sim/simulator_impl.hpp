@@ -174,6 +174,7 @@ struct Simulator::Impl {
             fem::CompliantFrame last;         // the warm start
             bool warm = false;
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
+            bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
         };
         std::shared_ptr<Compliant> compliant;
         Assessment::PatchEnd stats;

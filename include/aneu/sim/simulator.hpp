@@ -136,6 +136,16 @@ struct Assessment {
         double linearise_s = 0;
         int linearisations_failed = 0;       ///< refreshes refused (an element inverted at the state reached): the frames
                                              ///< went on with the last one
+        /// The compliance frames' reach from their linearisation: the largest displacement of the patch's surface from
+        /// the state the frame's linearisation was made at, over the wall's thickness there (the linear model's
+        /// measure, Scene::linear_limit: the frames are linear about that state, so past the limit their forces are
+        /// too large as the linear model's are), where and when it was largest. 0: not measured (Newton frames).
+        /// Relinearised every frame, it is one frame's step (corrected by the next frame's relinearisation).
+        double max_lag_to_thickness = 0, max_lag_mm = 0, max_lag_thickness_mm = 0, max_lag_t = 0;
+        Eigen::Vector3d max_lag_at = Eigen::Vector3d::Zero();
+        /// The same at the last frame: where the frames left the patch (a patch relinearised every frame settles on its
+        /// linearisation as the clip stops moving; one never relinearised carries its whole deformation).
+        double end_lag_to_thickness = 0;
     };
     std::vector<PatchEnd> patches;
     long frames = 0, haptic_ticks = 0;
