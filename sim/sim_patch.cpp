@@ -516,6 +516,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 try {
                     C->lin = std::make_unique<fem::Linearisation>(pm, P.X, pm.fixed_dofs(), u0, C->cand);
                     ++P.stats.linearisations;
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s\n", fr.t,
+                                     C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,
+                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s);
                 } catch (const NumericalError&) {
                     // An element the frames took past inversion: this state cannot be linearised. The frames go on
                     // with the last linearisation (a first one that fails ends the run).

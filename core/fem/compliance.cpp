@@ -80,6 +80,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
         m->llt.compute(U);
         if (m->llt.info() != Eigen::Success) {  // buckling: the element tangents projected onto PSD ones
             sw.lap();
+            projected = true;
             Kt = body.tangent(u0, true);
             U = detail::free_upper(Kt, m->free_index, mf);
             tangent_s += sw.lap();

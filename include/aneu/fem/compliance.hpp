@@ -66,6 +66,9 @@ public:
     /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance (fem::condense:
     /// its own factorisation, the forward solve and SYRK).
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
+    /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
+    /// projected onto positive semidefinite ones (factorise_s counts both factorisations).
+    bool projected = false;
 
 private:
     struct Impl;
