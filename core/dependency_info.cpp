@@ -16,11 +16,14 @@ extern "C" {
 char* openblas_get_corename(void);
 char* openblas_get_config(void);
 int openblas_get_num_threads(void);
+void openblas_set_num_threads(int);
 }
 
 namespace aneu {
 
 std::string openblas_kernels() { return openblas_get_corename(); }
+
+void set_blas_threads(int n) { openblas_set_num_threads(n); }
 
 std::string blas_kernels_for_this_cpu() {
     if (std::getenv("OPENBLAS_CORETYPE") != nullptr) return "";  // the user's choice (or ours, already applied)

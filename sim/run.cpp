@@ -19,6 +19,7 @@
 #include <H5Cpp.h>
 #include <nlohmann/json.hpp>
 
+#include "aneu/core/dependency_info.hpp"
 #include "aneu/core/common.hpp"
 #include "aneu/core/atomic_file.hpp"
 #include "aneu/core/error.hpp"
@@ -334,7 +335,11 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         sim.set_solver_threads(std::max(1, static_cast<int>(std::thread::hardware_concurrency()) - 1));
         // (The math libraries under a nonlinear patch's frames, CHOLMOD on OpenBLAS and OpenMP's tangents, keep
         // every core: kept to one, the haptic loop's period did no better with the sample's patch active
-        // (bench/results/study/patch_realtime.md).)
+        // (bench/results/study/patch_realtime.md).) Compliance frames that are refreshed make each refresh on a
+        // thread of its own beside the physics thread (sim_patch.cpp): there OpenBLAS is kept to one thread a caller,
+        // as its shared pool made the two wait on each other (the tube's refresh: 0.3 s alone, 1.7-2.2 s beside the
+        // frames with the pool, 0.26-0.35 s with one thread each).
+        if (sc.wall_model == WallModel::PATCH && sc.patch.solver == PatchSpec::Solver::COMPLIANCE && sc.patch.refresh_frames > 0) set_blas_threads(1);
         std::thread physics([&] {
             const double period = 1.0 / sc.physics_hz;
             double next = 0;
@@ -558,6 +563,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["linearisations"] = p.linearisations;
                 j["patches"][k]["linearise_s"] = p.linearise_s;
                 j["patches"][k]["linearisations_failed"] = p.linearisations_failed;
+                j["patches"][k]["refreshes_stale"] = p.refreshes_stale;
                 // How far the frames took the surface from the state they were linearised at, over the wall's thickness
                 // (the linear model's measure against linear_limit).
                 j["patches"][k]["max_lag_to_thickness"] = p.max_lag_to_thickness;

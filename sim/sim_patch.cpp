@@ -10,6 +10,7 @@
 // rest of the scene stays linear; the two add (the patch's displacement of the surface on top of the linear
 // solve's). With PatchSpec::Solver::COMPLIANCE a frame is instead the hard contact of blades and walls on the
 // patch's compliance at a linearisation (fem::solve_compliant_clip_walls), remade every refresh_frames frames.
+#include <omp.h>
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -362,6 +363,14 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
 // Each patch's Newton solve with its clip, then the surface's displacement from it.
 void Simulator::Impl::solve_patches(Frame& fr) {
     const SimSurface& sf = model.surface;
+    // Refresh threads that are done (threaded mode): joined (a done one has only to return).
+    for (auto it = refresh_jobs.begin(); it != refresh_jobs.end();)
+        if (it->first->done.load(std::memory_order_acquire)) {
+            it->second.join();
+            it = refresh_jobs.erase(it);
+        } else {
+            ++it;
+        }
     if (patches.empty()) return;
     patch_force.assign(ins.size(), Eigen::Vector3d::Zero());
     for (PatchRun& P : patches) {
@@ -511,7 +520,64 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
             }
-            if (!C->lin || (scene.patch.refresh_frames > 0 && C->since >= scene.patch.refresh_frames)) {
+            // A refresh made on the second core (threaded mode) that is done: the frames go on with it from here.
+            if (C->pending && C->pending->done.load(std::memory_order_acquire)) {
+                Refresh& q = *C->pending;
+                // The frames have gone on meanwhile: a linearisation the patch's surface has since left by more than the
+                // linear range (Scene::linear_limit wall thicknesses, as the frames' reach is measured) would take the
+                // frames back to its state in one step (the tube closing: an element inverted in the first frame on a
+                // refresh 0.36 s old, and every refresh after it refused). It is dropped, and one begun from here.
+                double moved = 0;
+                if (q.lin)
+                    for (size_t k = 0; k < P.cand_vertex.size(); ++k) {
+                        const double th = sf.thickness.size() ? sf.thickness[P.cand_vertex[k]] : std::nan("");
+                        if (!(std::isfinite(th) && th > 0)) continue;
+                        const Eigen::Index d0 = 3 * static_cast<Eigen::Index>(P.cand[k]);
+                        moved = std::max(moved, (u0.segment<3>(d0) - q.lin->u0().segment<3>(d0)).norm() / th);
+                    }
+                const bool stale = q.lin && scene.linear_limit > 0 && moved > scene.linear_limit;
+                if (stale) {
+                    ++P.stats.refreshes_stale;
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s) dropped: the surface has moved %.2f wall thicknesses since\n",
+                                     fr.t, q.t, q.seconds, moved);
+                } else if (q.lin) {
+                    C->lin = std::move(q.lin);
+                    ++P.stats.linearisations;
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s) taken\n",
+                                     fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s);
+                } else {
+                    ++P.stats.linearisations_failed;
+                    if (std::getenv("ANEU_PATCH_TRACE")) std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f refused: %s\n", fr.t, q.t, q.failed.c_str());
+                }
+                P.stats.linearise_s += q.seconds;
+                if (!stale) C->since = 0;  // (a dropped one: another is begun from here at once)
+                C->pending.reset();
+            }
+            const bool due = scene.patch.refresh_frames > 0 && C->since >= scene.patch.refresh_frames;
+            if (C->lin && due && fr.mx && !C->pending) {
+                // Threaded (real-time) mode: the refresh is made on another thread (the second core) from this frame's
+                // state, and the frames go on with the linearisation they have until it is done (the sample's refresh
+                // takes 10-13 s: inline, every refresh held the physics thread that long). The deterministic mode makes
+                // it inline, at the frame it is due, so its logs stay the same from run to run.
+                auto q = std::make_shared<Refresh>();
+                q->t = fr.t;
+                C->pending = q;
+                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, cand = C->cand] {
+                    omp_set_num_threads(1);  // the tangent's assembly beside the physics thread, not across its core
+                    const Stopwatch lw;
+                    try {
+                        q->lin = std::make_unique<fem::Linearisation>(*hold, X, hold->fixed_dofs(), u0, cand);
+                    } catch (const std::exception& e) {  // NumericalError: an element inverted at that state
+                        q->lin.reset();
+                        q->failed = e.what();
+                    }
+                    q->seconds = lw.seconds();
+                    q->done.store(true, std::memory_order_release);
+                }));
+            }
+            if (!C->lin || (due && !fr.mx)) {
                 const Stopwatch lw;
                 try {
                     C->lin = std::make_unique<fem::Linearisation>(pm, P.X, pm.fixed_dofs(), u0, C->cand);

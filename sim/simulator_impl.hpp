@@ -15,6 +15,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <Eigen/Core>
@@ -39,6 +40,16 @@ inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
     b.closed_gap_mm = cm.closed_gap_mm;
     return b;
 }
+
+/// A compliance patch's linearisation made on its own thread (threaded mode): the state it was made at, the result
+/// (null with `failed` set: refused, e.g. an element inverted there), its time, and whether it is done.
+struct Refresh {
+    double t = 0;  ///< the frame whose state it linearises [s]
+    std::unique_ptr<fem::Linearisation> lin;
+    std::string failed;
+    double seconds = 0;
+    std::atomic<bool> done{false};
+};
 
 struct Simulator::Impl {
     enum class NodeState : unsigned char { FREE, CONTACT, NEIGHBOUR, STUCK, RELAX, HELD };
@@ -175,6 +186,9 @@ struct Simulator::Impl {
             bool warm = false;
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
             bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
+            /// Threaded mode: a refresh being made on another thread (the second core) while the frames go on with lin;
+            /// the first frame after it is done takes it (null: none under way).
+            std::shared_ptr<struct Refresh> pending;
         };
         std::shared_ptr<Compliant> compliant;
         Assessment::PatchEnd stats;
@@ -182,6 +196,13 @@ struct Simulator::Impl {
     };
     std::vector<PatchRun> patches;
     std::atomic<bool> cancel_frames{false};  // Simulator::cancel_physics
+    /// The refreshes' threads (threaded mode), joined once done (solve_patches) and at the end: a patch dropped while its
+    /// refresh is under way leaves the thread to finish on the model it holds.
+    std::vector<std::pair<std::shared_ptr<Refresh>, std::thread>> refresh_jobs;
+    ~Impl() {
+        for (auto& [q, th] : refresh_jobs)
+            if (th.joinable()) th.join();
+    }
     std::vector<int> patch_of_clip;           // per clip: index into patches, −1
     Eigen::MatrixX3d d_patch;                 // the patches' part of d (d = the linear solve's + this)
     std::vector<Eigen::Vector3d> patch_force; // per instrument: the net force of the tissue on its clip's blades [N]

@@ -91,7 +91,28 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     }
     factorise_s = sw.lap();
 
-    const Eigen::VectorXd du = mf > 0 ? Eigen::VectorXd(m->llt.solve(m->r0)) : Eigen::VectorXd();
+    Eigen::VectorXd du = mf > 0 ? Eigen::VectorXd(m->llt.solve(m->r0)) : Eigen::VectorXd();
+    // The free step is a Newton step from u0, which frames far from their last linearisation leave far from
+    // equilibrium: shortened (halved, at most 10 times) until it inverts no element, and the residual with it, so
+    // that the frames on this linearisation are the damped step's (the tube's refresh on another thread, from a state
+    // the frames had taken 3.7 wall thicknesses from theirs: the full step inverted an element, and every refresh
+    // after it was refused).
+    if (mf > 0) {
+        Eigen::VectorXd ut = u0;
+        auto trial = [&](double a) {
+            ut = u0;
+            for (Eigen::Index i = 0; i < n; ++i)
+                if (const int k = m->free_index[static_cast<size_t>(i)]; k >= 0) ut[i] += a * du[k];
+            return body.min_jacobian(ut) > 0;
+        };
+        double a = 1;
+        for (int h = 0; h < 10 && !trial(a); ++h) a *= 0.5;
+        if (a < 1) {
+            free_step = a;
+            du *= a;
+            m->r0 *= a;
+        }
+    }
     m->free_body_u = u0;
     for (Eigen::Index i = 0; i < n; ++i)
         if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->free_body_u[i] += du[a];

@@ -17,6 +17,11 @@ std::vector<std::pair<std::string, std::string>> core_dependency_versions();
 /// #4267, fixed in 0.3.25): set OPENBLAS_CORETYPE before the process starts (set_blas_kernels_env).
 std::string openblas_kernels();
 
+/// OpenBLAS's threads for every call from now on, in every thread of the process (its pool is shared: two threads
+/// calling it at once, each with a pool of every core, wait on each other; the real-time mode's refreshes on the second
+/// core do: sim/run.cpp).
+void set_blas_threads(int n);
+
 /// The kernel set this CPU can run where OpenBLAS fell back to its SSE3 "Prescott" kernels without being told to
 /// (OPENBLAS_CORETYPE unset): "SkylakeX" with AVX-512 (F, CD, BW, DQ, VL), else "Haswell" with AVX2 and FMA, else
 /// "Sandybridge" with AVX; "" where OpenBLAS chose something else, the user set OPENBLAS_CORETYPE, or the CPU

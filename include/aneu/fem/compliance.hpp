@@ -69,6 +69,9 @@ public:
     /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
     /// projected onto positive semidefinite ones (factorise_s counts both factorisations).
     bool projected = false;
+    /// The free step's length as a fraction of the Newton step from u0 (1: the full step; shorter where the full step
+    /// would invert an element: the residual is scaled with it, so displacement() is the damped step's).
+    double free_step = 1;
 
 private:
     struct Impl;

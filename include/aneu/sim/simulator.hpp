@@ -136,6 +136,9 @@ struct Assessment {
         double linearise_s = 0;
         int linearisations_failed = 0;       ///< refreshes refused (an element inverted at the state reached): the frames
                                              ///< went on with the last one
+        /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
+        /// the time they were done (dropped; another begun from where the frames were)
+        int refreshes_stale = 0;
         /// The compliance frames' reach from their linearisation: the largest displacement of the patch's surface from
         /// the state the frame's linearisation was made at, over the wall's thickness there (the linear model's
         /// measure, Scene::linear_limit: the frames are linear about that state, so past the limit their forces are
