@@ -545,8 +545,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     C->lin = std::move(q.lin);
                     ++P.stats.linearisations;
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s) taken\n",
-                                     fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s);
+                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g) taken\n",
+                                     fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s,
+                                     C->lin->free_step);
                 } else {
                     ++P.stats.linearisations_failed;
                     if (std::getenv("ANEU_PATCH_TRACE")) std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f refused: %s\n", fr.t, q.t, q.failed.c_str());
@@ -583,9 +584,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     C->lin = std::make_unique<fem::Linearisation>(pm, P.X, pm.fixed_dofs(), u0, C->cand);
                     ++P.stats.linearisations;
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s\n", fr.t,
-                                     C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,
-                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s);
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's\n",
+                                     fr.t, C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,
+                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
+                                     C->lin->free_step);
                 } catch (const NumericalError&) {
                     // An element the frames took past inversion: this state cannot be linearised. The frames go on
                     // with the last linearisation (a first one that fails ends the run).
