@@ -16,6 +16,8 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
                     a wider blade keeps between its jaws as they close)
   --blade-friction M  model.blade_friction (the blades' Coulomb friction on the tissue; the default is 0.3): an
                     experiment on how much of the neck line the grip holds between the jaws
+  --hold            the applier holds the clip closed to the scene's end (the keyframes after the one that closes it
+                    dropped: no release): a real-time run whose patch is made long after the planned release
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
@@ -37,6 +39,7 @@ ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
 ap.add_argument("--jaw-width-mm", type=float, default=0.0)
 ap.add_argument("--blade-friction", type=float, default=-1.0)
+ap.add_argument("--hold", action="store_true")
 a = ap.parse_args()
 raw = open(a.plan).read()
 text = "\n".join(l for l in raw.splitlines() if not l.lstrip().startswith("//"))
@@ -70,6 +73,10 @@ if a.shift_mm != 0:
     for k in s["instruments"][0]["keyframes"]:
         if "position" in k:
             k["position"] = [round(p + a.shift_mm * q, 4) for p, q in zip(k["position"], n)]
+if a.hold:
+    k = s["instruments"][0]["keyframes"]
+    closing = next(i for i, x in enumerate(k) if x.get("opening_deg") == 0)
+    s["instruments"][0]["keyframes"] = k[:closing + 1]
 if a.slow > 0:
     k = s["instruments"][0]["keyframes"]
     at = dict(k[1])  # at the neck, open (the planned approach's end)

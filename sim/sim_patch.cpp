@@ -44,6 +44,27 @@ int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
     return n;
 }
 
+/// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
+/// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
+/// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
+/// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
+std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, const Eigen::MatrixX3d& X, const Eigen::VectorXd& u,
+                                                    const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back) {
+    back = 1;
+    if (valid && valid->size() == u.size() && !(pm.min_jacobian(u) > 0)) {
+        // (Before: the sample refreshed every frame had 42 of its 67 refreshes refused, an element inverted at the
+        // state reached, and the frames stayed on the last one; the real-time mode's, once refused, never recovered.)
+        for (double b = 0.5; b > 1e-3; b *= 0.5) {
+            const Eigen::VectorXd ub = *valid + b * (u - *valid);
+            if (pm.min_jacobian(ub) > 0) {
+                back = b;
+                return std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), ub, cand);
+            }
+        }
+    }
+    return std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), u, cand);
+}
+
 }  // namespace
 
 bool Simulator::Impl::patch_holds_instrument(size_t i) const {
@@ -545,9 +566,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     C->lin = std::move(q.lin);
                     ++P.stats.linearisations;
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g) taken\n",
+                        std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g; %.4g of the way to that state) taken\n",
                                      fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s,
-                                     C->lin->free_step);
+                                     C->lin->free_step, q.back);
                 } else {
                     ++P.stats.linearisations_failed;
                     if (std::getenv("ANEU_PATCH_TRACE")) std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f refused: %s\n", fr.t, q.t, q.failed.c_str());
@@ -565,11 +586,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 auto q = std::make_shared<Refresh>();
                 q->t = fr.t;
                 C->pending = q;
-                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, cand = C->cand] {
+                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = C->cand] {
                     omp_set_num_threads(1);  // the tangent's assembly beside the physics thread, not across its core
                     const Stopwatch lw;
                     try {
-                        q->lin = std::make_unique<fem::Linearisation>(*hold, X, hold->fixed_dofs(), u0, cand);
+                        q->lin = linearise_patch(*hold, X, u0, &valid, cand, q->back);
                     } catch (const std::exception& e) {  // NumericalError: an element inverted at that state
                         q->lin.reset();
                         q->failed = e.what();
@@ -581,8 +602,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             if (!C->lin || (due && !fr.mx)) {
                 const Stopwatch lw;
                 try {
-                    C->lin = std::make_unique<fem::Linearisation>(pm, P.X, pm.fixed_dofs(), u0, C->cand);
+                    double back = 1;
+                    C->lin = linearise_patch(pm, P.X, u0, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
                     ++P.stats.linearisations;
+                    if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's\n",
                                      fr.t, C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,

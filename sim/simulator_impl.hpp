@@ -48,6 +48,7 @@ struct Refresh {
     std::unique_ptr<fem::Linearisation> lin;
     std::string failed;
     double seconds = 0;
+    double back = 1;  ///< made this much of the way to that state from the last linearisation's (an element inverted there)
     std::atomic<bool> done{false};
 };
 
