@@ -23,7 +23,11 @@ namespace aneu {
 
 std::string openblas_kernels() { return openblas_get_corename(); }
 
-void set_blas_threads(int n) { openblas_set_num_threads(n); }
+int set_blas_threads(int n) {
+    const int before = openblas_get_num_threads();
+    openblas_set_num_threads(n);
+    return before;
+}
 
 std::string blas_kernels_for_this_cpu() {
     if (std::getenv("OPENBLAS_CORETYPE") != nullptr) return "";  // the user's choice (or ours, already applied)

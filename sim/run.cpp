@@ -339,7 +339,8 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         // thread of its own beside the physics thread (sim_patch.cpp): there OpenBLAS is kept to one thread a caller,
         // as its shared pool made the two wait on each other (the tube's refresh: 0.3 s alone, 1.7-2.2 s beside the
         // frames with the pool, 0.26-0.35 s with one thread each).
-        if (sc.wall_model == WallModel::PATCH && sc.patch.solver == PatchSpec::Solver::COMPLIANCE && sc.patch.refresh_frames > 0) set_blas_threads(1);
+        const bool one_blas_thread = sc.wall_model == WallModel::PATCH && sc.patch.solver == PatchSpec::Solver::COMPLIANCE && sc.patch.refresh_frames > 0;
+        const int blas_threads_before = one_blas_thread ? set_blas_threads(1) : 0;
         std::thread physics([&] {
             const double period = 1.0 / sc.physics_hz;
             double next = 0;
@@ -460,6 +461,7 @@ Assessment run_scene(Simulator& sim, const RunOptions& opt) {
         physics.join();
         sim.cancel_physics(false);
         output.join();
+        if (one_blas_thread) set_blas_threads(blas_threads_before);  // the process's later work gets its cores back
         for (const auto& [t, f] : hbuf) hlog.line(t, f);
         frames = fbuf;
     }

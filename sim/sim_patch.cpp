@@ -44,6 +44,28 @@ int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
     return n;
 }
 
+/// The largest displacement of a patch's surface vertices (`cand_vertex`, at patch nodes `cand`) between patch states u
+/// and ref, over the wall's thickness there (the linear model's measure, Scene::linear_limit): the ratio, and the
+/// displacement, thickness and rest place of the vertex where it is largest (0 and unset where none has a thickness).
+struct Reach {
+    double ratio = 0, mm = 0, thickness_mm = 0;
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();
+};
+Reach surface_reach(const SimSurface& sf, const std::vector<int>& cand_vertex, const std::vector<int>& cand, const Eigen::VectorXd& u,
+                    const Eigen::VectorXd& ref) {
+    Reach r;
+    for (size_t k = 0; k < cand_vertex.size(); ++k) {
+        const Eigen::Index v = cand_vertex[k];
+        const double th = sf.thickness.size() ? sf.thickness[v] : std::nan("");
+        if (!(std::isfinite(th) && th > 0)) continue;
+        const Eigen::Index d0 = 3 * static_cast<Eigen::Index>(cand[k]);
+        const double d = (u.segment<3>(d0) - ref.segment<3>(d0)).norm();
+        if (d / th <= r.ratio) continue;
+        r = {d / th, d, th, sf.X.row(v).transpose()};
+    }
+    return r;
+}
+
 /// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
 /// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
 /// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
@@ -520,8 +542,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // the LCP, the wall pairs' search and crossing checks, the patch's displacement from the forces.
         double c_lin = 0, c_rows = 0, c_delassus = 0, c_lcp = 0, c_search = 0, c_disp = 0;
         // The compliance frame's largest reach from its linearisation, over the wall's thickness, and where.
-        double lag_ratio = 0, lag_mm = 0, lag_th = 0;
-        Eigen::Vector3d lag_at = Eigen::Vector3d::Zero();
+        Reach lag;
         int c_repeats = 0, c_nrows = 0, c_pivots = 0, c_sweeps = 0;
         auto compliant_frame = [&]() {
             fem::NewtonResult res;
@@ -548,14 +569,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 // linear range (Scene::linear_limit wall thicknesses, as the frames' reach is measured) would take the
                 // frames back to its state in one step (the tube closing: an element inverted in the first frame on a
                 // refresh 0.36 s old, and every refresh after it refused). It is dropped, and one begun from here.
-                double moved = 0;
-                if (q.lin)
-                    for (size_t k = 0; k < P.cand_vertex.size(); ++k) {
-                        const double th = sf.thickness.size() ? sf.thickness[P.cand_vertex[k]] : std::nan("");
-                        if (!(std::isfinite(th) && th > 0)) continue;
-                        const Eigen::Index d0 = 3 * static_cast<Eigen::Index>(P.cand[k]);
-                        moved = std::max(moved, (u0.segment<3>(d0) - q.lin->u0().segment<3>(d0)).norm() / th);
-                    }
+                const double moved = q.lin ? surface_reach(sf, P.cand_vertex, P.cand, u0, q.lin->u0()).ratio : 0.0;
                 const bool stale = q.lin && scene.linear_limit > 0 && moved > scene.linear_limit;
                 if (stale) {
                     ++P.stats.refreshes_stale;
@@ -656,21 +670,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             c_disp = dw.seconds();
             // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
             // the patch's figures, and warned, under the lock below).
-            {
-                const Eigen::VectorXd& ul = C->lin->u0();
-                for (size_t k = 0; k < P.cand_vertex.size(); ++k) {
-                    const Eigen::Index v = P.cand_vertex[k];
-                    const double th = sf.thickness.size() ? sf.thickness[v] : std::nan("");
-                    if (!(std::isfinite(th) && th > 0)) continue;
-                    const Eigen::Index d0 = 3 * static_cast<Eigen::Index>(P.cand[k]);
-                    const double lag = (res.u.segment<3>(d0) - ul.segment<3>(d0)).norm();
-                    if (lag / th <= lag_ratio) continue;
-                    lag_ratio = lag / th;
-                    lag_mm = lag;
-                    lag_th = th;
-                    lag_at = sf.X.row(v).transpose();
-                }
-            }
+            lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
             res.u[nb] = f.theta;
             res.reaction = Eigen::VectorXd::Constant(1, f.loads.spring_torque_nmm - 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]));
             res.iterations = f.passes;
@@ -834,25 +834,25 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.mean_solve_ms = P.solve_ms_sum / static_cast<double>(st.frames);
         st.max_solve_ms = std::max(st.max_solve_ms, ms);
         st.peak_blade_force_n = std::max(st.peak_blade_force_n, cl.grip_force_n);
-        if (compliance && !restarted) st.end_lag_to_thickness = lag_ratio;
-        if (!restarted && lag_ratio > st.max_lag_to_thickness) {  // (a restart went back to an earlier state)
-            st.max_lag_to_thickness = lag_ratio;
-            st.max_lag_mm = lag_mm;
-            st.max_lag_thickness_mm = lag_th;
+        if (compliance && !restarted) st.end_lag_to_thickness = lag.ratio;
+        if (!restarted && lag.ratio > st.max_lag_to_thickness) {  // (a restart went back to an earlier state)
+            st.max_lag_to_thickness = lag.ratio;
+            st.max_lag_mm = lag.mm;
+            st.max_lag_thickness_mm = lag.thickness_mm;
             st.max_lag_t = fr.t;
-            st.max_lag_at = lag_at;
+            st.max_lag_at = lag.at;
         }
         // The frames are the linear model about their linearisation's state, whose forces the study found too large by
         // more than 10 % past Scene::linear_limit (0.3) wall thicknesses (bench/results/study; compliance.md: the sample's
         // frames linearised at rest +48 % at 16 deg, +198 % at 8 deg against the nonlinear solve). Warned once a patch.
-        if (!restarted && scene.linear_limit > 0 && lag_ratio > scene.linear_limit && P.compliant && !P.compliant->warned_lag) {
+        if (!restarted && scene.linear_limit > 0 && lag.ratio > scene.linear_limit && P.compliant && !P.compliant->warned_lag) {
             P.compliant->warned_lag = true;
             char b[640];
             std::snprintf(b, sizeof b,
                           "beyond the compliance frames' range at t=%.3f s: the patch's surface at (%.2f, %.2f, %.2f) is %.3g mm from the state its "
                           "frames are linearised at, %.2g times the wall's thickness (%.3g mm); past %.2g times a linearisation's forces there are "
                           "too large by more than 10 %% (contact.linear_limit); model.refresh_frames relinearises as the patch deforms",
-                          fr.t, lag_at.x(), lag_at.y(), lag_at.z(), lag_mm, lag_ratio, lag_th, scene.linear_limit);
+                          fr.t, lag.at.x(), lag.at.y(), lag.at.z(), lag.mm, lag.ratio, lag.thickness_mm, scene.linear_limit);
             warn(b);
         }
         st.min_wall_distance_mm = std::min(st.min_wall_distance_mm, wall_min);

@@ -19,8 +19,8 @@ std::string openblas_kernels();
 
 /// OpenBLAS's threads for every call from now on, in every thread of the process (its pool is shared: two threads
 /// calling it at once, each with a pool of every core, wait on each other; the real-time mode's refreshes on the second
-/// core do: sim/run.cpp).
-void set_blas_threads(int n);
+/// core do: sim/run.cpp). Returns the count before, to set it back.
+int set_blas_threads(int n);
 
 /// The kernel set this CPU can run where OpenBLAS fell back to its SSE3 "Prescott" kernels without being told to
 /// (OPENBLAS_CORETYPE unset): "SkylakeX" with AVX-512 (F, CD, BW, DQ, VL), else "Haswell" with AVX2 and FMA, else
