@@ -566,6 +566,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["linearise_s"] = p.linearise_s;
                 j["patches"][k]["linearisations_failed"] = p.linearisations_failed;
                 j["patches"][k]["refreshes_stale"] = p.refreshes_stale;
+                j["patches"][k]["first_candidates"] = p.first_candidates;
+                j["patches"][k]["last_candidates"] = p.last_candidates;
+                j["patches"][k]["blade_profile_n"] = p.blade_profile_n;
+                j["patches"][k]["blade_profile_across_n"] = p.blade_profile_across_n;
                 // How far the frames took the surface from the state they were linearised at, over the wall's thickness
                 // (the linear model's measure against linear_limit).
                 j["patches"][k]["max_lag_to_thickness"] = p.max_lag_to_thickness;

@@ -19,6 +19,8 @@
 #include <limits>
 #include <mutex>
 #include <optional>
+#include <tuple>
+#include <utility>
 
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
@@ -28,6 +30,13 @@
 namespace aneu::sim {
 
 namespace {
+
+// A refresh's candidates are those of the wedge the blades sweep closing from this much more than their opening
+// (the spring or the forceps may open them a little before the next refresh) ...
+constexpr double RESELECT_MARGIN_RAD = 2.0 * 3.14159265358979323846 / 180.0;
+// ... and a hinge that moves this far from where they were selected makes the frames due for another (the selection
+// keeps nodes within 0.1 mm of the wedge).
+constexpr double RESELECT_HINGE_MM = 0.05;
 
 /// How many of the nodes (at X) lie inside a blade's solid, or within `gap` in front of its face, at opening θ.
 int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, double gap) {
@@ -543,6 +552,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         double c_lin = 0, c_rows = 0, c_delassus = 0, c_lcp = 0, c_search = 0, c_disp = 0;
         // The compliance frame's largest reach from its linearisation, over the wall's thickness, and where.
         Reach lag;
+        std::vector<double> c_profile, c_across;  // the blades' normal force per mm from the hinge, per 0.1 mm across (PatchEnd)
         int c_repeats = 0, c_nrows = 0, c_pivots = 0, c_sweeps = 0;
         auto compliant_frame = [&]() {
             fem::NewtonResult res;
@@ -561,7 +571,28 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 C->faces = std::move(cs.faces);
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
+                C->theta_sel = v0[nb];
+                C->hinge_sel = blades.hinge;
             }
+            // A refresh selects the candidates again, for the jaws as they are (the wedge they sweep closing from a
+            // little more than this opening): the first selection is for the jaws as they first closed on the wall
+            // (the sample's: 2,391 candidates at 60 deg, W on them 6-10 s of a 10-13 s refresh).
+            auto select = [&](const Eigen::VectorXd& u) {
+                Eigen::MatrixX3d x = P.X;
+                for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u.segment<3>(3 * a).transpose();
+                const double th = std::max(v0[nb], theta_kept) + RESELECT_MARGIN_RAD;
+                return std::make_pair(fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i()), th);
+            };
+            // The frames' state carried over to a refresh's candidates, which the frames then act on.
+            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
+                fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, u0, C->last, C->search);
+                C->cand = std::move(cs.candidates);
+                C->faces = std::move(cs.faces);
+                C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
+                for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
+                C->theta_sel = th;
+                C->hinge_sel = hinge;
+            };
             // A refresh made on the second core (threaded mode) that is done: the frames go on with it from here.
             if (C->pending && C->pending->done.load(std::memory_order_acquire)) {
                 Refresh& q = *C->pending;
@@ -577,8 +608,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                         std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s) dropped: the surface has moved %.2f wall thicknesses since\n",
                                      fr.t, q.t, q.seconds, moved);
                 } else if (q.lin) {
+                    take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel);
                     C->lin = std::move(q.lin);
                     ++P.stats.linearisations;
+                    P.stats.last_candidates = static_cast<int>(C->cand.size());
                     if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g; %.4g of the way to that state) taken\n",
                                      fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s,
@@ -591,7 +624,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 if (!stale) C->since = 0;  // (a dropped one: another is begun from here at once)
                 C->pending.reset();
             }
-            const bool due = scene.patch.refresh_frames > 0 && C->since >= scene.patch.refresh_frames;
+            // (Refreshed frames are also due for one when the jaws open past the wedge their candidates were selected
+            // for, or the hinge moves: the candidates may miss what the blades now reach.)
+            const bool reselect = scene.patch.refresh_frames > 0;
+            const bool left_wedge = reselect && (theta_kept > C->theta_sel || (blades.hinge - C->hinge_sel).norm() > RESELECT_HINGE_MM);
+            const bool due = reselect && (C->since >= scene.patch.refresh_frames || left_wedge);
             if (C->lin && due && fr.mx && !C->pending) {
                 // Threaded (real-time) mode: the refresh is made on another thread (the second core) from this frame's
                 // state, and the frames go on with the linearisation they have until it is done (the sample's refresh
@@ -599,8 +636,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 // it inline, at the frame it is due, so its logs stay the same from run to run.
                 auto q = std::make_shared<Refresh>();
                 q->t = fr.t;
+                std::tie(q->setup, q->theta_sel) = select(u0);
+                q->hinge_sel = blades.hinge;
                 C->pending = q;
-                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = C->cand] {
+                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = q->setup.candidates] {
                     omp_set_num_threads(1);  // the tangent's assembly beside the physics thread, not across its core
                     const Stopwatch lw;
                     try {
@@ -617,8 +656,17 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 const Stopwatch lw;
                 try {
                     double back = 1;
-                    C->lin = linearise_patch(pm, P.X, u0, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
+                    if (C->lin && reselect) {
+                        auto [cs, th] = select(u0);
+                        std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, u0, &C->lin->u0(), cs.candidates, back);
+                        take_setup(std::move(cs), th, blades.hinge);
+                        C->lin = std::move(lin);
+                    } else {
+                        C->lin = linearise_patch(pm, P.X, u0, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
+                    }
                     ++P.stats.linearisations;
+                    if (P.stats.first_candidates == 0) P.stats.first_candidates = static_cast<int>(C->cand.size());
+                    P.stats.last_candidates = static_cast<int>(C->cand.size());
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (std::getenv("ANEU_PATCH_TRACE"))
@@ -671,6 +719,19 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
             // the patch's figures, and warned, under the lock below).
             lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
+            c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
+            c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);
+            const Eigen::Vector3d w_dir = blades.axis.cross(blades.up);
+            for (size_t i = 0; i < f.constraint.size() && i < f.lambda.size(); ++i) {
+                const auto [k, side] = f.constraint[i];
+                if ((side != 1 && side != -1) || !(f.lambda[i] > 0)) continue;
+                const Eigen::Vector3d x = C->Xc.row(k).transpose() + f.candidate_u.segment<3>(3 * static_cast<Eigen::Index>(k));
+                const double r = (x - blades.hinge).dot(blades.axis), a = (x - blades.hinge).dot(w_dir) + 0.5 * blades.width_mm + 0.1;
+                const auto bin = static_cast<size_t>(std::clamp(std::floor(r), 0.0, static_cast<double>(c_profile.size() - 1)));
+                c_profile[bin] += 0.5 * f.lambda[i];
+                const auto abin = static_cast<size_t>(std::clamp(std::floor(10 * a), 0.0, static_cast<double>(c_across.size() - 1)));
+                c_across[abin] += 0.5 * f.lambda[i];
+            }
             res.u[nb] = f.theta;
             res.reaction = Eigen::VectorXd::Constant(1, f.loads.spring_torque_nmm - 0.5 * (f.loads.moment_nmm[0] + f.loads.moment_nmm[1]));
             res.iterations = f.passes;
@@ -834,7 +895,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.mean_solve_ms = P.solve_ms_sum / static_cast<double>(st.frames);
         st.max_solve_ms = std::max(st.max_solve_ms, ms);
         st.peak_blade_force_n = std::max(st.peak_blade_force_n, cl.grip_force_n);
-        if (compliance && !restarted) st.end_lag_to_thickness = lag.ratio;
+        if (compliance && !restarted) {
+            st.end_lag_to_thickness = lag.ratio;
+            if (!c_profile.empty()) {
+                st.blade_profile_n = c_profile;
+                st.blade_profile_across_n = c_across;
+            }
+        }
         if (!restarted && lag.ratio > st.max_lag_to_thickness) {  // (a restart went back to an earlier state)
             st.max_lag_to_thickness = lag.ratio;
             st.max_lag_mm = lag.mm;

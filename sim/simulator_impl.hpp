@@ -49,6 +49,11 @@ struct Refresh {
     std::string failed;
     double seconds = 0;
     double back = 1;  ///< made this much of the way to that state from the last linearisation's (an element inverted there)
+    /// The candidates it keeps, selected again for the jaws as they were at that frame (fem::compliant_setup), the
+    /// wall faces between them and the opening and hinge they were selected at.
+    fem::CompliantSetup setup;
+    double theta_sel = 0;
+    Eigen::Vector3d hinge_sel = Eigen::Vector3d::Zero();
     std::atomic<bool> done{false};
 };
 
@@ -185,6 +190,11 @@ struct Simulator::Impl {
             fem::CompliantWallSearch search;
             fem::CompliantFrame last;         // the warm start
             bool warm = false;
+            /// The opening and hinge the candidates were selected at: the wedge the blades sweep closing from there
+            /// (a refresh selects them again for the jaws as they are; opened past theta_sel, or the hinge moved,
+            /// the frames are due for one).
+            double theta_sel = 0;
+            Eigen::Vector3d hinge_sel = Eigen::Vector3d::Zero();
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
             bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
             /// Threaded mode: a refresh being made on another thread (the second core) while the frames go on with lin;

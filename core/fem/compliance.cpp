@@ -1018,6 +1018,75 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
 
 namespace aneu::fem {
 
+void carry_compliant_frames(const std::vector<int>& from_cand, const Eigen::MatrixX3i& from_faces, const std::vector<int>& to_cand,
+                            const Eigen::MatrixX3i& to_faces, const Eigen::VectorXd& u, CompliantFrame& last, CompliantWallSearch& ws) {
+    const auto nf = static_cast<Eigen::Index>(from_cand.size()), nt = static_cast<Eigen::Index>(to_cand.size());
+    std::map<int, int> slot;  // body node -> its index in to_cand
+    for (Eigen::Index k = 0; k < nt; ++k) {
+        const int a = to_cand[static_cast<size_t>(k)];
+        if (a < 0 || 3 * static_cast<Eigen::Index>(a) + 2 >= u.size())
+            throw InputError("carry compliant frames: node " + std::to_string(a) + " outside the body's displacement of " + std::to_string(u.size()) + " DOFs");
+        slot.emplace(a, static_cast<int>(k));
+    }
+    std::vector<int> to(static_cast<size_t>(nf), -1);  // old candidate -> new one
+    for (Eigen::Index k = 0; k < nf; ++k)
+        if (auto it = slot.find(from_cand[static_cast<size_t>(k)]); it != slot.end()) to[static_cast<size_t>(k)] = it->second;
+    auto key = [](const std::vector<int>& cand, const Eigen::MatrixX3i& faces, Eigen::Index f) {
+        std::array<int, 3> k{};
+        for (int c = 0; c < 3; ++c) {
+            const int i = faces(f, c);
+            if (i < 0 || static_cast<size_t>(i) >= cand.size())
+                throw InputError("carry compliant frames: face " + std::to_string(f) + " names candidate " + std::to_string(i) + " of " + std::to_string(cand.size()));
+            k[static_cast<size_t>(c)] = cand[static_cast<size_t>(i)];
+        }
+        std::sort(k.begin(), k.end());
+        return k;
+    };
+    std::map<std::array<int, 3>, int> face_slot;
+    for (Eigen::Index f = 0; f < to_faces.rows(); ++f) face_slot.emplace(key(to_cand, to_faces, f), static_cast<int>(f));
+    std::vector<int> face_to(static_cast<size_t>(from_faces.rows()), -1);
+    for (Eigen::Index f = 0; f < from_faces.rows(); ++f)
+        if (auto it = face_slot.find(key(from_cand, from_faces, f)); it != face_slot.end()) face_to[static_cast<size_t>(f)] = it->second;
+
+    std::vector<std::pair<int, int>> constraint;
+    std::vector<double> lambda;
+    for (size_t i = 0; i < last.constraint.size(); ++i) {
+        auto [c, s] = last.constraint[i];
+        const int k = c >= 0 && c < nf ? to[static_cast<size_t>(c)] : -1;
+        if (k < 0) continue;
+        if (s >= 2) {  // a wall pair: (vertex, 2 + face)
+            const int f = s - 2 < from_faces.rows() ? face_to[static_cast<size_t>(s - 2)] : -1;
+            if (f < 0) continue;
+            s = 2 + f;
+        }
+        constraint.emplace_back(k, s);
+        lambda.push_back(i < last.lambda.size() ? last.lambda[i] : 0.0);
+    }
+    last.constraint = std::move(constraint);
+    last.lambda = std::move(lambda);
+    const bool have_u = last.candidate_u.size() == 3 * nf, have_f = last.candidate_forces.size() == 3 * nf;
+    Eigen::VectorXd cu(3 * nt), cf = Eigen::VectorXd::Zero(3 * nt);
+    for (Eigen::Index k = 0; k < nt; ++k) cu.segment<3>(3 * k) = u.segment<3>(3 * static_cast<Eigen::Index>(to_cand[static_cast<size_t>(k)]));
+    for (Eigen::Index k = 0; k < nf; ++k) {
+        const int j = to[static_cast<size_t>(k)];
+        if (j < 0) continue;
+        if (have_u) cu.segment<3>(3 * j) = last.candidate_u.segment<3>(3 * k);
+        if (have_f) cf.segment<3>(3 * j) = last.candidate_forces.segment<3>(3 * k);
+    }
+    last.candidate_u = std::move(cu);
+    last.candidate_forces = std::move(cf);
+
+    std::vector<int> close;
+    for (int v : ws.params.close_vertices)
+        if (v >= 0 && v < nf && to[static_cast<size_t>(v)] >= 0) close.push_back(to[static_cast<size_t>(v)]);
+    std::sort(close.begin(), close.end());
+    ws.params.close_vertices = std::move(close);
+    ws.pairs.clear();
+    ws.searched_at.resize(0);
+    ws.ended_at.resize(0);
+    ws.ended_behind.clear();
+}
+
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm, const CompliantOptions& opt, int* repeats) {

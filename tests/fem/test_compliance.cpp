@@ -757,3 +757,50 @@ TEST(CompliantClip, TheSetupTakesTheNodesNearTheJawsAndTheWallFacesBetweenThem) 
     EXPECT_EQ(fem::compliant_setup(b, 0.0, x, {0}, inner).candidates, (std::vector<int>{0, 4, 5, 6}));
     EXPECT_THROW(fem::compliant_setup(b, 0.4, x, {9}, inner), InputError);
 }
+
+TEST(CompliantClip, FramesCarriedToAnotherCandidateSetKeepTheRowsOfTheNodesAndFacesStillKept) {
+    // Candidates are body nodes 10-13, faces (10 11 12) and (10 12 13); the new set keeps 13, 12, 10 (in that order),
+    // drops 11 and adds 20, its one face (10 12 13) with its corners in another order: the same face.
+    const std::vector<int> from{10, 11, 12, 13}, to{13, 12, 10, 20};
+    Eigen::MatrixX3i ff(2, 3), tf(1, 3);
+    ff << 0, 1, 2, 0, 2, 3;
+    tf << 2, 1, 0;
+    fem::CompliantFrame f;
+    // Rows: node 10 on blade +1, node 11 on blade -1, node 13 on face (10 12 13), node 12's friction row, node 10 on
+    // face (10 11 12), node 13's friction row.
+    f.constraint = {{0, 1}, {1, -1}, {3, 3}, {2, -2}, {0, 2}, {3, -5}};
+    f.lambda = {0.1, 0.2, 0.3, 0.4, 0.5, 0.6};
+    f.candidate_u = Eigen::VectorXd::LinSpaced(12, 1, 12);
+    f.candidate_forces = Eigen::VectorXd::LinSpaced(12, -1, -12);
+    fem::CompliantWallSearch ws;
+    ws.params.close_vertices = {1, 2, 3};
+    ws.pairs = {{0, 1}};
+    ws.searched_at = Eigen::VectorXd::Zero(12);
+    ws.ended_at = Eigen::VectorXd::Zero(12);
+    ws.ended_behind = {{0, 1}};
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * 21);
+    u.segment<3>(60) << 70, 80, 90;  // node 20
+    fem::carry_compliant_frames(from, ff, to, tf, u, f, ws);
+    // Node 11's row and the row on face (10 11 12) are gone; the others renumbered (face (10 12 13): new face 0).
+    const std::vector<std::pair<int, int>> want{{2, 1}, {0, 2}, {1, -2}, {0, -5}};
+    EXPECT_EQ(f.constraint, want);
+    EXPECT_EQ(f.lambda, (std::vector<double>{0.1, 0.3, 0.4, 0.6}));
+    ASSERT_EQ(f.candidate_u.size(), 12);
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_u.segment<3>(0)), Eigen::Vector3d(10, 11, 12));  // node 13 (old 3)
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_u.segment<3>(3)), Eigen::Vector3d(7, 8, 9));     // node 12 (old 2)
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_u.segment<3>(6)), Eigen::Vector3d(1, 2, 3));     // node 10 (old 0)
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_u.segment<3>(9)), Eigen::Vector3d(70, 80, 90));  // node 20, new: the body's
+    ASSERT_EQ(f.candidate_forces.size(), 12);
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_forces.segment<3>(6)), Eigen::Vector3d(-1, -2, -3));
+    EXPECT_EQ(Eigen::Vector3d(f.candidate_forces.segment<3>(9)), Eigen::Vector3d::Zero());
+    EXPECT_EQ(ws.params.close_vertices, (std::vector<int>{0, 1}));  // nodes 13, 12 (old 3, 2); 11 dropped
+    EXPECT_TRUE(ws.pairs.empty());  // searched again at the next frame
+    EXPECT_EQ(ws.searched_at.size(), 0);
+    EXPECT_EQ(ws.ended_at.size(), 0);
+    EXPECT_TRUE(ws.ended_behind.empty());
+    // A face naming a candidate that is not there, a candidate outside the body's displacement: refused.
+    Eigen::MatrixX3i bad(1, 3);
+    bad << 0, 1, 4;
+    EXPECT_THROW(fem::carry_compliant_frames(to, bad, to, tf, u, f, ws), InputError);
+    EXPECT_THROW(fem::carry_compliant_frames(to, tf, {10, 30}, Eigen::MatrixX3i(), u, f, ws), InputError);
+}

@@ -199,6 +199,16 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr);
 
+/// A sequence of frames carried over to another candidate set (a refresh that selects the candidates again for the
+/// jaws as they are now: aneusim's patch): the last frame's constraints and their forces, and the candidates'
+/// displacements and forces, renumbered from `from_cand`/`from_faces` to `to_cand`/`to_faces` (candidates are body
+/// nodes; a face is the same face when its three nodes are). A row whose candidate or face is no longer kept is
+/// dropped; a new candidate's displacement is the body's `u` at its node (3 per node), its force 0. The wall search
+/// starts again at the next frame (its close vertices renumbered, the ones no longer kept dropped).
+/// @throws InputError faces or `u` that do not fit the candidates
+void carry_compliant_frames(const std::vector<int>& from_cand, const Eigen::MatrixX3i& from_faces, const std::vector<int>& to_cand,
+                            const Eigen::MatrixX3i& to_faces, const Eigen::VectorXd& u, CompliantFrame& last, CompliantWallSearch& ws);
+
 /// The frames' linear complementarity problem: find z with w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0, A symmetric positive
 /// definite (the Delassus matrix with its constraint force mixing).
 struct LcpOptions {

@@ -139,6 +139,15 @@ struct Assessment {
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
+        /// The candidates (nodes whose compliance a linearisation keeps) of the first linearisation and of the last:
+        /// a refresh selects them again for the jaws as they are (the wedge they sweep closing from there)
+        int first_candidates = 0, last_candidates = 0;
+        /// Where along the blades the tissue pushes back, at the last frame: per millimetre of blade length from the
+        /// hinge, the normal force on it, the two blades' mean [N] (compliance frames; empty: not measured)
+        std::vector<double> blade_profile_n;
+        /// The same across the blades' width, per 0.1 mm from 0.1 mm beyond one edge to 0.1 mm beyond the other,
+        /// along w = axis × up (fem::ClipBlades::frame)
+        std::vector<double> blade_profile_across_n;
         /// The compliance frames' reach from their linearisation: the largest displacement of the patch's surface from
         /// the state the frame's linearisation was made at, over the wall's thickness there (the linear model's
         /// measure, Scene::linear_limit: the frames are linear about that state, so past the limit their forces are
