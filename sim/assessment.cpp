@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
+#include <tuple>
 #include <optional>
 #include <queue>
 #include <vector>
@@ -482,6 +483,29 @@ double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channe
     return len > 0 ? cut / len : -1.0;
 }
 
+std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vector3d>>& loops, const std::vector<JawsBox>& jaws) {
+    constexpr double NaN = std::numeric_limits<double>::quiet_NaN();
+    double len = 0, in = 0, beside = 0;
+    for (const auto& pts : loops)
+        for (size_t k = 0; k < pts.size(); ++k) {
+            const Eigen::Vector3d& q = pts[(k + 1) % pts.size()];
+            const Eigen::Vector3d mid = 0.5 * (pts[k] + q);
+            const double seg = (q - pts[k]).norm();
+            len += seg;
+            bool inside = false;
+            for (const JawsBox& j : jaws) {
+                const Eigen::Vector3d r = mid - j.hinge, side = j.axis.cross(j.up).normalized();
+                const double along = r.dot(j.axis), wide = std::abs(r.dot(side)) - 0.5 * j.width_mm;
+                if (along < 0 || along > j.length_mm) continue;
+                if (wide <= 0) inside = true;
+                else beside = std::max(beside, wide);
+            }
+            if (inside) in += seg;
+        }
+    if (jaws.empty() || !(len > 0)) return {NaN, NaN};
+    return {in / len, beside};
+}
+
 bool write_lumen_obj(const std::string& path, const SimLumen& lumen, const Eigen::MatrixX3d& y, const NeckOcclusion& occ, const NeckChannel& channel) {
     std::FILE* fo = std::fopen(path.c_str(), "w");
     if (!fo) return false;
@@ -568,6 +592,16 @@ Assessment Simulator::Impl::assess() {
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});
+    {
+        // The deformed neck line against the jaws of the clips held or deposited, at their opening.
+        std::vector<JawsBox> jaws;
+        for (const Clip& c : clips)
+            if (!c.model.empty() && scene.clip_models.count(c.model)) {
+                const ClipModel& cm = scene.clip_models.at(c.model);
+                jaws.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.jaw_length_mm, cm.jaw_width_mm});
+            }
+        std::tie(out.neck_in_jaws_fraction, out.neck_beside_jaws_mm) = neck_in_jaws(occ.points, jaws);
+    }
     // Debugging and pictures (bench/render_channel.py): the deformed lumen as a Wavefront OBJ, the neck line's points, the
     // faces' widths and the channel listed after it as comments.
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) write_lumen_obj(obj, measured, ym, occ, channel);

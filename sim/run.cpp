@@ -523,6 +523,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
+    if (std::isfinite(a.neck_in_jaws_fraction)) {
+        j["neck_in_jaws_fraction"] = a.neck_in_jaws_fraction;
+        j["neck_beside_jaws_mm"] = a.neck_beside_jaws_mm;
+    }
     if (std::isfinite(a.neck_channel_mm)) {
         j["neck_channel_mm"] = a.neck_channel_mm;  // the widest channel still joining sac and parent (2: wide open)
         j["neck_channel_at"] = {a.neck_channel_at.x(), a.neck_channel_at.y(), a.neck_channel_at.z()};
@@ -679,6 +683,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                           100.0 * a.neck_cut_off_fraction, scene.neck_gap_mm);
             o << buf;
         }
+    }
+    if (std::isfinite(a.neck_in_jaws_fraction)) {
+        std::snprintf(buf, sizeof buf, "  neck line in the jaws      %.0f %% (within their width; the farthest beside it %.2f mm)\n", 100.0 * a.neck_in_jaws_fraction,
+                      a.neck_beside_jaws_mm);
+        o << buf;
     }
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';
     for (const auto& c : a.clip_ends) {

@@ -370,3 +370,32 @@ TEST(NeckChannel, APinchBesideTheNeckLeavesItOpen) {
     EXPECT_DOUBLE_EQ(neck_channel(s, pinched(s, 5.0, 0.0), 1).width_mm, 2.0);
     EXPECT_DOUBLE_EQ(neck_channel(s, pinched(s, -5.0, 0.0), 1).width_mm, 2.0);
 }
+
+TEST(NeckInJaws, ALineWithinTheJawsWidthIsInAndOneSqueezedOutSidewaysIsBesideThemByItsOverhang) {
+    // Jaws hinged at the origin along x (8 mm long), opening along z, 1 mm wide along y (x × z = -y: the side).
+    const JawsBox j{Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitZ(), 8.0, 1.0};
+    // A flattened neck line: a slit from x = 2 to 6 at y = 0, its two sides 0.1 mm apart in z (80 segments round).
+    auto slit = [](double y) {
+        std::vector<Eigen::Vector3d> pts;
+        for (int k = 0; k < 40; ++k) pts.emplace_back(2.0 + 0.1 * k, y, 0.05);
+        for (int k = 0; k < 40; ++k) pts.emplace_back(6.0 - 0.1 * k, y, -0.05);
+        return std::vector<std::vector<Eigen::Vector3d>>{pts};
+    };
+    const auto [in, beside] = neck_in_jaws(slit(0.0), {j});
+    EXPECT_DOUBLE_EQ(in, 1.0);
+    EXPECT_EQ(beside, 0.0);
+    // Squeezed 0.8 mm sideways: beside the width by 0.3 mm, nothing in.
+    const auto [in2, beside2] = neck_in_jaws(slit(0.8), {j});
+    EXPECT_EQ(in2, 0.0);
+    EXPECT_NEAR(beside2, 0.3, 1e-12);
+    // Half of it past the tips: in for the half along the jaws (the segment that crosses the tip counts by its midpoint).
+    std::vector<std::vector<Eigen::Vector3d>> long_slit(1);
+    for (int k = 0; k <= 80; ++k) long_slit[0].emplace_back(4.0 + 0.1 * k, 0.0, 0.0);
+    for (int k = 79; k >= 1; --k) long_slit[0].emplace_back(4.0 + 0.1 * k, 0.0, 0.0);
+    const auto [in3, beside3] = neck_in_jaws(long_slit, {j});
+    EXPECT_NEAR(in3, 0.5, 0.0126);
+    EXPECT_EQ(beside3, 0.0);
+    // No clip, no line: not measured.
+    EXPECT_TRUE(std::isnan(neck_in_jaws(slit(0.0), {}).first));
+    EXPECT_TRUE(std::isnan(neck_in_jaws({}, {j}).second));
+}

@@ -67,6 +67,18 @@ struct NeckChannel {
 /// reached (a neck remnant); one on the parent's side below it cuts it off with the sac. −1 without a reach.
 double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm);
 
+/// A clip's jaws as a box for neck_in_jaws: hinge, unit axis (towards the tips) and up (the opening direction), length
+/// and width [mm].
+struct JawsBox {
+    Eigen::Vector3d hinge, axis, up;
+    double length_mm = 0, width_mm = 0;
+};
+/// Where a neck line (closed loops of points) lies against clips' jaws: the fraction of its length (segment by
+/// segment, at their midpoints) within some clip's jaws (0 ≤ along the axis ≤ length, within half the width of the
+/// mid-plane across it, whatever the height along up), and the farthest beside the width that a midpoint along the
+/// jaws' length lies (0: none). NaN both without jaws or a line.
+std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vector3d>>& loops, const std::vector<JawsBox>& jaws);
+
 /// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
 /// largest ball inside the lumen that touches the wall there (the maximal inscribed sphere of VMTK's centrelines,
 /// here tangent at a wall point: its centre lies along the inward normal interpolated there), at most `cap_mm`.

@@ -81,6 +81,12 @@ struct Assessment {
     double neck_min_gap_mm = 0.0;             ///< smallest lumen gap across the neck line (negative: walls pass through)
     double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
+    /// Where the neck line ended up against the clips' jaws, held or deposited, at any opening: the fraction of it (by
+    /// length on the deformed lumen, as neck_closed_fraction) lying within a clip's jaws (along their length, within
+    /// their width), and the farthest beside their width that a point along their length lies (0: none beside). A neck
+    /// line the closing jaws squeezed out sideways stays open beside them whatever the clip's force. NaN: no clip.
+    double neck_in_jaws_fraction = std::numeric_limits<double>::quiet_NaN();
+    double neck_beside_jaws_mm = std::numeric_limits<double>::quiet_NaN();
     /// The widest channel of the deformed lumen still joining the sac to the parent (neck_channel, assessment.hpp;
     /// at most 2 mm: wide open; NaN: no neck), and where it is narrowest. The sac is sealed where it is at most
     /// Scene::neck_gap_mm.
