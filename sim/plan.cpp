@@ -280,6 +280,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         int way;
         double alpha, c, extra, covered;
         int order;
+        double inside;  // how far inside the nearer edge of the jaws' width the line they cover comes at its closest
     };
     auto corridor = [&](const Way& f) {  // the simulated-surface vertices in the way of the approach
         const double back = f.margin - f.near;
@@ -306,11 +307,14 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             const Way& f = ways[wi];
             const Eigen::Vector3d nprime = std::sin(alpha) * f.side * f.u + std::cos(alpha) * n;  // the tilted mid-plane's normal
             for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 3.0 + 1e-9; c += 0.05) {
-                double in = 0;
+                double in = 0, widest = 0;
                 for (const auto& [q, len] : seg)
-                    if (std::abs((q - c * n).dot(nprime)) <= 0.5 * JAW_W) in += len;
+                    if (const double h = std::abs((q - c * n).dot(nprime)); h <= 0.5 * JAW_W) {
+                        in += len;
+                        widest = std::max(widest, h);
+                    }
                 for (double extra = 0; extra <= 6; extra += 1)
-                    cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size())});
+                    cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size()), 0.5 * JAW_W - widest});
             }
         }
     auto depth_step = [&](const Candidate& k) {
@@ -328,6 +332,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         if (a.extra != b.extra) return a.extra < b.extra;
         if (a.way != b.way) return a.way < b.way;  // smaller yaw and opening first, the freer side first
         if (std::abs(a.covered - b.covered) > 1e-9) return a.covered > b.covered;
+        // The line as far inside both edges of the jaws' width as it can be (centred): the closing jaws squeeze what
+        // lies at an edge out sideways. (Before: the highest such pose, the line at the jaws' lower edge, on the
+        // parent's side: the sample's neck line, refreshed every frame, ended 36 of 62 points beside the jaws, 15.8 %
+        // closed; with the jaws 0.2 mm lower 53.3 %; bench/results/study/compliance.md, session 39.)
+        if (std::abs(a.inside - b.inside) > 1e-9) return a.inside > b.inside;
         return a.c > b.c;
     });
     // The clip for a candidate: its axis, hinge and the shortest standard blade (3 … 15 mm in 2 mm steps) whose
@@ -487,8 +496,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
     // How much of the jaws' width the neck line fills, and how near an edge it comes: a saddle that fills the band is
-    // squeezed out of it as the jaws close (the sample's 0.88 of 1.0 mm, at the lower edge: about half of the line
-    // stays open; bench/results/study/compliance.md, session 37).
+    // squeezed out of it as the jaws close (the sample's 0.88 of 1.0 mm, then at the lower edge: 36 of the line's 62
+    // points ended beside the jaws; bench/results/study/compliance.md, sessions 37 and 39).
     {
         const Eigen::Vector3d nprime = std::sin(chosen->alpha) * way.side * way.u + std::cos(chosen->alpha) * n;
         double lo = 1e300, hi = -1e300;

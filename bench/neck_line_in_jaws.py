@@ -1,0 +1,36 @@
+# SPDX-License-Identifier: MIT
+# Where a run's deformed neck line lies in its clip's jaw frame: per neck-line point (as ANEU_LUMEN_OBJ writes them,
+# `# neck LOOP X Y Z GAP`), r from the hinge along the jaws, across their width (along axis x up; the jaws span
+# +-width/2), up (the opening direction) and the gap across the lumen there, sorted by r. Shows whether an open part
+# of the neck line lies between the jaws (the clip held open) or beside them (squeezed out sideways).
+#   python3 bench/neck_line_in_jaws.py LUMEN.obj SCENE.json > neck_line.tsv
+import json, math, sys
+
+obj, scene_path = sys.argv[1], sys.argv[2]
+scene = json.load(open(scene_path))
+app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
+keys = app["keyframes"]
+axis, up = keys[0]["axis"], keys[0]["up"]
+closing = keys[0]
+for k in keys:  # the pose where the applier asks for the smallest opening
+    axis, up = k.get("axis", axis), k.get("up", up)
+    if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
+        closing = dict(k, axis=axis, up=up)
+model = scene["clip_models"][keys[0]["load"]]
+dot = lambda a, b: sum(x * y for x, y in zip(a, b))
+unit = lambda a: [x / math.sqrt(dot(a, a)) for x in a]
+ax, upv = unit(closing["axis"]), unit(closing["up"])
+w = unit([ax[1] * upv[2] - ax[2] * upv[1], ax[2] * upv[0] - ax[0] * upv[2], ax[0] * upv[1] - ax[1] * upv[0]])
+hinge = closing["position"]
+rows = []
+for line in open(obj):
+    if line.startswith("# neck "):
+        p = line.split()
+        d = [float(p[3 + i]) - hinge[i] for i in range(3)]
+        rows.append((dot(d, ax), dot(d, w), dot(d, upv), float(p[6])))
+rows.sort()
+half = 0.5 * model["jaw_width_mm"]
+print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
+for r, a, u, g in rows:
+    where = "past the jaws" if r < 0 or r > model["jaw_length_mm"] else ("in the jaws" if abs(a) <= half else "beside the jaws")
+    print("%.3f\t%+.3f\t%+.3f\t%s\t%s" % (r, a, u, "inf" if math.isinf(g) else "%.4f" % g, where))
