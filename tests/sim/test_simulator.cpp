@@ -913,7 +913,9 @@ TEST(SimulatorPatch, InRealTimeTheComplianceFramesRefreshOnAnotherThreadAndConve
     const sim::Clip& c = s.clips().at(0);
     EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
     // Measured -4.8 % after 8 linearisations (one dropped as stale while the jaws closed), each 0.4-0.5 s on its own
-    // thread beside the frames; the test allows twice that (a loaded machine makes fewer refreshes in the 4 s).
+    // thread beside the frames; with the candidates selected again at each refresh (session 39) -7.5 % after 12-14,
+    // settled on the last (-5.0 % with the first selection kept; why the threaded path ends lower is not found: the
+    // inline one ends at -1.5 % either way). The test allows 10 % (a loaded machine makes fewer refreshes in the 4 s).
     EXPECT_NEAR(c.grip_force_n, f_ref, 0.10 * f_ref);
     EXPECT_LT(p.end_lag_to_thickness, 0.3);
     std::printf("real time, refreshed on another thread: %ld frames, %d linearisations (%.2f s), blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), "
