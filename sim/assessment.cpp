@@ -495,10 +495,10 @@ std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vect
             bool inside = false;
             for (const JawsBox& j : jaws) {
                 const Eigen::Vector3d r = mid - j.hinge, side = j.axis.cross(j.up).normalized();
-                const double along = r.dot(j.axis), wide = std::abs(r.dot(side)) - 0.5 * j.width_mm;
+                const double along = r.dot(j.axis), wide = std::abs(r.dot(side)) - 0.5 * j.width_mm - j.margin_mm;
                 if (along < 0 || along > j.length_mm) continue;
-                if (wide <= 0) inside = true;
-                else beside = std::max(beside, wide);
+                if (wide > 0) beside = std::max(beside, wide);
+                else if (std::abs(r.dot(j.up)) <= j.max_up_mm) inside = true;
             }
             if (inside) in += seg;
         }
@@ -605,30 +605,24 @@ Assessment Simulator::Impl::assess() {
     // Debugging and pictures (bench/render_channel.py): the deformed lumen as a Wavefront OBJ, the neck line's points, the
     // faces' widths and the channel listed after it as comments.
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) write_lumen_obj(obj, measured, ym, occ, channel);
-    // The neck line lying between the jaws of a closed clip (where the clip is, not what it achieved).
-    double total = 0, closed = 0;
-    for (const auto& loop : model.surface.neck_loops) {
-        for (size_t k = 0; k < loop.size(); ++k) {
-            const Eigen::Vector3d p = x.row(loop[k]), q = x.row(loop[(k + 1) % loop.size()]);
-            const double len = (q - p).norm();
-            total += len;
-            const Eigen::Vector3d mid = 0.5 * (p + q);
-            for (const Clip& c : clips) {
-                if (c.model.empty()) continue;
-                const ClipModel& cm = scene.clip_models.at(c.model);
-                if (c.opening_deg > 1.0) continue;  // not closed
-                const Eigen::Vector3d r = mid - c.pose.position;
-                const Eigen::Vector3d ax = c.pose.axis, up = c.pose.up, side = ax.cross(up);
-                const double along = r.dot(ax), across = std::abs(r.dot(up)), wide = std::abs(r.dot(side));
-                if (along >= 0 && along <= cm.jaw_length_mm && wide <= 0.5 * cm.jaw_width_mm + scene.neck_tolerance_mm &&
-                    across <= 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm) {
-                    closed += len;
-                    break;
-                }
-            }
+    // The neck line (the outer surface's) lying between the jaws of a closed clip, within neck_tolerance_mm (where the
+    // clip is, not what it achieved).
+    {
+        std::vector<std::vector<Eigen::Vector3d>> loops;
+        for (const auto& loop : model.surface.neck_loops) {
+            loops.emplace_back();
+            for (int v : loop) loops.back().push_back(x.row(v).transpose());
         }
+        std::vector<JawsBox> closed;
+        for (const Clip& c : clips)
+            if (!c.model.empty() && c.opening_deg <= 1.0) {
+                const ClipModel& cm = scene.clip_models.at(c.model);
+                closed.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.jaw_length_mm, cm.jaw_width_mm,
+                                  scene.neck_tolerance_mm, 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm});
+            }
+        const double f = neck_in_jaws(loops, closed).first;
+        out.neck_between_jaws_fraction = std::isnan(f) ? 0.0 : f;
     }
-    out.neck_between_jaws_fraction = total > 0 ? closed / total : 0.0;
     out.patches.clear();
     for (const PatchRun& P : patches) {
         out.patches.push_back(P.stats);  // min_wall_distance_mm stays +inf when no opposite walls came within reach

@@ -559,40 +559,39 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             res.u = v0;
             std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
             const Eigen::VectorXd u0 = v0.head(nb);
-            if (!C) {
-                // The nodes the blades can reach as they close from here (within 0.1 mm of their wedge), and the inner
-                // walls they flatten (faces whose corners lie within 0.3 mm of it), the faces' corners candidates too
-                // (fem::compliant_setup, as aneu_bench_compliance's frames).
-                C = std::make_shared<PatchRun::Compliant>();
-                Eigen::MatrixX3d x = P.X;
-                for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u0.segment<3>(3 * a).transpose();
-                fem::CompliantSetup cs = fem::compliant_setup(blades, v0[nb], x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i());
-                C->cand = std::move(cs.candidates);
-                C->faces = std::move(cs.faces);
-                C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
-                for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
-                C->theta_sel = v0[nb];
-                C->hinge_sel = blades.hinge;
-            }
-            // A refresh selects the candidates again, for the jaws as they are (the wedge they sweep closing from a
-            // little more than this opening), and the inner walls' faces where the walls now are: the first selection
-            // is for the jaws as they first closed on the wall (the sample's: 2,391 candidates at 60 deg, 1,821 at the
-            // end; its walls on the neck line 0.0011 mm through each other, 0.0685 mm with the first selection kept).
-            auto select = [&](const Eigen::VectorXd& u) {
+            // The nodes the blades can reach as they close from opening th (within 0.1 mm of their wedge), and the inner
+            // walls they flatten (faces whose corners lie within 0.3 mm of it), the faces' corners candidates too
+            // (fem::compliant_setup, as aneu_bench_compliance's frames), the patch's nodes standing at X + u.
+            auto setup_at = [&](const Eigen::VectorXd& u, double th) {
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u.segment<3>(3 * a).transpose();
-                const double th = std::max(v0[nb], theta_kept) + RESELECT_MARGIN_RAD;
-                return std::make_pair(fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i()), th);
+                return fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i());
             };
-            // The frames' state carried over to a refresh's candidates, which the frames then act on.
-            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
-                fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, u0, C->last, C->search);
+            // The candidates the frames act on from here, selected at opening th with the hinge there.
+            auto adopt = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
                 C->cand = std::move(cs.candidates);
                 C->faces = std::move(cs.faces);
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
                 C->theta_sel = th;
                 C->hinge_sel = hinge;
+            };
+            if (!C) {
+                C = std::make_shared<PatchRun::Compliant>();
+                adopt(setup_at(u0, v0[nb]), v0[nb], blades.hinge);
+            }
+            // A refresh selects the candidates again, for the jaws as they are (the wedge they sweep closing from a
+            // little more than this opening), and the inner walls' faces where the walls now are: the first selection
+            // is for the jaws as they first closed on the wall (the sample's: 2,391 candidates at 60 deg, 1,821 at the
+            // end; its walls on the neck line 0.0011 mm through each other, 0.0685 mm with the first selection kept).
+            auto select = [&](const Eigen::VectorXd& u) {
+                const double th = std::max(v0[nb], theta_kept) + RESELECT_MARGIN_RAD;
+                return std::make_pair(setup_at(u, th), th);
+            };
+            // The frames' state carried over to a refresh's candidates, which the frames then act on.
+            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
+                fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, u0, C->last, C->search);
+                adopt(std::move(cs), th, hinge);
             };
             // A refresh made on the second core (threaded mode) that is done: the frames go on with it from here.
             if (C->pending && C->pending->done.load(std::memory_order_acquire)) {

@@ -395,6 +395,17 @@ TEST(NeckInJaws, ALineWithinTheJawsWidthIsInAndOneSqueezedOutSidewaysIsBesideThe
     const auto [in3, beside3] = neck_in_jaws(long_slit, {j});
     EXPECT_NEAR(in3, 0.5, 0.0126);
     EXPECT_EQ(beside3, 0.0);
+    // With a tolerance beside the width (the closed-clip measure, neck_between_jaws_fraction): the line 0.3 mm beside
+    // is in with a 0.31 mm margin; a height limit of 0.04 mm leaves out the slit's sides, 0.05 mm off the mid-plane
+    // (all but the two segments that join them across it at its ends, 0.1 mm x 0.1 mm each).
+    JawsBox loose = j;
+    loose.margin_mm = 0.31;
+    EXPECT_DOUBLE_EQ(neck_in_jaws(slit(0.8), {loose}).first, 1.0);
+    EXPECT_EQ(neck_in_jaws(slit(0.8), {loose}).second, 0.0);
+    loose.max_up_mm = 0.04;
+    EXPECT_NEAR(neck_in_jaws(slit(0.0), {loose}).first, 2 * std::sqrt(0.02) / (7.8 + 2 * std::sqrt(0.02)), 1e-9);
+    loose.max_up_mm = 0.06;
+    EXPECT_DOUBLE_EQ(neck_in_jaws(slit(0.0), {loose}).first, 1.0);
     // No clip, no line: not measured.
     EXPECT_TRUE(std::isnan(neck_in_jaws(slit(0.0), {}).first));
     EXPECT_TRUE(std::isnan(neck_in_jaws({}, {j}).second));

@@ -68,15 +68,17 @@ struct NeckChannel {
 double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm);
 
 /// A clip's jaws as a box for neck_in_jaws: hinge, unit axis (towards the tips) and up (the opening direction), length
-/// and width [mm].
+/// and width [mm]; a point counts as within them up to margin_mm beyond their width and max_up_mm from their mid-plane
+/// along up (infinite: at any height).
 struct JawsBox {
     Eigen::Vector3d hinge, axis, up;
     double length_mm = 0, width_mm = 0;
+    double margin_mm = 0, max_up_mm = std::numeric_limits<double>::infinity();
 };
 /// Where a neck line (closed loops of points) lies against clips' jaws: the fraction of its length (segment by
-/// segment, at their midpoints) within some clip's jaws (0 ≤ along the axis ≤ length, within half the width of the
-/// mid-plane across it, whatever the height along up), and the farthest beside the width that a midpoint along the
-/// jaws' length lies (0: none). NaN both without jaws or a line.
+/// segment, at their midpoints) within some clip's jaws (0 ≤ along the axis ≤ length, within half the width plus the
+/// margin of the mid-plane across it, within max_up_mm of it along up), and the farthest beside that width that a
+/// midpoint along the jaws' length lies (0: none). NaN both without jaws or a line.
 std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vector3d>>& loops, const std::vector<JawsBox>& jaws);
 
 /// The lumen's width at a point of face `face` (barycentric `w`) of the deformed lumen `y`: the diameter of the
