@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: MIT
 # One line (tab-separated) summing up a planned patch run made by bench/run_patch_case.sh: the plan, where the clip
 # stopped, the neck (closed share of its border, the widest sac-parent channel, sealed or not, the walls' deepest
-# interpenetration), the forces against the clip model's range, and the patch frames' cost.
+# interpenetration), the parent's narrowing, the forces against the clip model's range, and the patch frames' cost.
 #   python3 bench/patch_case_summary.py RUN_DIR SECONDS SPRING_SCALE     -> the line
 #   python3 bench/patch_case_summary.py RUN_DIR --render-args            -> render_channel.py's arguments after OUT.png
 import json, math, os, sys
@@ -49,6 +49,9 @@ fields = [
         report.get("neck_sealed", "-"), report.get("neck_interpenetration_mm", float("nan")),
         report.get("neck_measured_on", "corner triangles").replace(" ", "_"),
         "%.3f" % report["neck_channel_edge_mm"] if report.get("neck_channel_edge_mm") is not None else "-"),
+    "parent_narrowed=%s parent_mm=%s" % (
+        "%.1f%%" % (100 * report["parent_narrowing"]) if report.get("parent_narrowing") is not None else "-",
+        "%.2f/%.2f" % (report["parent_channel_mm"], report["parent_channel_rest_mm"]) if report.get("parent_narrowing") is not None else "-"),
     "peak_clip_force_n=%.3f range_n=%.2f-%.2f within=%s haptic_peak_n=%.3f" % (
         blade, lo, hi, "yes" if lo <= blade <= hi else "no", report.get("peak_force_n", float("nan"))),
     "patch_frames=%s unconverged=%s restarts=%s builds=%s mean_solve_s=%.1f walls_min_mm=%s solver=%s%s" % (

@@ -132,7 +132,8 @@ public:
             const double len = m_vn.row(v).norm();
             if (len > 0) m_vn.row(v) /= len;
         }
-        m_grid.build(m_C, std::max(0.25, 2 * m_reach));
+        // Cells of 1 mm (the balls' boxes are a few mm wide: finer cells cost more lookups than they save tests).
+        m_grid.build(m_C, std::max(1.0, 2 * m_reach));
     }
 
     const Eigen::MatrixX3d& centroids() const { return m_C; }
@@ -212,8 +213,13 @@ public:
         // the walls touch or pass through each other (a ball beside a wall that lies on the point is "clear" of
         // it, so this is where touching walls are seen).
         behind = std::max(behind, 1e-9);
-        const Eigen::Vector3d box = Eigen::Vector3d::Constant(2 * r + behind + m_reach);
-        m_grid.query(Aabb{p - box, p + box}, m_cand);
+        // Faces are found by their centroids, each within m_reach of any point of its face: those the segment from
+        // p − behind d to p + 2 r d crosses have theirs within m_reach of its box. (In the grid's order: the least
+        // bound is the same in any order, the ball's radius below to within the bisection's 0.1 µm.)
+        {
+            const Eigen::Vector3d s0 = p - behind * d, s1 = p + 2 * r * d, pad = Eigen::Vector3d::Constant(m_reach + 1e-9);
+            m_grid.query(Aabb{s0.cwiseMin(s1) - pad, s0.cwiseMax(s1) + pad}, m_cand, false);
+        }
         for (int g : m_cand) {
             if (!opposite(g, d) || std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
             double t;
@@ -222,11 +228,17 @@ public:
             if (t <= 0) return 0.0;
             r = 0.5 * t;
         }
+        // The faces that can touch the ball as it now stands: their centroids within r + m_reach of its centre.
+        {
+            const Eigen::Vector3d centre = p + r * d, pad = Eigen::Vector3d::Constant(r + m_reach + 1e-9);
+            m_grid.query(Aabb{centre - pad, centre + pad}, m_cand, false);
+        }
         for (int g : m_cand) {
             if (std::binary_search(m_ring.begin(), m_ring.end(), g)) continue;
             const Eigen::Vector3d a = m_y.row(m_F(g, 0)), b = m_y.row(m_F(g, 1)), c = m_y.row(m_F(g, 2));
             if ((m_C.row(g).transpose() - (p + r * d)).norm() >= r + m_reach) continue;  // clear of the ball as it stands
-            auto clear = [&](double s) { return (closest_point_on_triangle(p + s * d, a, b, c) - (p + s * d)).norm() >= s; };
+            // Clear within 1 nm: a wall the ball touches tangentially (a round lumen's) needs no bisection.
+            auto clear = [&](double s) { return (closest_point_on_triangle(p + s * d, a, b, c) - (p + s * d)).norm() >= s - 1e-9; };
             if (clear(r)) continue;
             double lo = 0, hi = r;
             for (int it = 0; it < 40 && hi - lo > 1e-7; ++it) {
@@ -259,6 +271,22 @@ double point_segment_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a
 /// Neck loop l's line on the lumen: SimLumen::neck_line's when set, else smoothed here.
 std::vector<NeckPointOnLumen> neck_line_of(const SimLumen& lumen, size_t l) {
     return l < lumen.neck_line.size() ? lumen.neck_line[l] : smoothed_neck_line(lumen, lumen.neck_loops[l]);
+}
+
+// The neck line at rest, as segments (all loops).
+std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> neck_segments_at_rest(const SimLumen& lumen) {
+    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg;
+    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
+        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
+        std::vector<Eigen::Vector3d> pts;
+        for (const NeckPointOnLumen& q : line) {
+            Eigen::Vector3d x = Eigen::Vector3d::Zero();
+            for (int k = 0; k < 3; ++k) x += q.weights[k] * lumen.X.row(lumen.F(q.face, k)).transpose();
+            pts.push_back(x);
+        }
+        for (size_t k = 0; k < pts.size(); ++k) seg.emplace_back(pts[k], pts[(k + 1) % pts.size()]);
+    }
+    return seg;
 }
 
 }  // namespace
@@ -420,18 +448,7 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     if (lumen.neck_loops.empty() || sac_region < 0) return out;
     const Eigen::MatrixX3i& F = lumen.F;
     const Eigen::Index NF = F.rows();
-    // The neck line at rest, as segments.
-    std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg;
-    for (size_t l = 0; l < lumen.neck_loops.size(); ++l) {
-        const std::vector<NeckPointOnLumen> line = neck_line_of(lumen, l);
-        std::vector<Eigen::Vector3d> pts;
-        for (const NeckPointOnLumen& q : line) {
-            Eigen::Vector3d x = Eigen::Vector3d::Zero();
-            for (int k = 0; k < 3; ++k) x += q.weights[k] * lumen.X.row(F(q.face, k)).transpose();
-            pts.push_back(x);
-        }
-        for (size_t k = 0; k < pts.size(); ++k) seg.emplace_back(pts[k], pts[(k + 1) % pts.size()]);
-    }
+    const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg = neck_segments_at_rest(lumen);
     if (seg.empty()) return out;
     DeformedLumen balls(lumen.F, y, lumen.wall_mm);
     std::vector<double> width(static_cast<size_t>(NF), cap_mm);
@@ -463,6 +480,72 @@ NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int s
     return out;
 }
 
+
+ParentChannel parent_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm, double end_mm) {
+    ParentChannel out;
+    const std::vector<std::pair<Eigen::Vector3d, Eigen::Vector3d>> seg = neck_segments_at_rest(lumen);
+    if (seg.empty() || sac_region < 0) return out;
+    const Eigen::MatrixX3i& F = lumen.F;
+    const Eigen::Index NF = F.rows();
+    // The parent's ends: its faces at least end_mm from the neck line, in pieces joined across edges.
+    std::vector<char> near(static_cast<size_t>(NF), 0), sac(static_cast<size_t>(NF), 0);
+    std::vector<int> end(static_cast<size_t>(NF), -1);
+    for (Eigen::Index f = 0; f < NF; ++f) {
+        const Eigen::Vector3d c = (lumen.X.row(F(f, 0)) + lumen.X.row(F(f, 1)) + lumen.X.row(F(f, 2))).transpose() / 3.0;
+        double dist = std::numeric_limits<double>::infinity();
+        for (const auto& [a, b] : seg) dist = std::min(dist, point_segment_distance(c, a, b));
+        sac[static_cast<size_t>(f)] = lumen.face_region[f] == sac_region;
+        near[static_cast<size_t>(f)] = dist < end_mm;
+    }
+    const std::vector<std::vector<int>> nbr = face_neighbours(F);
+    for (Eigen::Index f0 = 0; f0 < NF; ++f0) {
+        if (near[static_cast<size_t>(f0)] || sac[static_cast<size_t>(f0)] || end[static_cast<size_t>(f0)] >= 0) continue;
+        std::vector<int> stack{static_cast<int>(f0)};
+        end[static_cast<size_t>(f0)] = out.ends;
+        while (!stack.empty()) {
+            const int f = stack.back();
+            stack.pop_back();
+            for (int g : nbr[static_cast<size_t>(f)])
+                if (!near[static_cast<size_t>(g)] && !sac[static_cast<size_t>(g)] && end[static_cast<size_t>(g)] < 0) {
+                    end[static_cast<size_t>(g)] = out.ends;
+                    stack.push_back(g);
+                }
+        }
+        ++out.ends;
+    }
+    if (out.ends < 2) return out;
+    // The faces' widths at rest and deformed (the same faces: those near the neck line, the parent's).
+    auto widths = [&](DeformedLumen& balls) {
+        std::vector<double> w(static_cast<size_t>(NF), cap_mm);
+        const Eigen::Vector3d third = Eigen::Vector3d::Constant(1.0 / 3.0);
+        for (Eigen::Index f = 0; f < NF; ++f) {
+            if (sac[static_cast<size_t>(f)]) w[static_cast<size_t>(f)] = 0.0;
+            else if (near[static_cast<size_t>(f)]) w[static_cast<size_t>(f)] = balls.width(static_cast<int>(f), third, cap_mm);
+        }
+        return w;
+    };
+    DeformedLumen rest_balls(F, lumen.X, lumen.wall_mm), balls(F, y, lumen.wall_mm);
+    const std::vector<double> w0 = widths(rest_balls), w1 = widths(balls);
+    for (int a = 0; a < out.ends; ++a)
+        for (int b = a + 1; b < out.ends; ++b) {
+            std::vector<char> A(static_cast<size_t>(NF), 0), B(static_cast<size_t>(NF), 0);
+            for (Eigen::Index f = 0; f < NF; ++f) {
+                A[static_cast<size_t>(f)] = end[static_cast<size_t>(f)] == a;
+                B[static_cast<size_t>(f)] = end[static_cast<size_t>(f)] == b;
+            }
+            const double r = widest_channel(F, w0, A, B).first;
+            const auto [d, face] = widest_channel(F, w1, A, B);
+            if (!(r > 0)) continue;  // joined only through the sac at rest: no parent's channel between them
+            const double narrowing = 1.0 - d / r;
+            if (std::isnan(out.narrowing) || narrowing > out.narrowing) {
+                out.rest_mm = r;
+                out.width_mm = d;
+                out.narrowing = narrowing;
+                out.at = face >= 0 ? Eigen::Vector3d(balls.centroids().row(face).transpose()) : Eigen::Vector3d::Zero();
+            }
+        }
+    return out;
+}
 
 double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channel, double gap_tol_mm) {
     if (channel.reach_mm.empty()) return -1.0;
@@ -589,6 +672,11 @@ Assessment Simulator::Impl::assess() {
         out.neck_channel_at = channel.at;
         if (channel.face >= 0) out.neck_channel_edge_mm = lumen_edges_mm(lumen)[split ? channel.face / 4 : channel.face];
         out.neck_cut_off_fraction = neck_cut_off_fraction(occ, channel, scene.neck_gap_mm);
+        const ParentChannel parent = parent_channel(measured, ym, it == names.end() ? -1 : static_cast<int>(it - names.begin()));
+        out.parent_channel_mm = parent.width_mm;
+        out.parent_channel_rest_mm = parent.rest_mm;
+        out.parent_narrowing = parent.narrowing;
+        out.parent_channel_at = parent.at;
     }
     for (size_t l = 0; l < occ.points.size(); ++l)
         for (size_t k = 0; k < occ.points[l].size(); ++k) out.neck_line.push_back({occ.points[l][k], occ.gap_mm[l][k], static_cast<int>(l)});

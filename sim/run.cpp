@@ -534,6 +534,12 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         if (a.neck_cut_off_fraction >= 0) j["neck_cut_off_fraction"] = a.neck_cut_off_fraction;
         if (std::isfinite(a.neck_channel_edge_mm)) j["neck_channel_edge_mm"] = a.neck_channel_edge_mm;
     }
+    if (std::isfinite(a.parent_narrowing)) {
+        j["parent_channel_mm"] = a.parent_channel_mm;  // the parent's narrowest passage between its ends, deformed
+        j["parent_channel_rest_mm"] = a.parent_channel_rest_mm;
+        j["parent_narrowing"] = a.parent_narrowing;
+        j["parent_channel_at"] = {a.parent_channel_at.x(), a.parent_channel_at.y(), a.parent_channel_at.z()};
+    }
     // Where along the neck line it stays open: [x, y, z, gap] per neck vertex in loop order (gap null: no opposite
     // wall within reach).
     j["neck_line"] = nlohmann::json::array();
@@ -683,6 +689,12 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                           100.0 * a.neck_cut_off_fraction, scene.neck_gap_mm);
             o << buf;
         }
+    }
+    if (std::isfinite(a.parent_narrowing)) {
+        std::snprintf(buf, sizeof buf, "  parent artery narrowed     %.0f %% (its narrowest passage %.2f mm, %.2f mm at rest, at (%.2f, %.2f, %.2f))\n",
+                      100.0 * a.parent_narrowing, a.parent_channel_mm, a.parent_channel_rest_mm, a.parent_channel_at.x(), a.parent_channel_at.y(),
+                      a.parent_channel_at.z());
+        o << buf;
     }
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         std::snprintf(buf, sizeof buf, "  neck line in the jaws      %.0f %% (within their width; the farthest beside it %.2f mm)\n", 100.0 * a.neck_in_jaws_fraction,

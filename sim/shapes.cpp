@@ -252,18 +252,29 @@ void PointGrid::build(const Eigen::MatrixX3d& X, double cell, const std::vector<
     m_cell = cell > 0 ? cell : 1.0;
     m_X = &X;
     m_cells.clear();
+    m_points.clear();
     for (Eigen::Index i = 0; i < X.rows(); ++i) {
         if (include && !(*include)[static_cast<size_t>(i)]) continue;
         const auto c = (X.row(i).array() / m_cell).floor().cast<long long>();
         m_cells[key(c[0], c[1], c[2])].push_back(static_cast<int>(i));
+        m_points.push_back(static_cast<int>(i));
     }
 }
 
-void PointGrid::query(const Aabb& box, std::vector<int>& out) const {
+void PointGrid::query(const Aabb& box, std::vector<int>& out, bool sorted) const {
     out.clear();
     if (!m_X) return;
     const Eigen::Array3d lo = (box.lo.array() / m_cell).floor(), hi = (box.hi.array() / m_cell).floor();
     if (((hi - lo) > 1e6).any()) return;
+    // A box of more cells than there are points: the points themselves, in increasing order (the same answer; a wide
+    // box over a fine grid would visit millions of empty cells).
+    if ((hi - lo + 1).prod() > static_cast<double>(m_points.size())) {
+        for (int v : m_points) {
+            const Eigen::Vector3d p = m_X->row(v);
+            if ((p.array() >= box.lo.array()).all() && (p.array() <= box.hi.array()).all()) out.push_back(v);
+        }
+        return;
+    }
     for (long long k = static_cast<long long>(lo[2]); k <= static_cast<long long>(hi[2]); ++k)
         for (long long j = static_cast<long long>(lo[1]); j <= static_cast<long long>(hi[1]); ++j)
             for (long long i = static_cast<long long>(lo[0]); i <= static_cast<long long>(hi[0]); ++i) {
@@ -274,6 +285,7 @@ void PointGrid::query(const Aabb& box, std::vector<int>& out) const {
                     if ((p.array() >= box.lo.array()).all() && (p.array() <= box.hi.array()).all()) out.push_back(v);
                 }
             }
+    if (!sorted) return;
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
 }

@@ -410,3 +410,48 @@ TEST(NeckInJaws, ALineWithinTheJawsWidthIsInAndOneSqueezedOutSidewaysIsBesideThe
     EXPECT_TRUE(std::isnan(neck_in_jaws(slit(0.0), {}).first));
     EXPECT_TRUE(std::isnan(neck_in_jaws({}, {j}).second));
 }
+
+// The parent's channel: the tube with a side aneurysm's neck (the sac a patch of its wall, |θ| < π/4 and |z| < 1 mm),
+// its ends the pieces of the wall at least 6 mm from the neck line (z < −7 and z > 7 mm).
+namespace {
+SimLumen tube_with_side_sac() {
+    SimLumen s = tube();
+    const int k0 = 35, k1 = 45, i0 = -12, i1 = 12;  // z = −1 … 1 mm, θ = −π/4 … π/4
+    auto col = [](int i) { return (i % NT + NT) % NT; };
+    for (Eigen::Index g = 0; g < s.F.rows(); ++g) {
+        const int cell = static_cast<int>(g / 2), k = cell / NT, i = cell % NT;
+        const int ii = i >= NT / 2 ? i - NT : i;
+        s.face_region[g] = k >= k0 && k < k1 && ii >= i0 && ii < i1 ? 1 : 0;
+    }
+    std::vector<int> loop;
+    for (int i = i0; i < i1; ++i) loop.push_back(k0 * NT + col(i));
+    for (int k = k0; k < k1; ++k) loop.push_back(k * NT + col(i1));
+    for (int i = i1; i > i0; --i) loop.push_back(k1 * NT + col(i));
+    for (int k = k1; k > k0; --k) loop.push_back(k * NT + col(i0));
+    s.neck_loops = {loop};
+    return s;
+}
+}  // namespace
+
+TEST(ParentChannel, AnOpenParentKeepsItsDiameterAPinchNarrowsItToItsGap) {
+    const SimLumen s = tube_with_side_sac();
+    const ParentChannel open = parent_channel(s, s.X, 1);
+    EXPECT_EQ(open.ends, 2);
+    // The tube's inscribed circle (the polygon's, within the faceting), and not narrowed at all.
+    EXPECT_NEAR(open.rest_mm, 2 * R_IN, 0.01);
+    EXPECT_DOUBLE_EQ(open.width_mm, open.rest_mm);
+    EXPECT_DOUBLE_EQ(open.narrowing, 0.0);
+    // Flattened to a 0.3 mm slit across the neck (the whole ring, |z| ≤ 1.5 mm): the parent passes 0.3 mm, narrowed by
+    // 1 − 0.3 / 2.4.
+    const ParentChannel slit = parent_channel(s, pinched(s, 0.0, 0.3), 1);
+    EXPECT_NEAR(slit.width_mm, 0.3, 0.02);
+    EXPECT_NEAR(slit.narrowing, 1 - 0.3 / (2 * R_IN), 0.01);
+    EXPECT_LE(std::abs(slit.at.z()), 1.5 + 0.2);
+    // A pinch on the parent 4 mm from the neck's middle, between it and an end: narrowed as much.
+    EXPECT_NEAR(parent_channel(s, pinched(s, 4.0, 0.3), 1).width_mm, 0.3, 0.02);
+    // The parent's ends beyond the lumen (nothing 20 mm from the neck line) or no aneurysm: not measured.
+    const ParentChannel none = parent_channel(s, s.X, 1, 8.0, 20.0);
+    EXPECT_EQ(none.ends, 0);
+    EXPECT_TRUE(std::isnan(none.narrowing));
+    EXPECT_TRUE(std::isnan(parent_channel(s, s.X, -1).narrowing));
+}

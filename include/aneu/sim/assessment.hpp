@@ -109,6 +109,24 @@ std::vector<double> widest_reach(const Eigen::MatrixX3i& F, const std::vector<do
 NeckChannel neck_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm = 2.0, double clear_mm = 1.0,
                          double measure_mm = 6.0);
 
+/// Whether the parent artery stays open under the clip: the narrowest place its blood passes between the parent's ends,
+/// deformed against at rest. A clip set too far towards the parent seals the neck by narrowing the parent (a stenosis).
+struct ParentChannel {
+    int ends = 0;        ///< pieces of the parent's lumen at least `end_mm` from the neck line at rest (its inflow and outflows)
+    /// Of the pairs of ends, the one narrowed most: the widest channel between them (the diameter of the largest ball that
+    /// passes, as NeckChannel's) at rest and deformed, and 1 − deformed / rest (0: as wide as at rest; 1: closed).
+    /// NaN with fewer than two ends.
+    double rest_mm = std::numeric_limits<double>::quiet_NaN();
+    double width_mm = std::numeric_limits<double>::quiet_NaN();
+    double narrowing = std::numeric_limits<double>::quiet_NaN();
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< that channel's narrowest place, deformed (a face centroid)
+};
+/// The parent's channel (ParentChannel) on the deformed lumen `y`: the parent's faces (those not in `sac_region`) at
+/// least `end_mm` from the neck line at rest, grouped into pieces joined across edges, are its ends; faces nearer the
+/// neck line are measured (lumen_width at their centroid, at most `cap_mm`), farther ones count as `cap_mm`; the sac's
+/// faces count as 0 (the parent's blood is not routed through the aneurysm). Without a neck, nothing is measured.
+ParentChannel parent_channel(const SimLumen& lumen, const Eigen::MatrixX3d& y, int sac_region, double cap_mm = 8.0, double end_mm = 6.0);
+
 /// Writes the deformed lumen `y` (SimLumen::X's rows) as a Wavefront OBJ with the neck line's points and gaps, the faces'
 /// widths and the channel after it as comments: what bench/render_channel.py draws (`ANEU_LUMEN_OBJ`, aneu_bench_compliance).
 /// False where the file cannot be written.

@@ -67,12 +67,13 @@ class PointGrid {
 public:
     /// @param[in] cell  cell size [mm] (about the mean edge length)
     void build(const Eigen::MatrixX3d& X, double cell, const std::vector<char>* include = nullptr);
-    /// Indices of points inside the box, in increasing order.
-    void query(const Aabb& box, std::vector<int>& out) const;
+    /// Indices of points inside the box, in increasing order (`sorted`; else in the grid's order, each at least once).
+    void query(const Aabb& box, std::vector<int>& out, bool sorted = true) const;
 
 private:
     double m_cell = 1.0;
     std::unordered_map<long long, std::vector<int>> m_cells;
+    std::vector<int> m_points;  ///< the points kept, in increasing order
     const Eigen::MatrixX3d* m_X = nullptr;
     long long key(long long i, long long j, long long k) const { return (i * 73856093LL) ^ (j * 19349663LL) ^ (k * 83492791LL); }
 };

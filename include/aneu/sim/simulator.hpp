@@ -98,6 +98,14 @@ struct Assessment {
     /// the parent's blood still reaches (a neck remnant); where the clip sits a little above the border on the sac's
     /// side, the border there is cut off without its own walls touching. −1: not measured (no neck, or no parent).
     double neck_cut_off_fraction = -1.0;
+    /// The parent artery under the clip (parent_channel, assessment.hpp): of its ends' pairs, the one narrowed most — the
+    /// widest channel between them deformed and at rest [mm] and 1 − their ratio (0: as open as at rest; a clip set
+    /// towards the parent narrows it), where it is narrowest. NaN: fewer than two ends of the parent found (the lumen
+    /// ends within 6 mm of the neck line), or no neck.
+    double parent_channel_mm = std::numeric_limits<double>::quiet_NaN();
+    double parent_channel_rest_mm = std::numeric_limits<double>::quiet_NaN();
+    double parent_narrowing = std::numeric_limits<double>::quiet_NaN();
+    Eigen::Vector3d parent_channel_at = Eigen::Vector3d::Zero();
     /// The lumen's edge there at rest (its corner triangles': lumen_edges_mm, assessment.hpp): the resolution a fold's
     /// channel depends on (bench/bench_fold.cpp).
     double neck_channel_edge_mm = std::numeric_limits<double>::quiet_NaN();
