@@ -14,6 +14,8 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
                     positive): an experiment on where the jaws' width sits on the neck line
   --jaw-width-mm W  the planned clip's jaws W mm wide (an experiment: how much of a saddle-shaped neck line
                     a wider blade keeps between its jaws as they close)
+  --jaw-length-mm L  the planned clip's blades L mm long, the hinge where it was (an experiment: tips that stop
+                    before the thick tissue past the neck's far fold, against the planner's shortest blade passing it)
   --blade-friction M  model.blade_friction (the blades' Coulomb friction on the tissue; the default is 0.3): an
                     experiment on how much of the neck line the grip holds between the jaws
   --hold            the applier holds the clip closed to the scene's end (the keyframes after the one that closes it
@@ -38,6 +40,7 @@ ap.add_argument("--friction-cell", type=float, default=0.0)
 ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
 ap.add_argument("--jaw-width-mm", type=float, default=0.0)
+ap.add_argument("--jaw-length-mm", type=float, default=0.0)
 ap.add_argument("--blade-friction", type=float, default=-1.0)
 ap.add_argument("--hold", action="store_true")
 a = ap.parse_args()
@@ -64,6 +67,9 @@ if a.spring_scale != 1:
 if a.jaw_width_mm > 0:
     for m in s["clip_models"].values():
         m["jaw_width_mm"] = a.jaw_width_mm
+if a.jaw_length_mm > 0:
+    for m in s["clip_models"].values():
+        m["jaw_length_mm"] = a.jaw_length_mm
 if a.shift_mm != 0:
     import re
     m = re.search(r"normal towards the sac \(([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\)", raw)

@@ -39,7 +39,9 @@ struct Linearisation::Impl {
     std::vector<int> free_index;  // per body DOF: its index among the free ones, −1 fixed
     Eigen::Index nfree = 0;
     std::vector<double> Wb;  // W in 3 x 3 blocks: block (a, b) at 9 (b |C| + a), column-major
-    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;
+    std::unique_ptr<CondenseFactor> factor;  // the tangent's factor, condense's (with candidates)
+    Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;  // without candidates
+    Eigen::VectorXd solve(const Eigen::VectorXd& b) const { return factor ? factor->solve(b) : Eigen::VectorXd(llt.solve(b)); }
 };
 
 
@@ -73,25 +75,50 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     for (Eigen::Index i = 0; i < n; ++i)
         if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->r0[a] = -g[i];
     Eigen::SparseMatrix<double, Eigen::RowMajor> Kt = body.tangent(u0);
-    Eigen::SparseMatrix<double> U = detail::free_upper(Kt, m->free_index, mf);
     tangent_s = sw.lap();
-    m->llt.cholmod().print = 0;
-    if (mf > 0) {
-        m->llt.compute(U);
-        if (m->llt.info() != Eigen::Success) {  // buckling: the element tangents projected onto PSD ones
-            sw.lap();
-            projected = true;
-            Kt = body.tangent(u0, true);
-            U = detail::free_upper(Kt, m->free_index, mf);
-            tangent_s += sw.lap();
-            m->llt.compute(U);
-            if (m->llt.info() != Eigen::Success)
-                throw NumericalError("linearisation: the tangent is not positive definite, even projected (" + std::to_string(mf) + " free DOFs)");
+    // The tangent is factorised once: by the condensation that makes W (fem::condense: METIS on the node graph, the
+    // forward solve L⁻¹ P E_C from the candidates' pivots, W = YᵀY by SYRK per supernode), its factor kept for the free
+    // step and the frames' displacements. (Before: a factor of its own for those, then condense's; the sample's refresh
+    // factorised the tangent twice, three times where it was projected.) Without candidates, a factor alone.
+    std::vector<int> kept;
+    for (int c : candidates)
+        for (int ax = 0; ax < 3; ++ax)
+            if (m->free_index[static_cast<size_t>(3 * c + ax)] >= 0) kept.push_back(3 * c + ax);
+    CondensedData cd;
+    double w_s = 0;
+    auto factorise = [&]() {
+        if (mf == 0) return true;
+        if (!kept.empty()) {
+            CondenseParams cp;
+            cp.precision = Precision::FLOAT64;
+            cp.residual_columns = 0;  // checked by the tests instead
+            try {
+                cd = condense(Kt, fixed_dofs, Eigen::Map<const Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), cp,
+                              null_reporter(), &m->factor);
+            } catch (const NumericalError&) {
+                return false;
+            }
+            for (const auto& [k, v] : cd.diagnostics)
+                if (k == "w_s") w_s = v;
+            return true;
         }
+        m->llt.cholmod().print = 0;
+        m->llt.compute(detail::free_upper(Kt, m->free_index, mf));
+        return m->llt.info() == Eigen::Success;
+    };
+    double failed_s = 0;
+    if (!factorise()) {  // buckling: the element tangents projected onto PSD ones
+        failed_s = sw.lap();
+        projected = true;
+        Kt = body.tangent(u0, true);
+        tangent_s += sw.lap();
+        if (!factorise())
+            throw NumericalError("linearisation: the tangent is not positive definite, even projected (" + std::to_string(mf) + " free DOFs)");
     }
-    factorise_s = sw.lap();
+    factorise_s = failed_s + sw.lap() - w_s;
+    compliance_s = w_s;
 
-    Eigen::VectorXd du = mf > 0 ? Eigen::VectorXd(m->llt.solve(m->r0)) : Eigen::VectorXd();
+    Eigen::VectorXd du = mf > 0 ? m->solve(m->r0) : Eigen::VectorXd();
     // The free step is a Newton step from u0, which frames far from their last linearisation leave far from
     // equilibrium: shortened (halved, at most 10 times) until it inverts no element, and the residual with it, so
     // that the frames on this linearisation are the damped step's (the tube's refresh on another thread, from a state
@@ -127,23 +154,13 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
             m->free_x(static_cast<Eigen::Index>(k), ax) = X(c, ax) + m->free_u[static_cast<Eigen::Index>(3 * k) + ax];
         }
     }
-    // W = (K0⁻¹)_CC by the condensation's sparse route (fem::condense: the forward solve L⁻¹ P E_C, whose columns
-    // start at their pivots, then W = YᵀY by SYRK per supernode; its own factor, METIS on the node graph), stored in
-    // 3 x 3 node blocks, a column of blocks contiguous: a frame reads the blocks of the candidates its rows touch, 72
-    // contiguous bytes each. (Before: 3|C| full forward and back substitutions with the factor above. The sample's
-    // refresh, 1,448 candidates on 34,662 DOFs: compliance 12.7 -> 7.3 s, factorisation included; W equal to the
+    // W = (K0⁻¹)_CC, made above, stored in 3 x 3 node blocks, a column of blocks contiguous: a frame reads the blocks
+    // of the candidates its rows touch, 72 contiguous bytes each. (The sample's refresh, 1,448 candidates on 34,662
+    // DOFs: compliance 12.7 -> 7.3 s, factorisation included, by condense instead of 3|C| substitutions; W equal to the
     // substitutions' (the test compares them column by column).)
     const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size()), ncand = static_cast<Eigen::Index>(candidates.size());
     m->Wb.assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
-    std::vector<int> kept;
-    for (int c : candidates)
-        for (int ax = 0; ax < 3; ++ax)
-            if (m->free_index[static_cast<size_t>(3 * c + ax)] >= 0) kept.push_back(3 * c + ax);
-    if (!kept.empty()) {
-        CondenseParams cp;
-        cp.precision = Precision::FLOAT64;
-        cp.residual_columns = 0;  // checked by the tests instead
-        const CondensedData cd = condense(Kt, fixed_dofs, Eigen::Map<const Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), cp);
+    if (!kept.empty() && mf > 0) {
         std::vector<Eigen::Index> slot(static_cast<size_t>(X.rows()), -1);
         for (size_t k = 0; k < candidates.size(); ++k) slot[static_cast<size_t>(candidates[k])] = static_cast<Eigen::Index>(k);
         const Eigen::Index M = cd.size();
@@ -158,7 +175,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
             }
         }
     }
-    compliance_s = sw.lap();
+    compliance_s += sw.lap();
 }
 
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
@@ -226,7 +243,7 @@ Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
             if (const int a = m->free_index[static_cast<size_t>(3 * m->cand[k] + ax)]; a >= 0) rhs[a] += f[static_cast<Eigen::Index>(3 * k) + ax];
     Eigen::VectorXd u = m->u0;
     if (m->nfree == 0) return u;
-    const Eigen::VectorXd du = m->llt.solve(rhs);
+    const Eigen::VectorXd du = m->solve(rhs);
     for (Eigen::Index i = 0; i < u.size(); ++i)
         if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) u[i] += du[a];
     return u;

@@ -437,8 +437,34 @@ std::uint64_t peak_memory_bytes() {
 }
 
 
+struct CondenseFactor::Impl {
+    std::unique_ptr<Cholmod> ch;
+    int n = 0;
+};
+CondenseFactor::CondenseFactor() : m(std::make_unique<Impl>()) {}
+CondenseFactor::~CondenseFactor() = default;
+
+Eigen::VectorXd CondenseFactor::solve(const Eigen::VectorXd& b) const {
+    if (b.size() != m->n) throw InputError("condense factor: a right-hand side of " + std::to_string(b.size()) + " entries, expected " + std::to_string(m->n));
+    Eigen::VectorXd x(m->n);
+    if (m->n == 0) return x;
+    Cholmod& ch = *m->ch;
+    cholmod_dense B{};
+    B.nrow = B.d = static_cast<size_t>(m->n);
+    B.ncol = 1;
+    B.nzmax = static_cast<size_t>(m->n);
+    B.x = const_cast<double*>(b.data());
+    B.xtype = CHOLMOD_REAL;
+    B.dtype = CHOLMOD_DOUBLE;
+    cholmod_dense* X = cholmod_solve(CHOLMOD_A, ch.L, &B, &ch.c);
+    if (!X) throw NumericalError("condense factor: CHOLMOD solve failed: " + g_cholmod_error);
+    std::copy_n(static_cast<const double*>(X->x), m->n, x.data());
+    cholmod_free_dense(&X, &ch.c);
+    return x;
+}
+
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
-                       const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep) {
+                       const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep, std::unique_ptr<CondenseFactor>* factor) {
     validate(p);
     const Stopwatch t_all;
     const Eigen::Index n = K.rows();
@@ -469,7 +495,8 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
     const int nf = static_cast<int>(free_dofs.size()), m = static_cast<int>(kept_free.size());
 
     // Factor of K_ff: the SPARSE route's engine, and both routes' independent residual check.
-    Cholmod ch(p.ordering);
+    auto chp = std::make_unique<Cholmod>(p.ordering);
+    Cholmod& ch = *chp;
     ch.A = lower_csc(K, newidx, nf, &ch.c);
     Stopwatch t0;
     bool triples = nf % 3 == 0;  // every node's three DOFs free together, in order
@@ -586,6 +613,15 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
                        {"residual_columns", static_cast<double>(std::min(p.residual_columns, m))},
                        {"rcond_estimate_K", rcond},
                        {"tile_size", p.tile_size}};
+    if (factor) {
+        factor->reset();
+        if (p.method == CondenseMethod::SPARSE) {
+            cholmod_free_sparse(&ch.A, &ch.c);  // the matrix is not needed for solves
+            *factor = std::make_unique<CondenseFactor>();
+            (*factor)->m->n = nf;
+            (*factor)->m->ch = std::move(chp);
+        }
+    }
     return out;
 }
 

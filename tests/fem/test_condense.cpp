@@ -121,6 +121,42 @@ TEST(Condense, SparseAndDenseRoutesAgree) {
     EXPECT_LT((Ws - Wd).norm() / Wd.norm(), DOUBLE_TOL);
 }
 
+TEST(Condense, TheKeptFactorSolvesTheFreeBlockAndAgreesWithW) {
+    // The factor condense made for W, kept (fem::Linearisation's free step and frames use it): K_ff x = b to rounding,
+    // and x at the kept DOFs for a unit load on one of them is W's column.
+    const Problem p = tube_problem(20, 12);
+    std::unique_ptr<CondenseFactor> factor;
+    const CondensedData cd = condense(p.K, p.fixed, p.kept, params(CondenseMethod::SPARSE, Precision::FLOAT64, 64), null_reporter(), &factor);
+    ASSERT_TRUE(factor);
+    const Eigen::MatrixXd W = dense_in_kept_order(cd, p.kept);
+    std::vector<int> free_index(static_cast<size_t>(p.K.rows()), 0);
+    for (Eigen::Index k = 0; k < p.fixed.size(); ++k) free_index[static_cast<size_t>(p.fixed[k])] = -1;
+    std::vector<int> free_dofs;
+    for (Eigen::Index d = 0; d < p.K.rows(); ++d)
+        if (free_index[static_cast<size_t>(d)] >= 0) {
+            free_index[static_cast<size_t>(d)] = static_cast<int>(free_dofs.size());
+            free_dofs.push_back(static_cast<int>(d));
+        }
+    const Eigen::Index nf = static_cast<Eigen::Index>(free_dofs.size());
+    Eigen::MatrixXd Kff(nf, nf);
+    const Eigen::MatrixXd Kd(p.K);
+    for (Eigen::Index a = 0; a < nf; ++a)
+        for (Eigen::Index b = 0; b < nf; ++b) Kff(a, b) = Kd(free_dofs[static_cast<size_t>(a)], free_dofs[static_cast<size_t>(b)]);
+    const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(nf, -1.0, 2.0);
+    const Eigen::VectorXd x = factor->solve(b);
+    EXPECT_LT((Kff * x - b).norm() / b.norm(), 1e-10);
+    for (Eigen::Index j : {Eigen::Index(0), p.kept.size() / 2}) {
+        Eigen::VectorXd e = Eigen::VectorXd::Zero(nf);
+        e[free_index[static_cast<size_t>(p.kept[j])]] = 1.0;
+        const Eigen::VectorXd col = factor->solve(e);
+        for (Eigen::Index i = 0; i < p.kept.size(); ++i) EXPECT_NEAR(col[free_index[static_cast<size_t>(p.kept[i])]], W(i, j), DOUBLE_TOL * W.norm());
+    }
+    EXPECT_THROW(factor->solve(Eigen::VectorXd::Zero(nf + 1)), InputError);
+    // The dense route keeps none.
+    condense(p.K, p.fixed, p.kept, params(CondenseMethod::DENSE, Precision::FLOAT64, 16), null_reporter(), &factor);
+    EXPECT_FALSE(factor);
+}
+
 TEST(Condense, WorkingRegionIsTheSubBlockOfTheFullW) {
     const Problem p = tube_problem();
     const Eigen::MatrixXd W = dense_in_kept_order(condense(p.K, p.fixed, p.kept, params(CondenseMethod::SPARSE, Precision::FLOAT64)), p.kept);

@@ -63,8 +63,9 @@ public:
     /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
     /// back substitution; none for f = 0 (the free state, kept).
     Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
-    /// Seconds spent: tangent assembly, numeric factorisation (with CHOLMOD's analysis), the compliance (fem::condense:
-    /// its own factorisation, the forward solve and SYRK).
+    /// Seconds spent: tangent assembly, the factorisation (fem::condense's ordering, analysis and numeric factorisation,
+    /// the one factor the free step and the frames' displacements use too), the compliance (condense's forward solve and
+    /// SYRK, the free step, W's blocks).
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
     /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
     /// projected onto positive semidefinite ones (factorise_s counts both factorisations).

@@ -4,6 +4,7 @@
 /// Static condensation of the stiffness onto the simulated surface DOFs: W = (K⁻¹)_MM, the compliance
 /// seen from M (equal to the inverse of the Schur complement of K onto M). Always computed in double.
 #include <cstdint>
+#include <memory>
 #include <string>
 
 #include <Eigen/Core>
@@ -50,6 +51,20 @@ inline const opt::Spec<CondenseParams>& condense_numeric_spec() {
 /// @throws InputError naming the field
 inline void validate(const CondenseParams& p) { condense_numeric_spec().validate(p); }
 
+/// The factor of K's free block (CHOLMOD supernodal L Lᵀ with the condensation's ordering) that condense made for W, kept
+/// for solves with that block: fem::Linearisation's free step and frame displacements, without factorising K again.
+class CondenseFactor {
+public:
+    CondenseFactor();
+    ~CondenseFactor();
+    CondenseFactor(const CondenseFactor&) = delete;
+    CondenseFactor& operator=(const CondenseFactor&) = delete;
+    /// K_ff⁻¹ b, b on the free DOFs (those not fixed, in increasing order). One caller at a time (CHOLMOD's workspace).
+    Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
+    struct Impl;
+    std::unique_ptr<Impl> m;
+};
+
 /// Condenses K onto the kept DOFs.
 /// @param[in] K           3#N×3#N stiffness [N/mm], both triangles (as assemble_stiffness returns); the SPARSE
 ///                        method reads only the upper triangle (entries j ≥ i of row i), so K stored upper-only serves too
@@ -61,8 +76,10 @@ inline void validate(const CondenseParams& p) { condense_numeric_spec().validate
 ///         say which DOF each row is.
 /// @throws InputError bad DOF sets, or a predicted peak memory beyond the limit (with the figures);
 ///         NumericalError K is not positive definite once the fixed DOFs are removed
+/// @param[out] factor     if not null, the factor of K_ff kept for solves (SPARSE method only; null with DENSE)
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
-                       const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep = null_reporter());
+                       const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep = null_reporter(),
+                       std::unique_ptr<CondenseFactor>* factor = nullptr);
 
 /// MemAvailable of /proc/meminfo [bytes] (0 if unknown).
 std::uint64_t available_memory_bytes();
