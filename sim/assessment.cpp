@@ -132,7 +132,8 @@ public:
             const double len = m_vn.row(v).norm();
             if (len > 0) m_vn.row(v) /= len;
         }
-        // Cells of 1 mm (the balls' boxes are a few mm wide: finer cells cost more lookups than they save tests).
+        // Cells of 1 mm: a width's searches reach across the lumen (a ball's diameter, 0.1-4 mm): finer cells cost more
+        // lookups than they save tests.
         m_grid.build(m_C, std::max(1.0, 2 * m_reach));
     }
 

@@ -466,6 +466,7 @@ Eigen::VectorXd CondenseFactor::solve(const Eigen::VectorXd& b) const {
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
                        const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep, std::unique_ptr<CondenseFactor>* factor) {
     validate(p);
+    if (factor) factor->reset();  // none unless this condensation succeeds
     const Stopwatch t_all;
     const Eigen::Index n = K.rows();
     if (K.cols() != n) throw InputError("condense: K is not square");
@@ -613,14 +614,11 @@ CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, co
                        {"residual_columns", static_cast<double>(std::min(p.residual_columns, m))},
                        {"rcond_estimate_K", rcond},
                        {"tile_size", p.tile_size}};
-    if (factor) {
-        factor->reset();
-        if (p.method == CondenseMethod::SPARSE) {
-            cholmod_free_sparse(&ch.A, &ch.c);  // the matrix is not needed for solves
-            *factor = std::make_unique<CondenseFactor>();
-            (*factor)->m->n = nf;
-            (*factor)->m->ch = std::move(chp);
-        }
+    if (factor && p.method == CondenseMethod::SPARSE) {
+        cholmod_free_sparse(&ch.A, &ch.c);  // the matrix is not needed for solves
+        *factor = std::make_unique<CondenseFactor>();
+        (*factor)->m->n = nf;
+        (*factor)->m->ch = std::move(chp);
     }
     return out;
 }
