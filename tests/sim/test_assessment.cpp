@@ -2,6 +2,7 @@
 // Neck occlusion on scenes with known answers: a tube whose ring at z = 0 is the neck line, flattened by an
 // exact "pinch" map (the wall's mid-surface becomes a stadium of half-height g/2 + t/2, so the lumen gap in the
 // flat part is exactly g), across the neck and beside it.
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <tuple>
@@ -11,6 +12,7 @@
 
 #include "aneu/core/error.hpp"
 #include "aneu/sim/assessment.hpp"
+#include "aneu/sim/shapes.hpp"
 
 using namespace aneu::sim;
 
@@ -454,4 +456,30 @@ TEST(ParentChannel, AnOpenParentKeepsItsDiameterAPinchNarrowsItToItsGap) {
     EXPECT_EQ(none.ends, 0);
     EXPECT_TRUE(std::isnan(none.narrowing));
     EXPECT_TRUE(std::isnan(parent_channel(s, s.X, -1).narrowing));
+}
+
+TEST(PointGrid, EveryQueryIsTheBoxsPointsWhateverTheBoxsSizeAgainstTheCells) {
+    // Points on a 10 × 10 × 10 lattice, 0.3 mm apart, half of them kept; boxes from fewer cells than points to far more
+    // cells than points (where the query scans the points instead of the cells): the same points as a brute-force filter, sorted.
+    Eigen::MatrixX3d X(1000, 3);
+    std::vector<char> keep(1000, 0);
+    for (int i = 0; i < 1000; ++i) {
+        X.row(i) << 0.3 * (i % 10), 0.3 * (i / 10 % 10), 0.3 * (i / 100);
+        keep[static_cast<size_t>(i)] = i % 2;
+    }
+    PointGrid g;
+    g.build(X, 0.05, &keep);
+    for (const double half : {0.11, 0.7, 5.0}) {  // 125 cells (fewer than the 500 points), 29³, 201³
+        const Eigen::Vector3d c(1.5, 1.5, 0.9), h = Eigen::Vector3d::Constant(half);  // point 355, kept
+        std::vector<int> got, unsorted, want;
+        g.query(Aabb{c - h, c + h}, got);
+        g.query(Aabb{c - h, c + h}, unsorted, false);
+        for (int i = 0; i < 1000; ++i)
+            if (keep[static_cast<size_t>(i)] && ((X.row(i).transpose() - c).cwiseAbs().array() <= half).all()) want.push_back(i);
+        EXPECT_EQ(got, want) << half;
+        std::sort(unsorted.begin(), unsorted.end());
+        unsorted.erase(std::unique(unsorted.begin(), unsorted.end()), unsorted.end());
+        EXPECT_EQ(unsorted, want) << half;
+        EXPECT_FALSE(want.empty());
+    }
 }
