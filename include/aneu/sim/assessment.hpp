@@ -115,7 +115,7 @@ struct ParentChannel {
     int ends = 0;        ///< pieces of the parent's lumen at least `end_mm` from the neck line at rest (its inflow and outflows)
     /// Of the pairs of ends, the one narrowed most: the widest channel between them (the diameter of the largest ball that
     /// passes, as NeckChannel's) at rest and deformed, and 1 − deformed / rest (0: as wide as at rest; 1: closed).
-    /// NaN with fewer than two ends.
+    /// Negative where that passage widened. NaN with fewer than two ends.
     double rest_mm = std::numeric_limits<double>::quiet_NaN();
     double width_mm = std::numeric_limits<double>::quiet_NaN();
     double narrowing = std::numeric_limits<double>::quiet_NaN();
