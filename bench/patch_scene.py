@@ -16,6 +16,10 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
                     a wider blade keeps between its jaws as they close)
   --jaw-length-mm L  the planned clip's blades L mm long, the hinge where it was (an experiment: tips that stop
                     before the thick tissue past the neck's far fold, against the planner's shortest blade passing it)
+  --hinge-back-mm H  the hinge H mm further back along the blades' axis and the blades H mm longer, so that their
+                    planned part (the same place, the same length) closes nearly parallel; the opening scaled so that
+                    the gap at that part's middle is the plan's, the spring scaled so that its force there is the
+                    plan's (an experiment: whether blades that meet the neck parallel seal it; no clip is made so)
   --blade-friction M  model.blade_friction (the blades' Coulomb friction on the tissue; the default is 0.3): an
                     experiment on how much of the neck line the grip holds between the jaws
   --hold            the applier holds the clip closed to the scene's end (the keyframes after the one that closes it
@@ -41,6 +45,7 @@ ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
 ap.add_argument("--jaw-width-mm", type=float, default=0.0)
 ap.add_argument("--jaw-length-mm", type=float, default=0.0)
+ap.add_argument("--hinge-back-mm", type=float, default=0.0)
 ap.add_argument("--blade-friction", type=float, default=-1.0)
 ap.add_argument("--hold", action="store_true")
 a = ap.parse_args()
@@ -70,6 +75,32 @@ if a.jaw_width_mm > 0:
 if a.jaw_length_mm > 0:
     for m in s["clip_models"].values():
         m["jaw_length_mm"] = a.jaw_length_mm
+if a.hinge_back_mm > 0:
+    import math
+    H = a.hinge_back_mm
+    k0 = s["instruments"][0]["keyframes"][0]
+    ax = k0["axis"]
+    nrm = math.sqrt(sum(v * v for v in ax))
+    ax = [v / nrm for v in ax]
+    for m in s["clip_models"].values():
+        L = m["jaw_length_mm"]
+        rm_old, rm_new = L / 2, H + L / 2  # the planned part's middle from the old and the new hinge
+        theta_max = math.radians(m["max_opening_deg"])
+        m["jaw_length_mm"] = L + H
+        # the opening whose gap at the planned part's middle is the planned opening's there
+        scale_open = lambda deg: math.degrees(2 * math.asin(min(1.0, rm_old * math.sin(math.radians(deg) / 2) / rm_new)))
+        sp = m["spring"]
+        # F = tau / r: the label point moves from 2/3 L to 2/3 (L + H); the torque that gives the plan's force at the
+        # planned part's middle is tau_old * rm_new / rm_old, read at the new label point
+        f = (rm_new / rm_old) * (2 * L / 3) / (2 * (L + H) / 3)
+        sp["label_force_n"] = round(sp["label_force_n"] * f, 4)
+        sp["open_force_n"] = round(sp["open_force_n"] * f, 4)
+        sp["source"] = "experiment: hinge %g mm further back, the forces at the planned blades' middle kept (%s)" % (H, sp.get("source", ""))
+    for k in s["instruments"][0]["keyframes"]:
+        if "position" in k:
+            k["position"] = [round(p - H * q, 4) for p, q in zip(k["position"], ax)]
+        if "opening_deg" in k:
+            k["opening_deg"] = round(scale_open(k["opening_deg"]), 4)
 if a.shift_mm != 0:
     import re
     m = re.search(r"normal towards the sac \(([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\)", raw)

@@ -670,10 +670,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's\n",
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
+                                     " (%.0f free DOFs, %.0f kept, nnz(L) %.3g, factor %.3g GFLOP, W %.3g GFLOP at %.1f GFLOP/s)\n",
                                      fr.t, C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,
                                      C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
-                                     C->lin->free_step);
+                                     C->lin->free_step, C->lin->free_dofs, C->lin->kept_dofs, C->lin->nnz_L, C->lin->factor_flops / 1e9,
+                                     C->lin->w_flops / 1e9, C->lin->w_gflops_per_s);
                 } catch (const NumericalError&) {
                     // An element the frames took past inversion: this state cannot be linearised. The frames go on
                     // with the last linearisation (a first one that fails ends the run).

@@ -98,8 +98,15 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
             } catch (const NumericalError&) {
                 return false;
             }
-            for (const auto& [k, v] : cd.diagnostics)
+            for (const auto& [k, v] : cd.diagnostics) {
                 if (k == "w_s") w_s = v;
+                if (k == "n_free_dofs") free_dofs = v;
+                if (k == "n_kept_dofs") kept_dofs = v;
+                if (k == "nnz_L") nnz_L = v;
+                if (k == "factor_flops") factor_flops = v;
+                if (k == "w_flops") w_flops = v;
+                if (k == "w_gflops_per_s") w_gflops_per_s = v;
+            }
             return true;
         }
         m->llt.cholmod().print = 0;

@@ -67,6 +67,9 @@ public:
     /// the one factor the free step and the frames' displacements use too), the compliance (condense's forward solve and
     /// SYRK, the free step, W's blocks).
     double tangent_s = 0, factorise_s = 0, compliance_s = 0;
+    /// The last condensation's sizes and work: free DOFs, kept DOFs (3 per candidate), nnz(L), the factorisation's and
+    /// W's floating-point operations and W's rate [GFLOP/s] (fem::condense's diagnostics; zeros without candidates).
+    double free_dofs = 0, kept_dofs = 0, nnz_L = 0, factor_flops = 0, w_flops = 0, w_gflops_per_s = 0;
     /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
     /// projected onto positive semidefinite ones (factorise_s counts both factorisations).
     bool projected = false;
