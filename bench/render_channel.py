@@ -3,12 +3,14 @@
 # joining the sac to the parent (black), and the closed clip's blades (blue: the hinge line and the jaws' two edges),
 # seen along the clip's closing and down its jaws. The OBJ is what `ANEU_LUMEN_OBJ=F aneusim run ...` writes (widths
 # and channel as comments). System python3 with python3-vtk9 (bench only):
-#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG
+#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG [FROM_MM]
+# FROM_MM: draw the blades from this distance from the hinge (a hinge set far back: patch_scene.py --hinge-back-mm).
 # HINGE, AXIS (along the jaws) and CLOSING (the scene's "up": the direction the jaws close across) as x,y,z.
 import math, sys, vtk
 obj, out, title = sys.argv[1], sys.argv[2], sys.argv[3]
 hinge = [float(x) for x in sys.argv[4].split(",")]; axis = [float(x) for x in sys.argv[5].split(",")]; up = [float(x) for x in sys.argv[6].split(",")]
 length, theta_deg = float(sys.argv[7]), float(sys.argv[8])
+start = float(sys.argv[9]) if len(sys.argv) > 9 else 0.0  # the blades drawn from this far from the hinge (a hinge set far back)
 widths = obj
 r = vtk.vtkOBJReader(); r.SetFileName(obj); r.Update()
 pd = r.GetOutput()
@@ -34,19 +36,20 @@ for vi, (d, vu) in enumerate([(up, axis), ([-a for a in axis], up)]):
     for s in (1, -1):
         half = 0.5 * theta_deg * math.pi / 180
         t = [math.cos(half) * axis[i] + s * math.sin(half) * up[i] for i in range(3)]
-        line = vtk.vtkLineSource(); line.SetPoint1(*hinge); line.SetPoint2(*[hinge[i] + length * t[i] for i in range(3)])
+        line = vtk.vtkLineSource(); line.SetPoint1(*[hinge[i] + start * t[i] for i in range(3)]); line.SetPoint2(*[hinge[i] + length * t[i] for i in range(3)])
         tube = vtk.vtkTubeFilter(); tube.SetInputConnection(line.GetOutputPort()); tube.SetRadius(0.06); tube.SetNumberOfSides(8)
         bm = vtk.vtkPolyDataMapper(); bm.SetInputConnection(tube.GetOutputPort())
         ba = vtk.vtkActor(); ba.SetMapper(bm); ba.GetProperty().SetColor(0.2, 0.2, 0.9); ren.AddActor(ba)
         for e in (0.5, -0.5):
             l2 = vtk.vtkLineSource(); p0 = [hinge[i] + e * side[i] for i in range(3)]
-            l2.SetPoint1(*p0); l2.SetPoint2(*[p0[i] + length * t[i] for i in range(3)])
+            l2.SetPoint1(*[p0[i] + start * t[i] for i in range(3)]); l2.SetPoint2(*[p0[i] + length * t[i] for i in range(3)])
             m2 = vtk.vtkPolyDataMapper(); m2.SetInputConnection(l2.GetOutputPort())
             a2 = vtk.vtkActor(); a2.SetMapper(m2); a2.GetProperty().SetColor(0.2, 0.2, 0.9); a2.GetProperty().SetLineWidth(2); ren.AddActor(a2)
     sph = vtk.vtkSphereSource(); sph.SetCenter(*cx); sph.SetRadius(0.15); sm = vtk.vtkPolyDataMapper(); sm.SetInputConnection(sph.GetOutputPort())
     sa = vtk.vtkActor(); sa.SetMapper(sm); sa.GetProperty().SetColor(0.0, 0.0, 0.0); ren.AddActor(sa)
     cam = ren.GetActiveCamera(); cam.SetFocalPoint(*cx); cam.SetPosition(*[cx[i] + 30 * d[i] for i in range(3)]); cam.SetViewUp(*vu); cam.SetViewAngle(30)
-    if vi == 0: cam.SetFocalPoint(*[hinge[i] + 0.6 * length * axis[i] for i in range(3)]); cam.SetPosition(*[hinge[i] + 0.6 * length * axis[i] + 30 * d[i] for i in range(3)])
+    mid = start + 0.6 * (length - start)
+    if vi == 0: cam.SetFocalPoint(*[hinge[i] + mid * axis[i] for i in range(3)]); cam.SetPosition(*[hinge[i] + mid * axis[i] + 30 * d[i] for i in range(3)])
     txt = vtk.vtkTextActor(); txt.SetInput("%s: widest sac-parent channel %.3f mm (black)%s" % (title, chan[0], " - along the closing" if vi == 0 else " - down the jaws"))
     txt.GetTextProperty().SetColor(0, 0, 0); txt.GetTextProperty().SetFontSize(14); ren.AddActor2D(txt)
     if vi == 1:
