@@ -4,6 +4,7 @@
 # interpenetration), the parent's narrowing, the forces against the clip model's range, and the patch frames' cost.
 #   python3 bench/patch_case_summary.py RUN_DIR SECONDS SPRING_SCALE     -> the line
 #   python3 bench/patch_case_summary.py RUN_DIR --render-args            -> render_channel.py's arguments after OUT.png
+#                                                                        (title, pose, length, opening, blades' start, width)
 import json, math, os, sys
 
 run = sys.argv[1]
@@ -25,8 +26,11 @@ case = os.path.basename(os.path.dirname(os.path.abspath(scene["bundle"])))
 if sys.argv[2] == "--render-args":
     f = lambda v: ",".join("%.5f" % x for x in v)
     title = "%s: %s, %.2f deg" % (case, model_name, clip.get("opening_deg", float("nan")))
-    print("'%s' %s %s %s %g %.4f" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), model["jaw_length_mm"],
-                                    clip.get("opening_deg", 0.0)))
+    import re
+    # bench/patch_scene.py --hinge-back-mm says so in the spring's source: the blades are drawn from there
+    back = re.search(r"hinge ([0-9.]+) mm further back", model.get("spring", {}).get("source", ""))
+    print("'%s' %s %s %s %g %.4f %g %g" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), model["jaw_length_mm"],
+                                          clip.get("opening_deg", 0.0), float(back.group(1)) if back else 0.0, model.get("jaw_width_mm", 1.0)))
     sys.exit(0)
 secs, scale = int(sys.argv[2]), float(sys.argv[3])
 header = [l for l in open(os.path.join(run, "plan.json")) if l.startswith("//")]

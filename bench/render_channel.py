@@ -3,14 +3,16 @@
 # joining the sac to the parent (black), and the closed clip's blades (blue: the hinge line and the jaws' two edges),
 # seen along the clip's closing and down its jaws. The OBJ is what `ANEU_LUMEN_OBJ=F aneusim run ...` writes (widths
 # and channel as comments). System python3 with python3-vtk9 (bench only):
-#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG [FROM_MM]
-# FROM_MM: draw the blades from this distance from the hinge (a hinge set far back: patch_scene.py --hinge-back-mm).
+#   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG [FROM_MM [WIDTH_MM]]
+# FROM_MM: draw the blades from this distance from the hinge (a hinge set far back: patch_scene.py --hinge-back-mm);
+# WIDTH_MM: the jaws' width (their edge lines' spacing) [1]. patch_case_summary.py --render-args gives all of them.
 # HINGE, AXIS (along the jaws) and CLOSING (the scene's "up": the direction the jaws close across) as x,y,z.
 import math, sys, vtk
 obj, out, title = sys.argv[1], sys.argv[2], sys.argv[3]
 hinge = [float(x) for x in sys.argv[4].split(",")]; axis = [float(x) for x in sys.argv[5].split(",")]; up = [float(x) for x in sys.argv[6].split(",")]
 length, theta_deg = float(sys.argv[7]), float(sys.argv[8])
 start = float(sys.argv[9]) if len(sys.argv) > 9 else 0.0  # the blades drawn from this far from the hinge (a hinge set far back)
+jaw_w = float(sys.argv[10]) if len(sys.argv) > 10 else 1.0  # the jaws' width: their edges drawn that far apart
 widths = obj
 r = vtk.vtkOBJReader(); r.SetFileName(obj); r.Update()
 pd = r.GetOutput()
@@ -40,7 +42,7 @@ for vi, (d, vu) in enumerate([(up, axis), ([-a for a in axis], up)]):
         tube = vtk.vtkTubeFilter(); tube.SetInputConnection(line.GetOutputPort()); tube.SetRadius(0.06); tube.SetNumberOfSides(8)
         bm = vtk.vtkPolyDataMapper(); bm.SetInputConnection(tube.GetOutputPort())
         ba = vtk.vtkActor(); ba.SetMapper(bm); ba.GetProperty().SetColor(0.2, 0.2, 0.9); ren.AddActor(ba)
-        for e in (0.5, -0.5):
+        for e in (0.5 * jaw_w, -0.5 * jaw_w):
             l2 = vtk.vtkLineSource(); p0 = [hinge[i] + e * side[i] for i in range(3)]
             l2.SetPoint1(*[p0[i] + start * t[i] for i in range(3)]); l2.SetPoint2(*[p0[i] + length * t[i] for i in range(3)])
             m2 = vtk.vtkPolyDataMapper(); m2.SetInputConnection(l2.GetOutputPort())
