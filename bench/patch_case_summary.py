@@ -28,9 +28,12 @@ if sys.argv[2] == "--render-args":
     title = "%s: %s, %.2f deg" % (case, model_name, clip.get("opening_deg", float("nan")))
     import re
     # bench/patch_scene.py --hinge-back-mm says so in the spring's source: the blades are drawn from there
+    # (a clip model's fulcrum_mm: the blades from there; session 41's first scenes made the blades longer instead)
     back = re.search(r"hinge ([0-9.]+) mm further back", model.get("spring", {}).get("source", ""))
-    print("'%s' %s %s %s %g %.4f %g %g" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), model["jaw_length_mm"],
-                                          clip.get("opening_deg", 0.0), float(back.group(1)) if back else 0.0, model.get("jaw_width_mm", 1.0)))
+    start = model.get("fulcrum_mm", float(back.group(1)) if back else 0.0)
+    length = model["jaw_length_mm"] + model.get("fulcrum_mm", 0.0)
+    print("'%s' %s %s %s %g %.4f %g %g" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), length,
+                                          clip.get("opening_deg", 0.0), start, model.get("jaw_width_mm", 1.0)))
     sys.exit(0)
 secs, scale = int(sys.argv[2]), float(sys.argv[3])
 header = [l for l in open(os.path.join(run, "plan.json")) if l.startswith("//")]

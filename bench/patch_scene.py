@@ -16,10 +16,10 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
                     a wider blade keeps between its jaws as they close)
   --jaw-length-mm L  the planned clip's blades L mm long, the hinge where it was (an experiment: tips that stop
                     before the thick tissue past the neck's far fold, against the planner's shortest blade passing it)
-  --hinge-back-mm H  the hinge H mm further back along the blades' axis and the blades H mm longer, so that their
-                    planned part (the same place, the same length) closes nearly parallel; the opening scaled so that
-                    the gap at that part's middle is the plan's, the spring scaled so that its force there is the
-                    plan's (an experiment: whether blades that meet the neck parallel seal it; no clip is made so)
+  --hinge-back-mm H  the clip model's fulcrum H mm behind its blades' heel (fulcrum_mm; the applier's pose moved H mm
+                    back to it), so that the blades, where the plan put them, close nearly parallel; the opening scaled
+                    so that the gap at the blades' middle is the plan's, the spring so that its force there is the
+                    plan's (an experiment: the planner does not plan for a fulcrum yet)
   --blade-friction M  model.blade_friction (the blades' Coulomb friction on the tissue; the default is 0.3): an
                     experiment on how much of the neck line the grip holds between the jaws
   --hold            the applier holds the clip closed to the scene's end (the keyframes after the one that closes it
@@ -84,15 +84,14 @@ if a.hinge_back_mm > 0:
     ax = [v / nrm for v in ax]
     for m in s["clip_models"].values():
         L = m["jaw_length_mm"]
-        rm_old, rm_new = L / 2, H + L / 2  # the planned part's middle from the old and the new hinge
-        theta_max = math.radians(m["max_opening_deg"])
-        m["jaw_length_mm"] = L + H
-        # the opening whose gap at the planned part's middle is the planned opening's there
+        rm_old, rm_new = L / 2, H + L / 2  # the blade's middle from the heel and from the fulcrum
+        m["fulcrum_mm"] = H  # the clip model's fulcrum behind the heel (docs/scene_format.md); the pose is the fulcrum's
+        # the opening whose gap at the blade's middle is the planned opening's there
         scale_open = lambda deg: math.degrees(2 * math.asin(min(1.0, rm_old * math.sin(math.radians(deg) / 2) / rm_new)))
         sp = m["spring"]
-        # F = tau / r: the label point moves from 2/3 L to 2/3 (L + H); the torque that gives the plan's force at the
-        # planned part's middle is tau_old * rm_new / rm_old, read at the new label point
-        f = (rm_new / rm_old) * (2 * L / 3) / (2 * (L + H) / 3)
+        # F = tau / r: the label point moves from 2/3 L to H + 2/3 L from where the blades turn; the torque that gives
+        # the plan's force at the blade's middle is tau_old * rm_new / rm_old, read at the new label point
+        f = (rm_new / rm_old) * (2 * L / 3) / (H + 2 * L / 3)
         sp["label_force_n"] = round(sp["label_force_n"] * f, 4)
         sp["open_force_n"] = round(sp["open_force_n"] * f, 4)
         sp["source"] = "experiment: hinge %g mm further back, the forces at the planned blades' middle kept (%s)" % (H, sp.get("source", ""))

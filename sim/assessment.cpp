@@ -687,7 +687,7 @@ Assessment Simulator::Impl::assess() {
         for (const Clip& c : clips)
             if (!c.model.empty() && scene.clip_models.count(c.model)) {
                 const ClipModel& cm = scene.clip_models.at(c.model);
-                jaws.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.jaw_length_mm, cm.jaw_width_mm});
+                jaws.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.reach_mm(), cm.jaw_width_mm});
             }
         std::tie(out.neck_in_jaws_fraction, out.neck_beside_jaws_mm) = neck_in_jaws(occ.points, jaws);
     }
@@ -706,7 +706,7 @@ Assessment Simulator::Impl::assess() {
         for (const Clip& c : clips)
             if (!c.model.empty() && c.opening_deg <= 1.0) {
                 const ClipModel& cm = scene.clip_models.at(c.model);
-                closed.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.jaw_length_mm, cm.jaw_width_mm,
+                closed.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.reach_mm(), cm.jaw_width_mm,
                                   scene.neck_tolerance_mm, 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm});
             }
         const double f = neck_in_jaws(loops, closed).first;

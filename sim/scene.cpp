@@ -126,11 +126,14 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
     c.jaw_thickness_mm = o.num("jaw_thickness_mm", c.jaw_thickness_mm, 0.05, 20);
     c.closed_gap_mm = o.num("closed_gap_mm", c.closed_gap_mm, 0, 20);
     c.max_opening_deg = o.num("max_opening_deg", c.max_opening_deg, 0, 120);
+    c.fulcrum_mm = o.num("fulcrum_mm", c.fulcrum_mm, 0, 100);
+    if (c.reach_mm() > 100) o.fail("\"fulcrum_mm\" + \"jaw_length_mm\" = " + std::to_string(c.reach_mm()) + ", expected at most 100 mm");
     const std::string mesh = o.str("jaw_mesh", "");
     if (!mesh.empty()) {
         c.mesh_file = resolve(dir, mesh);
         c.jaw_mesh = read_trimesh(c.mesh_file);
     }
+    if (c.jaw_mesh && c.fulcrum_mm > 0) o.fail("\"fulcrum_mm\" = " + std::to_string(c.fulcrum_mm) + " with a jaw_mesh: expected 0 (a mesh jaw is drawn from its own hinge)");
     if (o.has("spring")) {
         Obj sp(o.at("spring"), o.where() + ".spring", o.file());
         c.label_force_n = sp.num("label_force_n", 0, 1e-3, 100, true);
@@ -140,8 +143,9 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
         sp.done();
     }
     if (c.label_force_n > 0) {  // (again, when a scene overrides a clip file's blade)
-        // ISO 9713: the label force is measured at 1 mm opening a third of the blade from its tip.
-        const double r = 2.0 * c.jaw_length_mm / 3.0;
+        // ISO 9713: the label force is measured at 1 mm opening a third of the blade from its tip (from the fulcrum:
+        // fulcrum_mm + 2/3 of the blade).
+        const double r = c.fulcrum_mm + 2.0 * c.jaw_length_mm / 3.0;
         try {
             c.spring = fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, c.closed_gap_mm), c.label_force_n,
                                                    c.max_opening_deg * DEG, c.open_force_n);

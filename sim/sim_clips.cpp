@@ -39,8 +39,8 @@ std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening
             sh.axes.col(0) = d;
             sh.axes.col(1) = c;
             sh.axes.col(2) = s * e;
-            sh.half = Eigen::Vector3d(0.5 * m.jaw_length_mm, 0.5 * m.jaw_width_mm, 0.5 * m.jaw_thickness_mm);
-            sh.centre = base + 0.5 * m.jaw_length_mm * d + s * 0.5 * m.jaw_thickness_mm * e;
+            sh.half = Eigen::Vector3d(0.5 * m.reach_mm(), 0.5 * m.jaw_width_mm, 0.5 * m.jaw_thickness_mm);
+            sh.centre = base + 0.5 * m.reach_mm() * d + s * 0.5 * m.jaw_thickness_mm * e;
         }
     }
     return jaws;

@@ -841,8 +841,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // changes the tissue's moment at the same opening, and the secant step on that jump overshoots (the sample's
             // clip refreshed every 10 frames went 3.47 -> 1.73 deg in one frame, a 6.4 N grip and walls 0.31 mm through
             // each other, then back to 3.1 deg).
+            // The cap is the blade's travel at its middle that 125°/s gives a clip turning at its heel; a clip whose
+            // fulcrum lies behind the heel (ClipModel::fulcrum_mm) turns proportionally less (20 mm behind a 13 mm
+            // blade's heel, 0.5° a frame would be 0.23 mm of travel at the blade's middle instead of 0.06 mm).
             if (compliance && loads.contacts[0] + loads.contacts[1] > 0) {
-                const double cap = 125.0 * DEG / scene.physics_hz;
+                const double cap = 125.0 * DEG / scene.physics_hz * (0.5 * cm.jaw_length_mm) / (cm.fulcrum_mm + 0.5 * cm.jaw_length_mm);
                 P.course.theta_bal = std::clamp(P.course.theta_bal, th - cap, th + cap);
             }
         }

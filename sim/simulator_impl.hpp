@@ -34,7 +34,7 @@ inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
     b.hinge = c.pose.position;
     b.axis = c.pose.axis;
     b.up = c.pose.up;
-    b.length_mm = cm.jaw_length_mm;
+    b.length_mm = cm.reach_mm();  // from the fulcrum (the arms and box behind the heel taken as blade)
     b.width_mm = cm.jaw_width_mm;
     b.thickness_mm = cm.jaw_thickness_mm;
     b.closed_gap_mm = cm.closed_gap_mm;

@@ -606,6 +606,44 @@ TEST(ClipFiles, ShippedClipModelsReadWithTheirLabelForce) {
     ASSERT_TRUE(c.spring);
 }
 
+TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
+    // A clip model whose blades turn about a fulcrum 20 mm behind their heel (ClipModel::fulcrum_mm): its jaws reach
+    // 20 + 9 mm from the pose's position, and its spring gives its label force at the ISO 9713 point measured from the
+    // fulcrum (1 mm opening at 20 + 6 mm), not at 6 mm. Refused: a negative fulcrum, one with a mesh jaw, a reach
+    // beyond 100 mm (each one line naming the key).
+    test::TempDir d("fulcrum");
+    json j = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
+    j["clip_models"]["straight"] = {{"file", std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_9mm.json"}, {"fulcrum_mm", 20.0}};
+    put(d.file("s.json"), j.dump());
+    const sim::Scene sc = sim::read_scene(d.file("s.json"));
+    const sim::ClipModel& c = sc.clip_models.at("straight");
+    EXPECT_DOUBLE_EQ(c.fulcrum_mm, 20.0);
+    EXPECT_DOUBLE_EQ(c.reach_mm(), 29.0);
+    ASSERT_TRUE(c.spring);
+    const double r = 20.0 + 6.0;
+    EXPECT_NEAR(c.spring->force_at(r, 2 * std::asin(0.5 / r)), 1.5, 1e-9);
+    EXPECT_NEAR(c.spring->force_at(r, c.max_opening_deg * M_PI / 180), 2.5, 1e-9);
+    // The same clip turning at its heel holds it 6 mm out: about the fulcrum it takes 26/6 the torque there.
+    const sim::ClipModel heel = sim::read_clip_file(std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_9mm.json");
+    EXPECT_NEAR(c.spring->torque(2 * std::asin(0.5 / r)) / heel.spring->torque(2 * std::asin(0.5 / 6.0)), 26.0 / 6.0, 1e-9);
+    auto refused = [&](const json& model, const std::string& says) {
+        json k = j;
+        k["clip_models"]["straight"] = model;
+        put(d.file("bad.json"), k.dump());
+        try {
+            sim::read_scene(d.file("bad.json"));
+            ADD_FAILURE() << "accepted " << model.dump();
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+        }
+    };
+    refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", -1.0}}, "fulcrum_mm");
+    refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", 95.0}}, "expected at most 100 mm");
+    const std::string stl = d.file("jaw.stl");
+    put(stl, "solid j\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid j\n");
+    refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", 5.0}, {"jaw_mesh", stl}}, "with a jaw_mesh");
+}
+
 TEST(Simulator, AFastClosingJawKeepsTheWallBetweenTheJaws) {
     // A clip across the whole tube (hinge 6 mm off its axis, 8 mm jaws along −x, opening along y) snaps shut from
     // 60° in 3 physics frames: the jaws cross the tube's wall at up to 1.3 mm a frame, more than their 0.5 mm

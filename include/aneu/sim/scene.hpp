@@ -38,6 +38,15 @@ struct ClipModel {
     double jaw_thickness_mm = 0.5;
     double closed_gap_mm = 0.0;     ///< gap between the jaws' inner faces when closed
     double max_opening_deg = 40.0;
+    /// How far behind the blades' heel they turn [mm] (0: at the heel). A coil-spring clip's blades open and close
+    /// about the base end of its coil as a fulcrum (US patent 5,634,932, background), behind the heel by the coil, the
+    /// arms and the box, so its blades close more nearly parallel than a hinge at the heel would let them. The pose's
+    /// position is the fulcrum; the clip's arms and box between it and the heel are taken as blade (the jaws reach
+    /// fulcrum_mm + jaw_length_mm from it: reach_mm()); the spring's label point lies 2/3 of the blade from the heel's
+    /// side, fulcrum_mm + 2/3 jaw_length_mm from the fulcrum. A box jaw only (not with jaw_mesh).
+    double fulcrum_mm = 0.0;
+    /// The jaws' length from the fulcrum: fulcrum_mm + jaw_length_mm.
+    double reach_mm() const { return fulcrum_mm + jaw_length_mm; }
     std::string mesh_file;          ///< set: the jaw is this mesh instead of a box
     std::optional<TriMesh> jaw_mesh;
     /// The closing spring (configs/clips/README.md): the applier can only hold the clip open; below what it
