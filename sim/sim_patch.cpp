@@ -448,7 +448,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // pattern and analysis, 47 s a factorisation, none of it interruptible). The patch then lags the applier
         // and catches up frame by frame. (The deterministic timeline moves the applier by a frame's worth only.)
         constexpr double REALTIME_STEP_DEG = 1.0;
-        const double step_max = fr.mx ? std::min(P.course.theta_step, REALTIME_STEP_DEG * DEG) : P.course.theta_step;
+        const double step_max = fr.mx ? std::min(P.course.theta_step, REALTIME_STEP_DEG * DEG * cm.turn_per_heel_turn()) : P.course.theta_step;
         const double theta_kept = P.v[nb] + std::clamp(theta_wanted - P.v[nb], -step_max, step_max);
         if (P.v_ok.size() != P.v.size()) {  // a new patch: its start is its last converged state
             P.v_ok = P.v;
@@ -843,9 +843,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // each other, then back to 3.1 deg).
             // The cap is the blade's travel at its middle that 125°/s gives a clip turning at its heel; a clip whose
             // fulcrum lies behind the heel (ClipModel::fulcrum_mm) turns proportionally less (20 mm behind a 13 mm
-            // blade's heel, 0.5° a frame would be 0.23 mm of travel at the blade's middle instead of 0.06 mm).
+            // blade's heel, 0.5° a frame would be 0.23 mm of travel at the blade's middle instead of 0.06 mm). So is
+            // the real-time mode's step above.
             if (compliance && loads.contacts[0] + loads.contacts[1] > 0) {
-                const double cap = 125.0 * DEG / scene.physics_hz * (0.5 * cm.jaw_length_mm) / (cm.fulcrum_mm + 0.5 * cm.jaw_length_mm);
+                const double cap = 125.0 * DEG / scene.physics_hz * cm.turn_per_heel_turn();
                 P.course.theta_bal = std::clamp(P.course.theta_bal, th - cap, th + cap);
             }
         }

@@ -619,12 +619,14 @@ TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     const sim::ClipModel& c = sc.clip_models.at("straight");
     EXPECT_DOUBLE_EQ(c.fulcrum_mm, 20.0);
     EXPECT_DOUBLE_EQ(c.reach_mm(), 29.0);
+    EXPECT_DOUBLE_EQ(c.turn_per_heel_turn(), 4.5 / 24.5);  // the blade's middle 24.5 mm from the fulcrum, 4.5 from the heel
     ASSERT_TRUE(c.spring);
     const double r = 20.0 + 6.0;
     EXPECT_NEAR(c.spring->force_at(r, 2 * std::asin(0.5 / r)), 1.5, 1e-9);
     EXPECT_NEAR(c.spring->force_at(r, c.max_opening_deg * M_PI / 180), 2.5, 1e-9);
     // The same clip turning at its heel holds it 6 mm out: about the fulcrum it takes 26/6 the torque there.
     const sim::ClipModel heel = sim::read_clip_file(std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_9mm.json");
+    EXPECT_EQ(heel.turn_per_heel_turn(), 1.0);  // without a fulcrum the caps are as they were, to the bit
     EXPECT_NEAR(c.spring->torque(2 * std::asin(0.5 / r)) / heel.spring->torque(2 * std::asin(0.5 / 6.0)), 26.0 / 6.0, 1e-9);
     auto refused = [&](const json& model, const std::string& says) {
         json k = j;

@@ -47,6 +47,10 @@ struct ClipModel {
     double fulcrum_mm = 0.0;
     /// The jaws' length from the fulcrum: fulcrum_mm + jaw_length_mm.
     double reach_mm() const { return fulcrum_mm + jaw_length_mm; }
+    /// An opening step's share that gives the blade's middle the travel the same step gives a clip turning at its
+    /// heel: (L/2) / (fulcrum + L/2), 1 without a fulcrum (the simulator's per-frame caps on the opening, in degrees
+    /// for a clip turning at its heel, are scaled by it).
+    double turn_per_heel_turn() const { return 0.5 * jaw_length_mm / (fulcrum_mm + 0.5 * jaw_length_mm); }
     std::string mesh_file;          ///< set: the jaw is this mesh instead of a box
     std::optional<TriMesh> jaw_mesh;
     /// The closing spring (configs/clips/README.md): the applier can only hold the clip open; below what it

@@ -100,8 +100,8 @@ struct Assessment {
     double neck_cut_off_fraction = -1.0;
     /// The parent artery under the clip (parent_channel, assessment.hpp): of its ends' pairs, the one narrowed most — the
     /// widest channel between them deformed and at rest [mm] and 1 − their ratio (0: as open as at rest; negative: wider,
-    /// the wall pushed out beside the jaws; a clip set towards the parent narrows it), where it is narrowest. NaN: fewer than two ends of the parent found (the lumen
-    /// ends within 6 mm of the neck line), or no neck.
+    /// the wall pushed out beside the jaws; a clip set towards the parent narrows it), where it is narrowest. NaN: fewer
+    /// than two ends of the parent found (the lumen ends within 6 mm of the neck line), or no neck.
     double parent_channel_mm = std::numeric_limits<double>::quiet_NaN();
     double parent_channel_rest_mm = std::numeric_limits<double>::quiet_NaN();
     double parent_narrowing = std::numeric_limits<double>::quiet_NaN();
