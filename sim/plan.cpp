@@ -116,6 +116,17 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         if (std::isfinite(s.thickness[v])) t_max = std::max(t_max, s.thickness[v]);
     constexpr double JAW_W = 1.0, JAW_T = 0.5, CLEAR = 0.2;
     const Eigen::Vector3d n = nf.normal;
+    // A clip whose blades turn about a fulcrum F behind their heel (PlanOptions::fulcrum_mm; ClipModel::fulcrum_mm):
+    // everything below is measured from where the blades turn (the "hinge": the heel when F = 0, the fulcrum
+    // otherwise), the arms between it and the heel count as blade (as the simulator takes them), and the heel stands
+    // at least 1 mm before the neck. Its openings are the heel-hinged clip's scaled so that the open jaws are as wide
+    // at the neck's far end at rest (the heel 1 mm before a neck of its length): tan(θ_F/2) = tan(θ/2)·(1 + len) /
+    // (F + 1 + len); F = 0 gives θ.
+    const double F = o.fulcrum_mm;
+    auto at_fulcrum = [&](double heel_deg) {
+        const double len = nf.length_mm;
+        return 2.0 * std::atan(std::tan(0.5 * heel_deg * PI / 180.0) * (1.0 + len) / (F + 1.0 + len)) * 180.0 / PI;
+    };
     // The border's edges (the smoothed neck line, which the occlusion is measured on): midpoint (from the centre)
     // and length. The jaws' width is placed to cover it, not the label loop's staircase around it.
     std::vector<std::pair<Eigen::Vector3d, double>> seg;
@@ -152,7 +163,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                 f.near = std::min(f.near, a);
                 f.far = std::max(f.far, a);
             }
-        f.margin = 1.0;
+        f.margin = F + 1.0;
         for (const auto& loop : s.lumen.neck_loops)
             for (int v : loop) {
                 const Eigen::Vector3d q = s.lumen.X.row(v).transpose() - nf.centre;
@@ -293,7 +304,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         return count;
     };
     std::vector<Way> ways;
-    for (double opening : {0.8 * o.max_opening_deg, o.max_opening_deg})
+    for (double opening : {at_fulcrum(0.8 * o.max_opening_deg), at_fulcrum(o.max_opening_deg)})
         for (double yaw_deg : {0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0, 60.0, -60.0, 75.0, -75.0, 90.0}) {
             Way a = way_of(yaw_deg * PI / 180.0, opening, 1.0), b = way_of(yaw_deg * PI / 180.0, opening, -1.0);
             if (corridor(b) < corridor(a)) std::swap(a, b);
@@ -355,11 +366,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         blade = 0;
         short_out = false;
         for (double l = 3; l <= 15; l += 2)
-            if (l * std::cos(k.alpha) >= back + std::max(f.far, flat_half) + t_max + 0.5) {
+            if ((F + l) * std::cos(k.alpha) >= back + std::max(f.far, flat_half) + t_max + 0.5) {
                 blade = l;
                 return true;
             }
-        if (15 * std::cos(k.alpha) >= back + f.far + 0.5) {
+        if ((F + 15) * std::cos(k.alpha) >= back + f.far + 0.5) {
             blade = 15;
             short_out = true;
         }
@@ -383,7 +394,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         if (!pose_of(k, ax, hi, l, short_k)) continue;
         // A pose that closes on a clamped node is never taken, clear or not: its scene would press tissue that
         // cannot give (C0095: 13-27 kN on the blade, the clip held open).
-        const int gripped = clamped_gripped(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        // (The arms between a fulcrum and the heel close as blade: the checks run from the hinge to the tips.)
+        const int gripped = clamped_gripped(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
         if (gripped > 0) {
             if (!first_gripped) {
                 first_gripped = &k;
@@ -392,8 +404,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             if (++checked >= 60000) break;
             continue;
         }
-        const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, l);
-        const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, l);
+        const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
+        const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
         const int h = in_way + pinched;
         if (!widest) {
             widest = &k;
@@ -459,11 +471,12 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     nlohmann::ordered_json j;
     j["bundle"] = bundle_ref;
     j["clip_models"][std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm"] = {
-        {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", o.max_opening_deg},
+        {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", at_fulcrum(o.max_opening_deg)},
         // The standard permanent clip's closing spring of configs/clips (placeholder figures: configs/clips/README.md).
         {"spring", {{"label_force_n", 1.5}, {"open_force_n", 2.5}, {"placeholder", true},
                     {"source", "configs/clips/README.md: placeholder within the 1-2.5 N of issue #15"}}}};
     const std::string model = std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm";
+    if (F > 0) j["clip_models"][model]["fulcrum_mm"] = F;  // the pose below is the fulcrum's (docs/scene_format.md)
     j["outputs"] = {{"log", stem + "_log.csv"}, {"series", stem + "_series"}, {"report", stem + "_report.json"}};
     if (o.flow) j["outputs"]["flow"] = stem + "_flow.h5";
     nlohmann::ordered_json ap;
@@ -495,6 +508,14 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
                   blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
+    if (F > 0) {
+        char fu[320];
+        std::snprintf(fu, sizeof fu,
+                      "// Its blades turn about a fulcrum %g mm behind their heel (the model's fulcrum_mm): the applier's position is the fulcrum's,\n"
+                      "// its opening the angle there (%.1f deg: the jaws as wide at the neck's far end as a clip hinged at its heel open %.0f deg).\n",
+                      F, opening, opening == at_fulcrum(o.max_opening_deg) ? o.max_opening_deg : 0.8 * o.max_opening_deg);
+        header += fu;
+    }
     // How much of the jaws' width the neck line fills, and how near an edge it comes: a saddle that fills the band is
     // squeezed out of it as the jaws close (the sample's 0.88 of 1.0 mm, then at the lower edge: 36 of the line's 62
     // points ended beside the jaws; bench/results/study/compliance.md, sessions 37 and 39).

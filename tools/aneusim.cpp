@@ -89,6 +89,10 @@ int main(int argc, char** argv) {
     plan->add_option("--min-cover", plan_min_cover, "least share of the neck's border the jaws must cover (0-1); a case whose only clear way is beside the neck is refused below it")
         ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
+    double plan_fulcrum = aneu::sim::PlanOptions{}.fulcrum_mm;
+    plan->add_option("--fulcrum-mm", plan_fulcrum, "the planned clip's blades turn about a fulcrum this far behind their heel (the model's fulcrum_mm; 0: about the heel)")
+        ->check(CLI::Range(0.0, 60.0))
+        ->capture_default_str();
     plan->add_flag("--flow", plan_flow, "the scene's outputs include the residual blood flow after the session (aneuprep flow, OpenFOAM: about a minute for the sample)");
 
     // aneusim serve SCENE: the simulator behind an OpenIGTLink server.
@@ -142,6 +146,7 @@ int main(int argc, char** argv) {
             aneu::sim::PlanOptions po;
             po.flow = plan_flow;
             po.min_cover = plan_min_cover;
+            po.fulcrum_mm = plan_fulcrum;
             const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 #include "aneu/sim/plan.hpp"
 #include "aneu/sim/scene.hpp"
 #include "aneu/sim/simulator.hpp"
@@ -171,6 +172,77 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
     const sim::Scene with_flow = sim::read_scene((t.dir / "planned_flow.json").string());
     EXPECT_EQ(fs::path(with_flow.flow).filename(), "planned_flow_flow.h5");
     EXPECT_EQ(fs::path(with_flow.series).filename(), "planned_flow_series");
+}
+
+// A clip whose blades turn about a fulcrum 10 mm behind their heel (PlanOptions::fulcrum_mm, the model's
+// fulcrum_mm): the applier's pose is the fulcrum's, the heel stands at least 1 mm before the neck, the tips past it as
+// for the heel-hinged clip, the opening is the heel-hinged clip's scaled to open the jaws as wide at the neck's far
+// end (tan(θ_F/2)·(F + 1 + len) = tan(θ/2)·(1 + len), θ 48° or 60°), and the scene runs: the open arms and jaws
+// come in without touching the vessel, close on it and stay.
+TEST(Plan, AClipWithAFulcrumBehindTheHeelIsPlannedFromTheFulcrum) {
+    PlannedTube t;
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(t.bundle.string(), lo);
+    const sim::NeckFrame nf = sim::neck_frame(m);
+    constexpr double F = 10.0;
+    sim::PlanOptions po;
+    po.fulcrum_mm = F;
+    const std::string text = sim::plan_scene(m, "tube.h5", "planned", po);
+    const fs::path scene_path = t.dir / "planned_fulcrum.json";
+    {
+        std::ofstream(scene_path) << text;
+    }
+    const sim::Scene sc = sim::read_scene(scene_path.string());
+    ASSERT_EQ(sc.clip_models.size(), 1u) << text;
+    const sim::ClipModel& cm = sc.clip_models.begin()->second;
+    EXPECT_DOUBLE_EQ(cm.fulcrum_mm, F);
+    EXPECT_NE(text.find("// Its blades turn about a fulcrum 10 mm behind their heel"), std::string::npos) << text.substr(0, 1400);
+    const auto& keys = sc.instruments[0].keys;
+    ASSERT_GE(keys.size(), 4u);
+    const sim::Pose& closed = keys[2].pose;
+    ASSERT_GT(std::abs(closed.axis.z()), 0.99);
+    const Eigen::Vector3d heel = closed.position + F * closed.axis;
+    const Eigen::Vector3d tip = closed.position + cm.reach_mm() * closed.axis;
+    EXPECT_GE(std::abs(heel.z() - nf.centre.z()) - 0.5 * nf.length_mm, 1.0 - 1e-9) << "the heel before the neck";
+    EXPECT_LE(std::min(heel.z(), tip.z()), 2.5 - 0.5);
+    EXPECT_GE(std::max(heel.z(), tip.z()), 5.5 + 0.5);
+    const double len = nf.length_mm;
+    auto scaled = [&](double heel_deg) {
+        return 2 * std::atan(std::tan(0.5 * heel_deg * M_PI / 180) * (1 + len) / (F + 1 + len)) * 180 / M_PI;
+    };
+    EXPECT_NEAR(cm.max_opening_deg, scaled(60.0), 1e-9);
+    const double open = keys[0].opening_deg;
+    EXPECT_TRUE(std::abs(open - scaled(48.0)) < 1e-9 || std::abs(open - scaled(60.0)) < 1e-9) << open;
+    EXPECT_LT(open, 30.0) << "a fulcrum 10 mm back opens the jaws as wide with a smaller angle";
+    // The open jaws clear the neck's widest point (half width + wall 0.4 + 0.5 mm) where it lies.
+    const double margin = std::abs(closed.position.z() - nf.centre.z()) - 0.5 * len;
+    EXPECT_GE((margin + 0.5 * len) * std::tan(0.5 * open * M_PI / 180), 0.5 * nf.width_mm + 0.4 + 0.5 - 0.3);
+    // The spring's label point lies fulcrum + 2/3 of the blade from the fulcrum (ISO 9713 from the heel's side).
+    const double r_label = F + 2.0 * cm.jaw_length_mm / 3.0;
+    ASSERT_TRUE(cm.spring.has_value());
+    EXPECT_NEAR(cm.spring->force_at(r_label, fem::opening_angle(r_label, 1.0, cm.closed_gap_mm)), 1.5, 1e-9);
+    EXPECT_NEAR(cm.spring->force_at(r_label, cm.max_opening_deg * M_PI / 180), 2.5, 1e-9);
+    sim::Scene run = sc;
+    run.series = run.report = "";
+    run.log = (t.dir / "run_fulcrum_log.csv").string();
+    sim::Simulator s(run, sim::load_model(t.bundle.string()));
+    sim::RunOptions opt;
+    opt.deterministic = true;
+    const sim::Assessment a = sim::run_scene(s, opt);
+    EXPECT_EQ(a.clips_deposited, 1);
+    EXPECT_GT(a.peak_vessel_force_n, 0.0) << "the clip touched the vessel";
+    std::ifstream log(run.log);
+    std::string line;
+    std::getline(log, line);
+    int rows_in = 0;
+    while (std::getline(log, line)) {
+        const double tt = std::stod(line);
+        if (tt >= keys[1].t - 1e-9) break;
+        ++rows_in;
+        EXPECT_EQ(std::stoi(line.substr(line.find(',') + 1)), 0) << "contact on the way in at t = " << tt;
+    }
+    EXPECT_GT(rows_in, 100);
 }
 
 // A sac spanning ±80° of the tube: its border's heights along the normal span more than the jaws' 1 mm width, so

@@ -37,6 +37,10 @@ struct PlanOptions {
     /// the dome or the parents) is refused. A quarter: the corpus's planned poses cover 52-100 % where a clear
     /// way across the neck exists; one that covers less is beside the neck, not across it.
     double min_cover = 0.25;
+    /// How far behind the blades' heel they turn (ClipModel::fulcrum_mm; 0: about the heel). The planned clip model
+    /// carries it, the applier's pose is the fulcrum's, its openings are the heel-hinged clip's scaled to open the
+    /// jaws as wide at the neck's far end, and the arms between the fulcrum and the heel are checked as blade.
+    double fulcrum_mm = 0.0;
 };
 
 /// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the
