@@ -30,7 +30,10 @@ for line in open(obj):
         rows.append((dot(d, ax), dot(d, w), dot(d, upv), float(p[6])))
 rows.sort()
 half = 0.5 * model["jaw_width_mm"]
+# r from where the blades turn: with a fulcrum (fulcrum_mm) the arms behind the heel close as blade, as the simulator
+# and its assessment take them (docs/scene_format.md)
+reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
 print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
 for r, a, u, g in rows:
-    where = "past the jaws" if r < 0 or r > model["jaw_length_mm"] else ("in the jaws" if abs(a) <= half else "beside the jaws")
+    where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
     print("%.3f\t%+.3f\t%+.3f\t%s\t%s" % (r, a, u, "inf" if math.isinf(g) else "%.4f" % g, where))
