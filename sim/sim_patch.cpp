@@ -37,6 +37,9 @@ constexpr double RESELECT_MARGIN_RAD = 2.0 * DEG;
 // ... and a hinge that moves this far from where they were selected makes the frames due for another (the selection
 // keeps nodes within 0.1 mm of the wedge).
 constexpr double RESELECT_HINGE_MM = 0.05;
+// A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
+// ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
+constexpr double SECANT_MIN_DEG = 0.01;
 
 /// How many of the nodes (at X) lie inside a blade's solid, or within `gap` in front of its face, at opening θ.
 int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, double gap) {
@@ -829,12 +832,24 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // tissue's; a held clip goes on following the applier).
         if (cm.spring && r.reaction.size() && r.converged) {
             const double R = r.reaction[0], th = r.u[nb];
-            double k = P.course.tissue_k;
-            if (P.course.prev_theta >= 0 && std::abs(th - P.course.prev_theta) > 1e-7) k = (R - P.course.prev_R) / (th - P.course.prev_theta);
-            k = std::max(k, spring.k_nmm_per_rad);  // R grows with θ: the spring alone gives at least its k
-            P.course.tissue_k = k;
-            P.course.prev_theta = th;
-            P.course.prev_R = R;
+            // The secant over the last step that moved the opening by at least SECANT_MIN_DEG (at the heel's turn): with
+            // the patch relinearised the tissue's moment also changes at a fixed opening, and over a step of a
+            // thousandth of a degree that change is the secant. (Taken over every step, the sample's held clip with its
+            // fulcrum 8 mm back stalled on a steep secant, then, on a wrong-signed one clamped to the spring's k, stepped
+            // the full cap closed every fourth frame and back: 2.65-3.2 deg, a 3.23 N blade peak over a 2.4 N hold.)
+            // A secant below the spring's own k (R grows with θ: the spring alone gives at least that) keeps the last
+            // estimate.
+            double k = std::max(P.course.tissue_k, spring.k_nmm_per_rad);
+            const double min_step = SECANT_MIN_DEG * DEG * cm.turn_per_heel_turn();
+            if (P.course.prev_theta < 0 || std::abs(th - P.course.prev_theta) >= min_step) {
+                if (P.course.prev_theta >= 0) {
+                    const double secant = (R - P.course.prev_R) / (th - P.course.prev_theta);
+                    if (secant > spring.k_nmm_per_rad) k = secant;
+                }
+                P.course.tissue_k = k;
+                P.course.prev_theta = th;
+                P.course.prev_R = R;
+            }
             // (Held, the applier bounds it from below anyway.)
             P.course.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0);
             // On the compliance frames, with the blades pressing, at most 125°/s (0.5° a frame at 250 Hz): a refresh
@@ -849,6 +864,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 const double cap = 125.0 * DEG / scene.physics_hz * cm.turn_per_heel_turn();
                 P.course.theta_bal = std::clamp(P.course.theta_bal, th - cap, th + cap);
             }
+            if (std::getenv("ANEU_PATCH_TRACE"))
+                std::fprintf(stderr, "balance t=%.4f theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, th / DEG, R, k, P.course.theta_bal / DEG);
         }
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
