@@ -124,6 +124,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // (F + 1 + len); F = 0 gives θ.
     const double F = o.fulcrum_mm;
     auto at_fulcrum = [&](double heel_deg) {
+        if (F == 0) return heel_deg;  // exactly (the round trip through tan and atan is not)
         const double len = nf.length_mm;
         return 2.0 * std::atan(std::tan(0.5 * heel_deg * PI / 180.0) * (1.0 + len) / (F + 1.0 + len)) * 180.0 / PI;
     };
@@ -145,12 +146,14 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // the way in (from its centre, forwards positive).
     struct Way {
         Eigen::Vector3d u, w;
-        double yaw, opening, side, margin, near, far;
+        double yaw, opening, heel_opening, side, margin, near, far;  // opening: at the hinge; heel_opening: the heel-hinged one it was scaled from
     };
-    auto way_of = [&](double yaw, double opening, double side) {
+    auto way_of = [&](double yaw, double heel_opening, double side) {
+        const double opening = at_fulcrum(heel_opening);
         Way f;
         f.yaw = yaw;
         f.opening = opening;
+        f.heel_opening = heel_opening;
         f.side = side;
         f.u = std::cos(yaw) * nf.long_axis + std::sin(yaw) * nf.short_axis;
         f.w = n.cross(f.u).normalized();
@@ -304,7 +307,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         return count;
     };
     std::vector<Way> ways;
-    for (double opening : {at_fulcrum(0.8 * o.max_opening_deg), at_fulcrum(o.max_opening_deg)})
+    for (double opening : {0.8 * o.max_opening_deg, o.max_opening_deg})
         for (double yaw_deg : {0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0, 60.0, -60.0, 75.0, -75.0, 90.0}) {
             Way a = way_of(yaw_deg * PI / 180.0, opening, 1.0), b = way_of(yaw_deg * PI / 180.0, opening, -1.0);
             if (corridor(b) < corridor(a)) std::swap(a, b);
@@ -513,7 +516,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         std::snprintf(fu, sizeof fu,
                       "// Its blades turn about a fulcrum %g mm behind their heel (the model's fulcrum_mm): the applier's position is the fulcrum's,\n"
                       "// its opening the angle there (%.1f deg: the jaws as wide at the neck's far end as a clip hinged at its heel open %.0f deg).\n",
-                      F, opening, opening == at_fulcrum(o.max_opening_deg) ? o.max_opening_deg : 0.8 * o.max_opening_deg);
+                      F, opening, way.heel_opening);
         header += fu;
     }
     // How much of the jaws' width the neck line fills, and how near an edge it comes: a saddle that fills the band is
