@@ -133,6 +133,20 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
         c.mesh_file = resolve(dir, mesh);
         c.jaw_mesh = read_trimesh(c.mesh_file);
     }
+    c.jaw_curve_radius_mm = o.num("jaw_curve_radius_mm", c.jaw_curve_radius_mm, -1000, 1000);
+    if (c.jaw_curve_radius_mm != 0) {
+        if (c.jaw_mesh) o.fail("\"jaw_curve_radius_mm\" with a jaw_mesh: expected 0 (a mesh jaw has its own shape)");
+        fem::ClipBlades b;
+        b.length_mm = c.reach_mm();
+        b.width_mm = c.jaw_width_mm;
+        b.curve_radius_mm = c.jaw_curve_radius_mm;
+        b.curve_from_mm = c.fulcrum_mm;
+        try {
+            b.check_curve();
+        } catch (const InputError& e) {
+            o.fail(std::string("jaw_curve_radius_mm: ") + e.what());
+        }
+    }
     if (c.jaw_mesh && c.fulcrum_mm > 0) o.fail("\"fulcrum_mm\" = " + std::to_string(c.fulcrum_mm) + " with a jaw_mesh: expected 0 (a mesh jaw is drawn from its own hinge)");
     if (o.has("spring")) {
         Obj sp(o.at("spring"), o.where() + ".spring", o.file());

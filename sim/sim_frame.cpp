@@ -147,8 +147,9 @@ void Simulator::Impl::detect_contacts(Frame& fr) {
                     // inner normal. A jaw that closes faster than half its thickness per frame (the lag of a
                     // displacement fraction of ½) would otherwise carry the wall out through its back.
                     const Eigen::Vector3d rel = p - J.blades.hinge;
-                    const double r = rel.dot(jt), dn = 0.5 * J.blades.closed_gap_mm + rel.dot(jn);
-                    if (r >= 0 && r <= J.blades.length_mm && std::abs(rel.dot(jw)) <= 0.5 * J.blades.width_mm && dn < 0) {
+                    const fem::ClipBlades::FaceCoords fc = J.blades.face_coords(rel.dot(jt), rel.dot(jw));  // (a curved blade's)
+                    const double dn = 0.5 * J.blades.closed_gap_mm + rel.dot(jn);
+                    if (rel.dot(jt) >= 0 && fc.s <= J.blades.length_mm && std::abs(fc.a) <= 0.5 * J.blades.width_mm && dn < 0) {
                         const bool was_between = 0.5 * J.blades.closed_gap_mm + rel.dot(jn_prev) >= 0;
                         const bool pushed_back = gap_seen[s] && owner_seen[s] == part &&
                                                  (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::NEIGHBOUR);

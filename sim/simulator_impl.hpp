@@ -38,6 +38,8 @@ inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
     b.width_mm = cm.jaw_width_mm;
     b.thickness_mm = cm.jaw_thickness_mm;
     b.closed_gap_mm = cm.closed_gap_mm;
+    b.curve_radius_mm = cm.jaw_curve_radius_mm;  // a curved clip's blades bend from the heel
+    b.curve_from_mm = cm.fulcrum_mm;
     return b;
 }
 

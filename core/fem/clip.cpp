@@ -45,11 +45,79 @@ void ClipBlades::frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d&
     w = axis.cross(up);
 }
 
+ClipBlades::FaceCoords ClipBlades::face_coords(double r, double a) const {
+    FaceCoords c;
+    c.s = r;
+    c.a = a;
+    if (!curved()) return c;
+    c.rho_c = std::hypot(r - curve_from_mm, std::abs(curve_radius_mm) - (curve_radius_mm > 0 ? a : -a));
+    if (r <= curve_from_mm) return c;
+    // About the centre of curvature C = (r₀, R) in (r, a): with the side's sign g (a_g = g a, R_g = |R|), the point's
+    // offset from C is (Δr, Δa) = (r − r₀, R_g − a_g), ρ = |(Δr, Δa)|, the angle turned φ = atan2(Δr, Δa), so
+    // s = r₀ + R_g φ and a = g (R_g − ρ). At r = r₀ both equal the straight blade's (φ = 0, ρ = R_g − a_g).
+    const double g = curve_radius_mm > 0 ? 1.0 : -1.0, R = std::abs(curve_radius_mm);
+    const double dr = r - curve_from_mm, da = R - g * a, rr = dr * dr + da * da, rho = std::sqrt(rr);
+    c.rho_c = rho;
+    if (!(rho > 1e-9 * R)) {  // the centre itself: no direction (far from any blade valid here)
+        c.s = curve_from_mm + R * 0.5 * PI;
+        c.a = g * R;
+        return c;
+    }
+    c.s = curve_from_mm + R * std::atan2(dr, da);
+    c.a = g * (R - rho);
+    // First derivatives on (r, a_g): ∂ρ = (Δr, −Δa)/ρ, ∂φ = (Δa, Δr)/ρ²; on a: × g.
+    c.ds = Eigen::Vector2d(R * da / rr, g * R * dr / rr);
+    c.da = Eigen::Vector2d(-g * dr / rho, da / rho);
+    // Second derivatives: ρ's Hessian on (Δr, Δa) is (I − e eᵀ)/ρ, e = (Δr, Δa)/ρ (Δa = R_g − a_g flips the mixed
+    // term's sign; a_g = g a flips it again for g < 0, the squares keep theirs); a = g (R_g − ρ). φ's on (r, a_g):
+    // ∂²/∂r² = −2 Δr Δa/ρ⁴, ∂²/∂r∂a_g = (Δa² − Δr²)/ρ⁴, ∂²/∂a_g² = 2 Δr Δa/ρ⁴.
+    const double r4 = rr * rr, rho3 = rr * rho;
+    Eigen::Matrix2d hrho;
+    hrho << da * da / rho3, g * dr * da / rho3, g * dr * da / rho3, dr * dr / rho3;
+    c.ha = -g * hrho;
+    c.hs << -2 * R * dr * da / r4, g * R * (da * da - dr * dr) / r4, g * R * (da * da - dr * dr) / r4, 2 * R * dr * da / r4;
+    return c;
+}
+
+void ClipBlades::centre_line(double s, double& r, double& a, double& dr, double& da) const {
+    if (!curved() || s <= curve_from_mm) {
+        r = s;
+        a = 0;
+        dr = 1;
+        da = 0;
+        return;
+    }
+    const double g = curve_radius_mm > 0 ? 1.0 : -1.0, R = std::abs(curve_radius_mm), phi = (s - curve_from_mm) / R;
+    r = curve_from_mm + R * std::sin(phi);
+    a = g * R * (1 - std::cos(phi));
+    dr = std::cos(phi);
+    da = g * std::sin(phi);
+}
+
+void ClipBlades::check_curve() const {
+    if (!curved()) return;
+    const double R = std::abs(curve_radius_mm);
+    if (!std::isfinite(R) || R < 2.0 || R <= width_mm)
+        throw InputError("clip: a blade curve radius of " + std::to_string(curve_radius_mm) + " mm; expected 0 (straight) or |R| >= 2 mm and more than the blade's width (" +
+                         std::to_string(width_mm) + " mm)");
+    if (!(curve_from_mm >= 0) || curve_from_mm >= length_mm)
+        throw InputError("clip: the blades' curve starts " + std::to_string(curve_from_mm) + " mm from the hinge; expected within the blade (0 to " +
+                         std::to_string(length_mm) + " mm)");
+    if ((length_mm - curve_from_mm) / R > 0.5 * PI + 1e-12)
+        throw InputError("clip: a blade of " + std::to_string(length_mm - curve_from_mm) + " mm curved at a radius of " + std::to_string(R) +
+                         " mm bends past 90 degrees; expected |R| >= " + std::to_string((length_mm - curve_from_mm) / (0.5 * PI)) + " mm");
+}
+
 bool ClipBlades::near_wedge(double theta, const Eigen::Vector3d& p, double margin) const {
     const Eigen::Vector3d rel = p - hinge, w = axis.cross(up);
     const double r = rel.dot(axis);
     if (r < -margin || r > length_mm + margin) return false;
-    if (std::abs(rel.dot(w)) > 0.5 * width_mm + margin) return false;
+    if (curved()) {  // along and across the curved blade's centre line
+        const FaceCoords fc = face_coords(r, rel.dot(w));
+        if (fc.s > length_mm + margin || std::abs(fc.a) > 0.5 * width_mm + margin) return false;
+    } else if (std::abs(rel.dot(w)) > 0.5 * width_mm + margin) {
+        return false;
+    }
     const double rr = std::clamp(r, 0.0, length_mm);
     return std::abs(rel.dot(up)) <= rr * std::tan(0.5 * theta) + 0.5 * closed_gap_mm + thickness_mm + margin;
 }
@@ -65,6 +133,7 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
         throw InputError("clip: blade length, width and thickness must be > 0 and the closed gap >= 0");
     if (std::abs(blades.axis.norm() - 1) > 1e-9 || std::abs(blades.up.norm() - 1) > 1e-9 || std::abs(blades.axis.dot(blades.up)) > 1e-9)
         throw InputError("clip: the blade axis and opening direction must be orthonormal");
+    blades.check_curve();
     if (!(p.gap_mm > 0)) throw InputError("clip: the blades' barrier distance d̂ (gap) must be > 0 mm (got " + std::to_string(p.gap_mm) + ")");
     if (!(p.friction >= 0) || !std::isfinite(p.friction)) throw InputError("clip: the blades' friction coefficient must be >= 0 (got " + std::to_string(p.friction) + ")");
     if (!(p.stick_mm > 0)) throw InputError("clip: the friction's stick slip must be > 0 mm (got " + std::to_string(p.stick_mm) + ")");
@@ -156,11 +225,19 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     // beside it the distance to the core's edge, the node's height above the core's plane counted only in front
     // of it (beside the blade, below its face, the blade's side pushes it sideways). A node more than ρ behind the
     // face right at the core's edge is the one place where the two disagree (it has come far through the blade).
+    // A curved blade (ClipBlades::curved): the same in its face coordinates (s along the centre line, a across it).
     c.r = rel.dot(c.t);
     c.a = rel.dot(c.w);
     const double p = 0.5 * m_blades.closed_gap_mm + rel.dot(c.n);
     const double half = 0.5 * m_blades.width_mm - m_rho, tip = m_blades.length_mm - m_rho;
-    const double vr = c.r - std::clamp(c.r, 0.0, tip), va = c.a - std::clamp(c.a, -half, half);
+    c.curved = m_blades.curved();
+    double along = c.r, across = c.a;
+    if (c.curved) {
+        c.fc = m_blades.face_coords(c.r, c.a);
+        along = c.fc.s;
+        across = c.fc.a;
+    }
+    const double vr = along - std::clamp(along, 0.0, tip), va = across - std::clamp(across, -half, half);
     if (vr == 0 && va == 0) {
         c.u = Eigen::Vector3d(0, 0, 1);
         c.dist = 0;
@@ -207,6 +284,7 @@ bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, d
     // ψ(D) (press(): the barrier), dP = −∇D; ∇D = u_r ∇r + u_a ∇a + u_d ∇p in the blade's
     // frame (u: the unit vector from the core's nearest point), with ∇r = (t, −q/2), ∇a = (w, 0), ∇p = (n, r/2),
     // q = rel·n.
+    if (c.curved) return pair_terms_curved(c, e, grad, H, project);
     Eigen::Vector4d dP;
     dP << -(c.u[0] * c.t + c.u[1] * c.w + c.u[2] * c.n), -(c.u[0] * (-0.5 * c.q) + c.u[2] * 0.5 * c.r);
     const Press pr = press(c.d);
@@ -236,6 +314,51 @@ bool ClipBody::pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, d
             (*H)(3, 3) += -kp * (c.u[0] * (-0.25 * c.r) + c.u[2] * (-0.25 * c.q));
         }
     }
+    return true;
+}
+
+bool ClipBody::pair_terms_curved(const Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H, bool project) const {
+    // pair_terms on a curved blade: D = |v| − ρ in the face coordinates y = (s, a, p) (p as on a straight blade), each
+    // a function of the straight ones (r, a) (ClipBlades::face_coords). On (x, θ): ∇r = (t, −q/2), ∇a = (w, 0),
+    // ∇p = (n, r/2), ∇s = s_r ∇r + s_a ∇a (and a's alike); ∇²r has ∂²r/∂x∂θ = −n/2, ∂²r/∂θ² = −r/4, ∇²p has
+    // ∂²p/∂x∂θ = t/2, ∂²p/∂θ² = −q/4, ∇²a = 0, and ∇²s = s_r ∇²r + Gᵀ S G with G = (∇r; ∇a), S the 2 × 2 Hessian of s
+    // on (r, a). ∇²D = Jᵀ Hy J + Σ u_i ∇²y_i (J = ∂y/∂(x, θ), Hy the edge's part as on a straight blade).
+    Eigen::Vector4d gr, ga, gp;
+    gr << c.t, -0.5 * c.q;
+    ga << c.w, 0.0;
+    gp << c.n, 0.5 * c.r;
+    const Eigen::Vector4d gs = c.fc.ds[0] * gr + c.fc.ds[1] * ga, gac = c.fc.da[0] * gr + c.fc.da[1] * ga;
+    const Eigen::Vector4d dP = -(c.u[0] * gs + c.u[1] * gac + c.u[2] * gp);
+    const Press pr = press(c.d);
+    e = pr.e;
+    if (!std::isfinite(e)) return true;
+    grad = pr.f * dP;
+    if (!H) return true;
+    *H = pr.k * dP * dP.transpose();
+    if (project) return true;
+    Eigen::Matrix4d hr = Eigen::Matrix4d::Zero(), hp = Eigen::Matrix4d::Zero();
+    hr.block<3, 1>(0, 3) = -0.5 * c.n;
+    hr.block<1, 3>(3, 0) = -0.5 * c.n.transpose();
+    hr(3, 3) = -0.25 * c.r;
+    hp.block<3, 1>(0, 3) = 0.5 * c.t;
+    hp.block<1, 3>(3, 0) = 0.5 * c.t.transpose();
+    hp(3, 3) = -0.25 * c.q;
+    Eigen::Matrix<double, 2, 4> G;
+    G.row(0) = gr.transpose();
+    G.row(1) = ga.transpose();
+    const Eigen::Matrix4d hs = c.fc.ds[0] * hr + G.transpose() * c.fc.hs * G;
+    const Eigen::Matrix4d hac = c.fc.da[0] * hr + G.transpose() * c.fc.ha * G;
+    Eigen::Matrix4d d2 = c.u[0] * hs + c.u[1] * hac + c.u[2] * hp;
+    if (c.dist > 0) {
+        Eigen::Matrix<double, 3, 4> J;
+        J.row(0) = gs.transpose();
+        J.row(1) = gac.transpose();
+        J.row(2) = gp.transpose();
+        const Eigen::Vector3d m(c.mr, c.ma, c.md);
+        const Eigen::Matrix3d Hy = m.asDiagonal() * (Eigen::Matrix3d::Identity() - c.u * c.u.transpose()) * m.asDiagonal() / c.dist;
+        d2 += J.transpose() * Hy * J;
+    }
+    *H -= pr.f * d2;
     return true;
 }
 
@@ -401,7 +524,20 @@ double ClipBody::max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) c
         const int node = m_nodes[k];
         const Eigen::Vector3d x0 = m_X.row(node).transpose() + v.segment<3>(3 * node), dx = dv.segment<3>(3 * node);
         const double R = (x0 - m_blades.hinge).norm() + dx.norm();
-        const double l = dx.norm() + 0.5 * R * dth;
+        double l = dx.norm() + 0.5 * R * dth;
+        if (m_blades.curved()) {
+            // On a curved blade s changes by up to |R_c|/ρ_c per mm across the face (ρ_c: the distance from the
+            // centre of curvature, which the step can shorten by l): D is that Lipschitz, not 1.
+            const double Rc = std::abs(m_blades.curve_radius_mm);
+            double rho_c = std::numeric_limits<double>::infinity();
+            for (int s : {1, -1}) {
+                Touch c;
+                m_blades.frame(s, v[theta_dof()], c.t, c.n, c.w);
+                const Eigen::Vector3d rel = x0 - m_blades.hinge;
+                rho_c = std::min(rho_c, m_blades.face_coords(rel.dot(c.t), rel.dot(c.w)).rho_c);
+            }
+            if (std::isfinite(rho_c)) l *= std::max(1.0, Rc / std::max(rho_c - l, 0.25 * Rc));
+        }
         if (!(l > 0)) continue;
         for (int s : {1, -1}) {
             const size_t i = s > 0 ? 0 : 1;

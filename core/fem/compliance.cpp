@@ -270,15 +270,24 @@ double blade_distance_d(const ClipBlades& b, int s, double theta, const Eigen::V
     const Eigen::Vector3d rel = x - b.hinge;
     const double r = rel.dot(t), a = rel.dot(w), qn = rel.dot(n), p = 0.5 * b.closed_gap_mm + qn;
     const double half = 0.5 * b.width_mm - rho, tip = b.length_mm - rho;
-    const double vr = r - std::clamp(r, 0.0, tip), va = a - std::clamp(a, -half, half);
+    // A curved blade: the same in its face coordinates (ClipBlades::face_coords: s along its centre line, c across).
+    const ClipBlades::FaceCoords fc = b.face_coords(r, a);
+    const double vr = fc.s - std::clamp(fc.s, 0.0, tip), va = fc.a - std::clamp(fc.a, -half, half);
     if (vr == 0 && va == 0) {
         if (grad) *grad = n;
         if (dtheta) *dtheta = 0.5 * r;
         return p;
     }
     const double vd = std::max(p + rho, 0.0), dist = std::sqrt(vr * vr + va * va + vd * vd);
-    if (grad) *grad = (vr * t + va * w + vd * n) / dist;  // vd = 0 where p + ρ ≤ 0: no term
-    if (dtheta) *dtheta = (vr * (-0.5 * qn) + vd * 0.5 * r) / dist;
+    if (!b.curved()) {
+        if (grad) *grad = (vr * t + va * w + vd * n) / dist;  // vd = 0 where p + ρ ≤ 0: no term
+        if (dtheta) *dtheta = (vr * (-0.5 * qn) + vd * 0.5 * r) / dist;
+        return dist - rho;
+    }
+    // ∇s = s_r t + s_a w, ∂s/∂θ = s_r ∂r/∂θ = −s_r q/2 (a's alike): r turns with the blade, a does not.
+    const double cr = vr * fc.ds[0] + va * fc.da[0], ca = vr * fc.ds[1] + va * fc.da[1];
+    if (grad) *grad = (cr * t + ca * w + vd * n) / dist;
+    if (dtheta) *dtheta = (cr * (-0.5 * qn) + vd * 0.5 * r) / dist;
     return dist - rho;
 }
 

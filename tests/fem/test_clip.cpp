@@ -195,6 +195,96 @@ TEST(ClipBody, ForcesAndTangentAreTheEnergysDerivatives) {
     EXPECT_LT(clip.internal_force(c)[clip.theta_dof()], 0.0);
 }
 
+TEST(ClipBlades, ACurvedBladesFaceCoordinatesFollowItsCentreLineWithTheirDerivatives) {
+    fem::ClipBlades b;
+    b.length_mm = 9.0;
+    b.curve_from_mm = 2.0;
+    for (double R : {6.0, -6.0}) {
+        b.curve_radius_mm = R;
+        EXPECT_NO_THROW(b.check_curve());
+        // On the centre line s is its length and the offset 0; 0.3 mm across it (towards +a's side) the offset is 0.3.
+        for (double s : {1.0, 2.0, 4.5, 9.0}) {
+            double r, a, dr, da;
+            b.centre_line(s, r, a, dr, da);
+            EXPECT_NEAR(std::hypot(dr, da), 1.0, 1e-12);
+            const fem::ClipBlades::FaceCoords on = b.face_coords(r, a), off = b.face_coords(r - 0.3 * da, a + 0.3 * dr);
+            EXPECT_NEAR(on.s, s, 1e-12) << R << " " << s;
+            EXPECT_NEAR(on.a, 0.0, 1e-12);
+            EXPECT_NEAR(off.s, s, 1e-12);
+            EXPECT_NEAR(off.a, 0.3, 1e-12);
+        }
+        // A point on the blade's axis 7 mm into the curve: |R| − its distance from the centre of curvature across it.
+        EXPECT_NEAR(b.face_coords(9.0, 0.0).a * R, std::abs(R) * (std::abs(R) - std::hypot(7.0, std::abs(R))), 1e-9);
+        // The derivatives, by central differences, where it curves (also for points inside the bend and beyond the tip).
+        for (const Eigen::Vector2d& q : {Eigen::Vector2d(4.0, 0.2), Eigen::Vector2d(6.5, -0.7), Eigen::Vector2d(8.0, 2.5), Eigen::Vector2d(3.0, 1.0)}) {
+            const fem::ClipBlades::FaceCoords c = b.face_coords(q[0], q[1]);
+            const double h = 1e-5;
+            for (int i = 0; i < 2; ++i) {
+                Eigen::Vector2d p = q, m = q;
+                p[i] += h;
+                m[i] -= h;
+                const fem::ClipBlades::FaceCoords cp = b.face_coords(p[0], p[1]), cm = b.face_coords(m[0], m[1]);
+                EXPECT_NEAR(c.ds[i], (cp.s - cm.s) / (2 * h), 1e-8);
+                EXPECT_NEAR(c.da[i], (cp.a - cm.a) / (2 * h), 1e-8);
+                for (int j = 0; j < 2; ++j) {
+                    EXPECT_NEAR(c.hs(j, i), (cp.ds[j] - cm.ds[j]) / (2 * h), 1e-6) << R << " (" << q.transpose() << ") " << j << i;
+                    EXPECT_NEAR(c.ha(j, i), (cp.da[j] - cm.da[j]) / (2 * h), 1e-6) << R << " (" << q.transpose() << ") " << j << i;
+                }
+            }
+        }
+    }
+    // Before the curve: the straight blade's coordinates.
+    const fem::ClipBlades::FaceCoords st = b.face_coords(1.5, 0.4);
+    EXPECT_EQ(st.s, 1.5);
+    EXPECT_EQ(st.a, 0.4);
+    // Too tight a curve, or one bending the blade past 90°, is refused.
+    b.curve_radius_mm = 1.5;
+    EXPECT_THROW(b.check_curve(), InputError);
+    b.curve_radius_mm = -4.0;  // 7 mm of arc at 4 mm: 100°
+    EXPECT_THROW(b.check_curve(), InputError);
+    b.length_mm = 4.0;  // 2 mm of arc at 2.5 mm: 46°, but the blade 3 mm wide
+    b.curve_radius_mm = 2.5;
+    b.width_mm = 3.0;
+    EXPECT_THROW(b.check_curve(), InputError);
+    b.width_mm = 1.0;
+    EXPECT_NO_THROW(b.check_curve());
+}
+
+TEST(ClipBody, OnCurvedBladesForcesAndTangentAreTheEnergysDerivatives) {
+    // The block's nodes against blades curved from 1 mm at a radius of 6 mm: node 2 over blade +1's face where it has
+    // turned, node 3 over blade −1's side edge there; both within d̂.
+    const Block b;
+    fem::ClipBlades bl;
+    bl.curve_radius_mm = 6.0;
+    bl.curve_from_mm = 1.0;
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    const fem::ClipBody clip(*b.body, b.X, {2, 3}, v0, bl, test_spring());
+    auto on = [&](int node, double theta, double s, double across, double p) {  // (across: along the centre line's normal)
+        double r, a, dr, da;
+        bl.centre_line(s, r, a, dr, da);
+        return place(b, bl, node, theta, r - across * da, a + across * dr, p);
+    };
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(clip.dofs());
+    v.segment<3>(6) = on(2, 0.2, 4.0, 0.1, 0.004);
+    v.segment<3>(9) = on(3, 0.2, 4.5, 0.45, -0.00767);  // over the side edge (see ForcesAndTangentAreTheEnergysDerivatives)
+    v[clip.theta_dof()] = 0.2;
+    const fem::BladeLoads L = clip.loads(v);
+    ASSERT_EQ(L.contacts[0], 1);
+    ASSERT_EQ(L.contacts[1], 1);
+    expect_derivatives(clip, v, 6, 1e-6);
+    // The force on node 3 turns round the edge across the curved blade (along its centre line's normal, not z).
+    const Eigen::VectorXd g = clip.internal_force(v);
+    const Eigen::Vector3d f3 = -g.segment<3>(9) + b.body->internal_force(v.head(b.body->dofs())).segment<3>(9);
+    double r, a, dr, da;
+    bl.centre_line(4.5, r, a, dr, da);
+    Eigen::Vector3d t, n, w;
+    bl.frame(-1, 0.2, t, n, w);
+    const Eigen::Vector3d across = -da * t + dr * w;
+    EXPECT_GT(f3.dot(across), 0.1 * f3.norm());
+    EXPECT_LT(std::abs(f3.dot(dr * t + da * w)), 1e-9 * f3.norm());  // nothing along the centre line
+}
+
 TEST(ClipBody, NoStepPassesThroughABlade) {
     // Node 2 0.05 mm in front of blade +1 at θ = 0.2: sent 0.2 mm through the face, the step is cut where it is a
     // tenth of its distance from it; the blades closing to θ = 0 (which would leave it 0.4 mm behind blade +1)

@@ -55,6 +55,29 @@ TEST(CompliantClip, BladeDistanceIsTheFacesOverTheBladeAndTheRoundedEdgesBeside)
     EXPECT_NEAR(fem::blade_distance(b, 1, th, 4.0 * t + 0.3 * n), 0.3, 1e-12);
 }
 
+TEST(CompliantClip, BladeDistanceOnACurvedBladeIsAcrossItsCentreLine) {
+    fem::ClipBlades b;  // 7 × 1 mm, curved from 2 mm at 5 mm towards +z (= axis × up), closed
+    b.curve_radius_mm = 5.0;
+    b.curve_from_mm = 2.0;
+    // Over the face where it has turned 45° (s = 2 + 5π/4): in front of it by the plane's distance, however far
+    // across the straight blade's 1 mm that point lies.
+    double r, a, dr, da;
+    b.centre_line(2.0 + 5.0 * PI / 4, r, a, dr, da);
+    EXPECT_NEAR(r, 2.0 + 5.0 * std::sqrt(0.5), 1e-12);
+    EXPECT_NEAR(a, 5.0 * (1 - std::sqrt(0.5)), 1e-12);
+    ASSERT_GT(a, 1.0);  // beside a straight blade
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {r, -0.25, a}), 0.25, 1e-12);
+    // 0.3 mm out from its side (across the centre line, level with the face): as beside a straight blade.
+    const Eigen::Vector2d out = 0.8 * Eigen::Vector2d(-da, dr);  // across the centre line, towards +a's side
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {r + out[0], -1e-9, a + out[1]}), std::hypot(0.4, 0.1) - 0.1, 1e-6);
+    // Before the curve (r < 2) the blade is the straight one.
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {1.5, -1e-9, 0.8}), std::hypot(0.4, 0.1) - 0.1, 1e-6);
+    // 0.3 mm on from its tip (s = 7) along its end's direction: the tip's rounded edge, the way along it measured on
+    // the arc (R atan(0.3/R)).
+    b.centre_line(7.0, r, a, dr, da);
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {r + 0.3 * dr, -1e-9, a + 0.3 * da}), std::hypot(5.0 * std::atan(0.3 / 5.0) + 0.1, 0.1) - 0.1, 1e-9);
+}
+
 TEST(CompliantClip, HeldOpenOnABlockOneFrameGivesItsHardContactForce) {
     const Block b;
     const fem::ClipSpring spring = test_spring();
@@ -121,15 +144,16 @@ TEST(CompliantClip, ReleasedOnABlockTheFramesStopAtTheAnalyticAngle) {
     EXPECT_EQ(g.theta, 0.0);
 }
 
-TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalance) {
-    // ClipBody's test block: 2 × 1 × 1 mm, 1 MPa, 3 … 5 mm from the hinge, its far face held; blades 2 mm wide.
+namespace {
+
+/// ClipBody's test block (2 × 1 × 1 mm, 1 MPa, 3 … 5 mm from the hinge, its far face held) released between
+/// `blades` at 40°: the linearised frames reach the balance of ClipBody's barrier solve.
+void frames_reach_the_barriers_balance(const fem::ClipBlades& blades) {
     const aneu::test::HeldBlock hb;
     const Eigen::MatrixX3d& X = hb.X;
     const fem::NeoHookeanSolid& solid = *hb.solid;
     const std::vector<int>& surface = hb.surface;
     const Eigen::VectorXi& fixed = hb.fixed;
-    fem::ClipBlades blades;
-    blades.width_mm = 2.0;
     const fem::ClipSpring spring = test_spring();
 
     // The reference: ClipBody's barrier (d̂ = 0.01 mm) in one Newton solve, released at 40°.
@@ -175,6 +199,26 @@ TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalan
             EXPECT_GT(d, -1e-6) << "node " << node << ", blade " << s;
         }
     }
+}
+
+}  // namespace
+
+TEST(CompliantClip, LinearisedFramesOnANeoHookeanBlockReachTheBarrierSolvesBalance) {
+    fem::ClipBlades blades;  // 2 mm wide: the block's 1 mm face lies within them
+    blades.width_mm = 2.0;
+    frames_reach_the_barriers_balance(blades);
+}
+
+TEST(CompliantClip, OnCurvedBladesTheFramesReachTheBarrierSolvesBalanceToo) {
+    // Blades curved from 2 mm at a radius of 8 mm (towards +z): over the block (3 … 5 mm out) their centre line moves
+    // 0.06 … 0.58 mm across it, so the block's far corner (z = −0.5) lies beside their rounded side edge, the rest
+    // under the face. (Tighter, at 6 mm and less, the block is squeezed sideways off the edge and ClipBody's one
+    // Newton solve from 40° needs more than its 30 iterations a step.)
+    fem::ClipBlades blades;
+    blades.width_mm = 2.0;
+    blades.curve_radius_mm = 8.0;
+    blades.curve_from_mm = 2.0;
+    frames_reach_the_barriers_balance(blades);
 }
 
 namespace {

@@ -23,6 +23,7 @@
 /// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include <mutex>
@@ -69,6 +70,29 @@ struct ClipBlades {
     Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
     Eigen::Vector3d up = Eigen::Vector3d::UnitY();
     double length_mm = 7.0, width_mm = 1.0, thickness_mm = 0.5, closed_gap_mm = 0.0;
+    /// A blade curved in its face plane (as curved aneurysm clips are): from `curve_from_mm` along it (the heel, where
+    /// the blade begins beyond a fulcrum's arms) its centre line bends on a circle of radius |curve_radius_mm| towards
+    /// +w (= axis × up) when positive, towards −w when negative; 0: straight. Its face stays one plane (the blade
+    /// turns rigidly with θ), so only where the face ends changes: its width W is measured across the centre line and
+    /// its length along it. Valid for |R| ≥ 2 mm, > W, and an arc of at most 90° (check_curve()).
+    double curve_radius_mm = 0.0, curve_from_mm = 0.0;
+    bool curved() const { return curve_radius_mm != 0.0; }
+    /// A point's place on the face plane in the blade's own coordinates: s, the length along the centre line from
+    /// the hinge end, and a, the offset across it (along w; the straight blade's r and a), with their first (ds, da)
+    /// and second (hs, ha) derivatives on the straight coordinates (r = rel·t, a = rel·w). A straight blade: s = r,
+    /// a = a. Where the blade curves: the polar coordinates about its centre of curvature, s = r₀ + R φ, a = R − ρ.
+    struct FaceCoords {
+        double s = 0, a = 0;
+        Eigen::Vector2d ds = Eigen::Vector2d(1, 0), da = Eigen::Vector2d(0, 1);
+        Eigen::Matrix2d hs = Eigen::Matrix2d::Zero(), ha = Eigen::Matrix2d::Zero();
+        double rho_c = std::numeric_limits<double>::infinity();  ///< in the face plane from the centre of curvature (∞: straight)
+    };
+    FaceCoords face_coords(double r, double a) const;
+    /// The centre line at arc length s from the hinge end: its point (r along the axis, a along w) in the closed
+    /// blade's frame, and its direction there (for drawing the blades and their outline).
+    void centre_line(double s, double& r, double& a, double& dr, double& da) const;
+    /// @throws InputError a curve that is too tight for the blade (|R| < 2 mm or ≤ W) or bends it past 90°
+    void check_curve() const;
     /// Blade s (±1) at opening θ: its direction t, inner-face normal n (towards the other blade) and the
     /// across-blade direction w.
     void frame(int s, double theta, Eigen::Vector3d& t, Eigen::Vector3d& n, Eigen::Vector3d& w) const;
@@ -168,6 +192,8 @@ private:
         Eigen::Vector3d u = Eigen::Vector3d(0, 0, 1);  // ∂D/∂(r, a, p): the unit vector from the blade's core
         double dist = 0;                               // beside the core: |v|, the distance from its edge (0: over it)
         double mr = 0, ma = 0, md = 0;                 // which of v's components follow r, a, p (1) or are 0
+        bool curved = false;                           // a curved blade's: u, mr, ma follow fc's (s, a), not (r, a)
+        ClipBlades::FaceCoords fc;
     };
     static constexpr double EDGE_MM = 0.1;  ///< the blades' edge radius ρ (less on blades too thin or narrow for it)
     /// D: how far the point hinge + rel lies in front of the blade whose frame c holds (its face flat over the
@@ -182,6 +208,8 @@ private:
     /// One candidate against one blade: energy, gradient on (its x, y, z, θ) and (H ≠ null) the 4 × 4 tangent.
     bool pair_terms(const Eigen::VectorXd& v, size_t k, int s, Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H,
                     bool project) const;
+    /// pair_terms' energy, gradient and tangent on a curved blade (c measured).
+    bool pair_terms_curved(const Touch& c, double& e, Eigen::Vector4d& grad, Eigen::Matrix4d* H, bool project) const;
     /// Both blades' frames at v's opening (index 0: blade +1), once per evaluation.
     std::array<Touch, 2> touches(const Eigen::VectorXd& v) const;
     /// Candidate k against blade s at v (c holds that blade's frame from touches()): true when it presses on it

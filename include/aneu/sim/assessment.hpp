@@ -74,6 +74,7 @@ struct JawsBox {
     Eigen::Vector3d hinge, axis, up;
     double length_mm = 0, width_mm = 0;
     double margin_mm = 0, max_up_mm = std::numeric_limits<double>::infinity();
+    double curve_radius_mm = 0, curve_from_mm = 0;  ///< curved blades (fem::ClipBlades): along and across their centre line
 };
 /// Where a neck line (closed loops of points) lies against clips' jaws: the fraction of its length (segment by
 /// segment, at their midpoints) within some clip's jaws (0 ≤ along the axis ≤ length, within half the width plus the

@@ -45,6 +45,10 @@ struct ClipModel {
     /// fulcrum_mm + jaw_length_mm from it: reach_mm()); the spring's label point lies 2/3 of the blade from the heel's
     /// side, fulcrum_mm + 2/3 jaw_length_mm from the fulcrum. A box jaw only (not with jaw_mesh).
     double fulcrum_mm = 0.0;
+    /// Blades curved in their face plane (a curved clip): from the heel their centre line bends on a circle of this
+    /// radius [mm] towards axis × up (positive) or up × axis (negative); 0: straight (fem::ClipBlades::curve_radius_mm:
+    /// the width is across the centre line, the length along it). A box jaw only (not with jaw_mesh).
+    double jaw_curve_radius_mm = 0.0;
     /// The jaws' length from the fulcrum: fulcrum_mm + jaw_length_mm.
     double reach_mm() const { return fulcrum_mm + jaw_length_mm; }
     /// An opening step's share that gives the blade's middle the travel the same step gives a clip turning at its
