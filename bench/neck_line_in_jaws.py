@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: MIT
 # Where a run's deformed neck line lies in its clip's jaw frame: per neck-line point (as ANEU_LUMEN_OBJ writes them,
 # `# neck LOOP X Y Z GAP`), r from the hinge along the jaws, across their width (along axis x up; the jaws span
-# +-width/2), up (the opening direction) and the gap across the lumen there, sorted by r. Shows whether an open part
+# +-width/2; a curved clip's along and across its centre line), up (the opening direction) and the gap across the
+# lumen there, sorted by r. Shows whether an open part
 # of the neck line lies between the jaws (the clip held open) or beside them (squeezed out sideways).
 #   python3 bench/neck_line_in_jaws.py LUMEN.obj SCENE.json > neck_line.tsv
 import json, math, sys
@@ -28,11 +29,18 @@ for line in open(obj):
         p = line.split()
         d = [float(p[3 + i]) - hinge[i] for i in range(3)]
         rows.append((dot(d, ax), dot(d, w), dot(d, upv), float(p[6])))
-rows.sort()
 half = 0.5 * model["jaw_width_mm"]
 # r from where the blades turn: with a fulcrum (fulcrum_mm) the arms behind the heel close as blade, as the simulator
 # and its assessment take them (docs/scene_format.md)
 reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
+# A curved clip (jaw_curve_radius_mm, from the heel): r along its centre line and across it, as
+# fem::ClipBlades::face_coords measures them.
+R, r0 = model.get("jaw_curve_radius_mm", 0.0), model.get("fulcrum_mm", 0.0)
+if R != 0:
+    g, Rm = (1.0 if R > 0 else -1.0), abs(R)
+    bent = lambda r, a: (r, a) if r <= r0 else (r0 + Rm * math.atan2(r - r0, Rm - g * a), g * (Rm - math.hypot(r - r0, Rm - g * a)))
+    rows = [bent(r, a) + (u, gp) for r, a, u, gp in rows]
+rows.sort()
 print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
 for r, a, u, g in rows:
     where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")

@@ -48,6 +48,11 @@ ap.add_argument("--jaw-length-mm", type=float, default=0.0)
 ap.add_argument("--hinge-back-mm", type=float, default=0.0)
 ap.add_argument("--blade-friction", type=float, default=-1.0)
 ap.add_argument("--hold", action="store_true")
+# a curved clip (the model's jaw_curve_radius_mm, from the heel), the clip turned by --turn-deg about its opening
+# direction at the closing pose (the fulcrum) and moved --across-mm along its width: bench/fit_curved_blade.py's fit
+ap.add_argument("--curve-radius-mm", type=float, default=0.0)
+ap.add_argument("--turn-deg", type=float, default=0.0)
+ap.add_argument("--across-mm", type=float, default=0.0)
 a = ap.parse_args()
 raw = open(a.plan).read()
 text = "\n".join(l for l in raw.splitlines() if not l.lstrip().startswith("//"))
@@ -109,6 +114,39 @@ if a.shift_mm != 0:
     for k in s["instruments"][0]["keyframes"]:
         if "position" in k:
             k["position"] = [round(p + a.shift_mm * q, 4) for p, q in zip(k["position"], n)]
+if a.curve_radius_mm != 0:
+    for m in s["clip_models"].values():
+        m["jaw_curve_radius_mm"] = a.curve_radius_mm
+if a.turn_deg != 0 or a.across_mm != 0:
+    import math
+    keys = s["instruments"][0]["keyframes"]
+    closing = min((k for k in keys if "position" in k and "opening_deg" in k), key=lambda k: k["opening_deg"])
+    c0 = closing["position"]
+    up = closing.get("up", keys[0]["up"])
+    dot = lambda u, v: sum(x * y for x, y in zip(u, v))
+    cross = lambda u, v: [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    nu = math.sqrt(dot(up, up))
+    up = [x / nu for x in up]
+    c, sn = math.cos(math.radians(a.turn_deg)), math.sin(math.radians(a.turn_deg))
+    # Rodrigues about up: v -> c v + s (up x v) + (1 - c)(up.v) up; a turn by +psi takes the axis towards +w (= axis x up):
+    # up x axis = -w, so the turn is by -psi about up
+    def turn(v):
+        k = cross(up, v)
+        return [c * x - sn * y + (1 - c) * dot(up, v) * z for x, y, z in zip(v, k, up)]
+    axis = None
+    for k in keys:
+        if "axis" in k:
+            k["axis"] = [round(x, 6) for x in turn(k["axis"])]
+        if "up" in k:
+            k["up"] = [round(x, 6) for x in turn(k["up"])]
+        if "position" in k:
+            k["position"] = [round(q + x, 4) for q, x in zip(c0, turn([p - q for p, q in zip(k["position"], c0)]))]
+    ax = next(k["axis"] for k in keys if "axis" in k)
+    w = cross(ax, up)
+    nw = math.sqrt(dot(w, w))
+    for k in keys:
+        if "position" in k:
+            k["position"] = [round(p + a.across_mm * x / nw, 4) for p, x in zip(k["position"], w)]
 if a.hold:
     k = s["instruments"][0]["keyframes"]
     closing = next(i for i, x in enumerate(k) if x.get("opening_deg") == 0)

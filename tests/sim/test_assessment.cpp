@@ -413,6 +413,29 @@ TEST(NeckInJaws, ALineWithinTheJawsWidthIsInAndOneSqueezedOutSidewaysIsBesideThe
     EXPECT_TRUE(std::isnan(neck_in_jaws({}, {j}).second));
 }
 
+TEST(NeckInJaws, ALineAlongACurvedJawIsInWhereTheStraightOneWouldLeaveIt) {
+    // Jaws along x from the origin, opening along z, 1 mm wide, curved from 2 mm at a radius of 10 mm towards x × z = −y.
+    // A slit along the bent centre line (s = 2.5 … 7.5 mm) is in; the straight jaws leave its far part beside them.
+    JawsBox j{Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitZ(), 8.0, 1.0};
+    j.curve_radius_mm = 10.0;
+    j.curve_from_mm = 2.0;
+    std::vector<Eigen::Vector3d> pts;
+    for (int side : {1, -1})
+        for (int k = 0; k <= 50; ++k) {
+            const double s = side > 0 ? 2.5 + 0.1 * k : 7.5 - 0.1 * k, phi = (s - 2.0) / 10.0;
+            pts.emplace_back(2.0 + 10.0 * std::sin(phi), -10.0 * (1 - std::cos(phi)), 0.05 * side);
+        }
+    const std::vector<std::vector<Eigen::Vector3d>> line{pts};
+    const auto [in, beside] = neck_in_jaws(line, {j});
+    EXPECT_DOUBLE_EQ(in, 1.0);
+    EXPECT_EQ(beside, 0.0);
+    JawsBox straight = j;
+    straight.curve_radius_mm = 0;
+    const auto [in_s, beside_s] = neck_in_jaws(line, {straight});
+    EXPECT_LT(in_s, 0.8);  // past s ≈ 5.2 the bent line lies more than 0.5 mm across
+    EXPECT_NEAR(beside_s, 10.0 * (1 - std::cos(0.55)) - 0.5, 0.02);  // its far end: 1.47 mm across, 0.97 beside
+}
+
 // The parent's channel: the tube with a side aneurysm's neck (the sac a patch of its wall, |θ| < π/4 and |z| < 1 mm),
 // its ends the pieces of the wall at least 6 mm from the neck line (z < −7 and z > 7 mm).
 namespace {

@@ -646,6 +646,48 @@ TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", 5.0}, {"jaw_mesh", stl}}, "with a jaw_mesh");
 }
 
+TEST(ClipFiles, ACurvedClipsJawsBendFromTheHeelAndATooTightCurveIsRefused) {
+    // A 9 mm clip with a fulcrum 5 mm behind its heel, its blades curved at 12 mm towards axis × up: the model keeps
+    // the radius, its jaws (a box swept along the centre line) hold a point on the bent centre line 8 mm into the curve
+    // and not the straight blade's place there, and the blades' frame (blades_of, the patch and the spring) bends
+    // from the heel. Refused: a curve tighter than the blade allows, a curve with a jaw mesh.
+    test::TempDir d("curved");
+    json j = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
+    j["clip_models"]["straight"] = {{"file", std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_9mm.json"}, {"fulcrum_mm", 5.0},
+                                    {"jaw_curve_radius_mm", 12.0}};
+    put(d.file("s.json"), j.dump());
+    const sim::Scene sc = sim::read_scene(d.file("s.json"));
+    const sim::ClipModel& c = sc.clip_models.at("straight");
+    EXPECT_DOUBLE_EQ(c.jaw_curve_radius_mm, 12.0);
+    sim::Pose p;
+    p.position = Eigen::Vector3d(1, 2, 3);
+    p.axis = Eigen::Vector3d::UnitX();
+    p.up = Eigen::Vector3d::UnitZ();  // axis × up = −y: the blades bend towards −y
+    const auto jaws = sim::clip_jaws(c, p, 0.0);
+    ASSERT_EQ(jaws[0].kind, sim::Shape::Kind::MESH);
+    const double phi = 8.0 / 12.0;
+    const Eigen::Vector3d on = p.position + Eigen::Vector3d(5.0 + 12.0 * std::sin(phi), -12.0 * (1 - std::cos(phi)), 0.25);  // 0.25 into jaw +1
+    EXPECT_LT(jaws[0].sdf(on), -0.2);
+    EXPECT_GT(jaws[0].sdf(Eigen::Vector3d(on.x(), p.position.y(), on.z())), 0.5);  // where a straight blade would be: outside
+    EXPECT_LT(jaws[0].sdf(p.position + Eigen::Vector3d(3.0, 0.0, 0.25)), -0.2);  // the arms before the heel: straight
+    auto refused = [&](const json& model, const std::string& says) {
+        json k = j;
+        k["clip_models"]["straight"] = model;
+        put(d.file("bad.json"), k.dump());
+        try {
+            sim::read_scene(d.file("bad.json"));
+            ADD_FAILURE() << "accepted " << model.dump();
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+        }
+    };
+    refused({{"jaw_length_mm", 9.0}, {"jaw_curve_radius_mm", 5.0}}, "bends past 90 degrees");
+    refused({{"jaw_length_mm", 9.0}, {"jaw_curve_radius_mm", -1.0}}, "jaw_curve_radius_mm");
+    const std::string stl = d.file("jaw.stl");
+    put(stl, "solid j\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid j\n");
+    refused({{"jaw_length_mm", 9.0}, {"jaw_curve_radius_mm", 20.0}, {"jaw_mesh", stl}}, "with a jaw_mesh");
+}
+
 TEST(Simulator, AFastClosingJawKeepsTheWallBetweenTheJaws) {
     // A clip across the whole tube (hinge 6 mm off its axis, 8 mm jaws along −x, opening along y) snaps shut from
     // 60° in 3 physics frames: the jaws cross the tube's wall at up to 1.3 mm a frame, more than their 0.5 mm
