@@ -4,7 +4,7 @@
 # interpenetration), the parent's narrowing, the forces against the clip model's range, and the patch frames' cost.
 #   python3 bench/patch_case_summary.py RUN_DIR SECONDS SPRING_SCALE     -> the line
 #   python3 bench/patch_case_summary.py RUN_DIR --render-args            -> render_channel.py's arguments after OUT.png
-#                                                                        (title, pose, length, opening, blades' start, width)
+#                                                                        (title, pose, length, opening, blades' start, width, curve)
 import json, math, os, sys
 
 run = sys.argv[1]
@@ -32,8 +32,9 @@ if sys.argv[2] == "--render-args":
     back = re.search(r"hinge ([0-9.]+) mm further back", model.get("spring", {}).get("source", ""))
     start = model.get("fulcrum_mm", float(back.group(1)) if back else 0.0)
     length = model["jaw_length_mm"] + model.get("fulcrum_mm", 0.0)
-    print("'%s' %s %s %s %g %.4f %g %g" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), length,
-                                          clip.get("opening_deg", 0.0), start, model.get("jaw_width_mm", 1.0)))
+    print("'%s' %s %s %s %g %.4f %g %g %g" % (title, f(closing["position"]), f(closing["axis"]), f(closing["up"]), length,
+                                             clip.get("opening_deg", 0.0), start, model.get("jaw_width_mm", 1.0),
+                                             model.get("jaw_curve_radius_mm", 0.0)))
     sys.exit(0)
 secs, scale = int(sys.argv[2]), float(sys.argv[3])
 header = [l for l in open(os.path.join(run, "plan.json")) if l.startswith("//")]

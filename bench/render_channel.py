@@ -5,7 +5,7 @@
 # and channel as comments). System python3 with python3-vtk9 (bench only):
 #   bash scripts/xvfb.sh /usr/bin/python3 bench/render_channel.py LUMEN.obj OUT.png "TITLE" HINGE AXIS CLOSING LENGTH_MM OPENING_DEG [FROM_MM [WIDTH_MM]]
 # FROM_MM: draw the blades from this distance from the hinge (a hinge set far back: patch_scene.py --hinge-back-mm);
-# WIDTH_MM: the jaws' width (their edge lines' spacing) [1]. patch_case_summary.py --render-args gives all of them.
+# WIDTH_MM: the jaws' width (their edge lines' spacing) [1]; CURVE_MM: a curved clip's radius [0]. patch_case_summary.py --render-args gives all of them.
 # HINGE, AXIS (along the jaws) and CLOSING (the scene's "up": the direction the jaws close across) as x,y,z.
 import math, sys, vtk
 obj, out, title = sys.argv[1], sys.argv[2], sys.argv[3]
@@ -13,6 +13,7 @@ hinge = [float(x) for x in sys.argv[4].split(",")]; axis = [float(x) for x in sy
 length, theta_deg = float(sys.argv[7]), float(sys.argv[8])
 start = float(sys.argv[9]) if len(sys.argv) > 9 else 0.0  # the blades drawn from this far from the hinge (a hinge set far back)
 jaw_w = float(sys.argv[10]) if len(sys.argv) > 10 else 1.0  # the jaws' width: their edges drawn that far apart
+curve = float(sys.argv[11]) if len(sys.argv) > 11 else 0.0  # a curved clip's radius (jaw_curve_radius_mm), bent from `start`
 widths = obj
 r = vtk.vtkOBJReader(); r.SetFileName(obj); r.Update()
 pd = r.GetOutput()
@@ -38,13 +39,25 @@ for vi, (d, vu) in enumerate([(up, axis), ([-a for a in axis], up)]):
     for s in (1, -1):
         half = 0.5 * theta_deg * math.pi / 180
         t = [math.cos(half) * axis[i] + s * math.sin(half) * up[i] for i in range(3)]
-        line = vtk.vtkLineSource(); line.SetPoint1(*[hinge[i] + start * t[i] for i in range(3)]); line.SetPoint2(*[hinge[i] + length * t[i] for i in range(3)])
+        # the centre line and the two edges (a curved clip's bend from `start` on a circle of radius `curve`,
+        # towards +side when positive: fem::ClipBlades::centre_line)
+        def poly(e):
+            pts = vtk.vtkPoints(); n = 40
+            for k in range(n + 1):
+                sl = start + (length - start) * k / n
+                if curve == 0:
+                    r, a, dr, da = sl, 0.0, 1.0, 0.0
+                else:
+                    g, R = (1.0 if curve > 0 else -1.0), abs(curve); phi = (sl - start) / R
+                    r, a, dr, da = start + R * math.sin(phi), g * R * (1 - math.cos(phi)), math.cos(phi), g * math.sin(phi)
+                pts.InsertNextPoint(*[hinge[i] + r * t[i] + a * side[i] + e * (-da * t[i] + dr * side[i]) for i in range(3)])
+            src = vtk.vtkLineSource(); src.SetPoints(pts); return src
+        line = poly(0.0)
         tube = vtk.vtkTubeFilter(); tube.SetInputConnection(line.GetOutputPort()); tube.SetRadius(0.06); tube.SetNumberOfSides(8)
         bm = vtk.vtkPolyDataMapper(); bm.SetInputConnection(tube.GetOutputPort())
         ba = vtk.vtkActor(); ba.SetMapper(bm); ba.GetProperty().SetColor(0.2, 0.2, 0.9); ren.AddActor(ba)
         for e in (0.5 * jaw_w, -0.5 * jaw_w):
-            l2 = vtk.vtkLineSource(); p0 = [hinge[i] + e * side[i] for i in range(3)]
-            l2.SetPoint1(*[p0[i] + start * t[i] for i in range(3)]); l2.SetPoint2(*[p0[i] + length * t[i] for i in range(3)])
+            l2 = poly(e)
             m2 = vtk.vtkPolyDataMapper(); m2.SetInputConnection(l2.GetOutputPort())
             a2 = vtk.vtkActor(); a2.SetMapper(m2); a2.GetProperty().SetColor(0.2, 0.2, 0.9); a2.GetProperty().SetLineWidth(2); ren.AddActor(a2)
     sph = vtk.vtkSphereSource(); sph.SetCenter(*cx); sph.SetRadius(0.15); sm = vtk.vtkPolyDataMapper(); sm.SetInputConnection(sph.GetOutputPort())

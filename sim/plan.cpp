@@ -123,6 +123,35 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // at the neck's far end at rest (the heel 1 mm before a neck of its length): tan(θ_F/2) = tan(θ/2)·(1 + len) /
     // (F + 1 + len); F = 0 gives θ.
     const double F = o.fulcrum_mm;
+    // A curved clip (PlanOptions::curve_radius_mm): a point's place along and across a blade bent by `bend` (+1 towards
+    // +a, −1 away, 0 straight) from the heel, in the blade's frame (r along it from the hinge, a across it).
+    const double CR = o.curve_radius_mm;
+    if (!(CR == 0 || CR >= 2) || !std::isfinite(CR)) throw InputError("plan: --curve-radius-mm " + std::to_string(CR) + ", expected 0 (straight) or a radius >= 2 mm");
+    auto bent = [&](double bend, double r, double a) {
+        if (bend == 0 || CR == 0) return std::pair<double, double>(r, a);
+        fem::ClipBlades cb;
+        cb.curve_radius_mm = bend * CR;
+        cb.curve_from_mm = F;
+        const fem::ClipBlades::FaceCoords fc = cb.face_coords(r, a);
+        return std::pair<double, double>(fc.s, fc.a);
+    };
+    // The blade lengths a curved clip can have: bent 90° at most (fem::ClipBlades::check_curve).
+    auto blade_fits = [&](double l) {
+        if (CR == 0) return true;
+        fem::ClipBlades cb;
+        cb.length_mm = F + l;
+        cb.width_mm = 1.0;
+        cb.curve_radius_mm = CR;
+        cb.curve_from_mm = F;
+        try {
+            cb.check_curve();
+        } catch (const InputError&) {
+            return false;
+        }
+        return true;
+    };
+    // How far along the axis a blade of length l reaches from the hinge (bent: its chord).
+    auto reach_along = [&](double l) { return CR == 0 ? F + l : F + CR * std::sin(std::min(l / CR, 0.5 * PI)); };
     auto at_fulcrum = [&](double heel_deg) {
         if (F == 0) return heel_deg;  // exactly (the round trip through tan and atan is not)
         const double len = nf.length_mm;
@@ -192,7 +221,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     }
     // Outer-surface vertices within CLEAR of either open blade (boxes: length, width, thickness) with the hinge at
     // `hinge`, anywhere along the approach (the hinge every 0.25 mm back to approach_mm before it).
-    auto approach_hits = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+    auto approach_hits = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length, double bend_sac) {
         fem::ClipBlades bl;
         bl.axis = axis;
         bl.up = f.w;
@@ -204,14 +233,20 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             Eigen::Vector3d t, nn, ww;
             bl.frame(sb, f.opening * PI / 180.0, t, nn, ww);
             const double dr = axis.dot(t), da = axis.dot(ww), dp = axis.dot(nn);
+            // a bent blade's curve, towards the sac (bend_sac > 0) or away, in this frame's across (ww)
+            Eigen::Vector3d sac_side = axis.cross(f.w);
+            if (sac_side.dot(n) < 0) sac_side = -sac_side;
+            const double bend = bend_sac * (ww.dot(sac_side) >= 0 ? 1.0 : -1.0);
             for (Eigen::Index v = 0; v < s.size() + static_cast<Eigen::Index>(clamped.size()); ++v) {
                 // Along the approach the hinge is at hinge − b·axis: the vertex's coordinates in the blade's frame
                 // shift by b·(axis·t, axis·ww, axis·nn). The clamped nodes after the surface's vertices.
                 const Eigen::Vector3d rel0 = (v < s.size() ? Eigen::Vector3d(s.X.row(v).transpose()) : clamped[static_cast<size_t>(v - s.size())]) - hinge;
                 const double r0 = rel0.dot(t), a0 = rel0.dot(ww), p0 = rel0.dot(nn);
                 for (double b = 0; b <= o.approach_mm + 1e-9; b += 0.25) {
-                    const double r = r0 + b * dr, across = a0 + b * da, p = p0 + b * dp;
-                    if (r >= -CLEAR && r <= length + CLEAR && std::abs(across) <= 0.5 * JAW_W + CLEAR && p < CLEAR && p > -JAW_T - CLEAR) {
+                    const double p = p0 + b * dp;
+                    if (!(p < CLEAR && p > -JAW_T - CLEAR)) continue;
+                    const auto [r, across] = bent(bend, r0 + b * dr, a0 + b * da);
+                    if (r >= -CLEAR && r <= length + CLEAR && std::abs(across) <= 0.5 * JAW_W + CLEAR) {
                         ++hits;
                         break;
                     }
@@ -253,29 +288,31 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             if (!close) parent.push_back(x);
         }
     }
-    auto parent_pinched = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+    auto parent_pinched = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length, double bend_sac) {
         Eigen::Vector3d side = axis.cross(f.w).normalized();
         if (side.dot(n) < 0) side = -side;  // towards the sac
         const double tan_half = std::tan(0.5 * f.opening * PI / 180.0);
         int n_in = 0;
         for (const Eigen::Vector3d& x : parent) {
             const Eigen::Vector3d r = x - hinge;
-            const double along = r.dot(axis);
-            const double h = r.dot(side);
-            if (along >= 0 && along <= length && h >= 0 && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= along * tan_half) ++n_in;
+            const double up = r.dot(axis);
+            const auto [along, h] = bent(bend_sac, up, r.dot(side));
+            if (up >= 0 && along <= length && h >= 0 && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= up * tan_half) ++n_in;
         }
         return n_in;
     };
-    auto clamped_gripped = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length) {
+    auto clamped_gripped = [&](const Way& f, const Eigen::Vector3d& hinge, const Eigen::Vector3d& axis, double length, double bend_sac) {
         if (clamped.empty()) return 0;
         const Eigen::Vector3d side = axis.cross(f.w).normalized();
+        const double bend = bend_sac * (side.dot(n) >= 0 ? 1.0 : -1.0);
         const double tan_half = std::tan(0.5 * f.opening * PI / 180.0);
         int n_in = 0;
         for (const Eigen::Vector3d& x : clamped) {
             const Eigen::Vector3d r = x - hinge;
-            const double along = r.dot(axis);
-            if (along < -EDGE_MM || along > length + EDGE_MM || std::abs(r.dot(side)) > 0.5 * JAW_W + EDGE_MM) continue;
-            if (std::abs(r.dot(f.w)) <= std::max(along, 0.0) * tan_half + JAW_T + EDGE_MM) ++n_in;
+            const double up = r.dot(axis);
+            const auto [along, across] = bent(bend, up, r.dot(side));
+            if (up < -EDGE_MM || along > length + EDGE_MM || std::abs(across) > 0.5 * JAW_W + EDGE_MM) continue;
+            if (std::abs(r.dot(f.w)) <= std::max(up, 0.0) * tan_half + JAW_T + EDGE_MM) ++n_in;
         }
         return n_in;
     };
@@ -295,6 +332,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         double alpha, c, extra, covered;
         int order;
         double inside;  // how far inside the nearer edge of the jaws' width the line they cover comes at its closest
+        double bend = 0;  // a curved clip's: +1 its blades bend towards the sac, −1 away from it
     };
     auto corridor = [&](const Way& f) {  // the simulated-surface vertices in the way of the approach
         const double back = f.margin - f.near;
@@ -320,15 +358,37 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             const double alpha = ia * 3.0 * PI / 180.0;
             const Way& f = ways[wi];
             const Eigen::Vector3d nprime = std::sin(alpha) * f.side * f.u + std::cos(alpha) * n;  // the tilted mid-plane's normal
+            const Eigen::Vector3d axis_a = std::cos(alpha) * f.side * f.u - std::sin(alpha) * n;
             for (double c = h_lo - 0.5 * JAW_W; c <= h_hi + 0.5 * JAW_W + 3.0 + 1e-9; c += 0.05) {
-                double in = 0, widest = 0;
-                for (const auto& [q, len] : seg)
-                    if (const double h = std::abs((q - c * n).dot(nprime)); h <= 0.5 * JAW_W) {
-                        in += len;
-                        widest = std::max(widest, h);
+                if (CR == 0) {
+                    double in = 0, widest = 0;
+                    for (const auto& [q, len] : seg)
+                        if (const double h = std::abs((q - c * n).dot(nprime)); h <= 0.5 * JAW_W) {
+                            in += len;
+                            widest = std::max(widest, h);
+                        }
+                    for (double extra = 0; extra <= 6; extra += 1)
+                        cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size()), 0.5 * JAW_W - widest});
+                    continue;
+                }
+                // Bent blades: where the line lies across them depends on how far along them it is, so on how far back
+                // the hinge stands (pose_of: back along u from the neck's centre, on the tilted mid-plane).
+                for (double extra = 0; extra <= 6; extra += 1) {
+                    const double back = f.margin + extra - f.near;
+                    const Eigen::Vector3d hinge_rel = c * n - back * f.side * f.u + back * std::tan(alpha) * n;  // from the neck's centre
+                    for (double bend : {1.0, -1.0}) {
+                        double in = 0, widest = 0;
+                        for (const auto& [q, len] : seg) {
+                            const Eigen::Vector3d rel = q - hinge_rel;
+                            const double h = std::abs(bent(bend, rel.dot(axis_a), rel.dot(nprime)).second);
+                            if (h <= 0.5 * JAW_W) {
+                                in += len;
+                                widest = std::max(widest, h);
+                            }
+                        }
+                        cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size()), 0.5 * JAW_W - widest, bend});
                     }
-                for (double extra = 0; extra <= 6; extra += 1)
-                    cands.push_back({static_cast<int>(wi), alpha, c, extra, in / nf.line_mm, static_cast<int>(cands.size()), 0.5 * JAW_W - widest});
+                }
             }
         }
     auto depth_step = [&](const Candidate& k) {
@@ -368,13 +428,16 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         hinge = nf.centre + k.c * n - back * f.side * f.u + back * std::tan(k.alpha) * n;
         blade = 0;
         short_out = false;
+        // (A bent blade: its chord along the axis, and no longer than bends it 90°.)
         for (double l = 3; l <= 15; l += 2)
-            if ((F + l) * std::cos(k.alpha) >= back + std::max(f.far, flat_half) + t_max + 0.5) {
+            if (blade_fits(l) && reach_along(l) * std::cos(k.alpha) >= back + std::max(f.far, flat_half) + t_max + 0.5) {
                 blade = l;
                 return true;
             }
-        if ((F + 15) * std::cos(k.alpha) >= back + f.far + 0.5) {
-            blade = 15;
+        double longest = 15;
+        while (longest > 3 && !blade_fits(longest)) longest -= 2;
+        if (blade_fits(longest) && reach_along(longest) * std::cos(k.alpha) >= back + f.far + 0.5) {
+            blade = longest;
             short_out = true;
         }
         return blade > 0;
@@ -398,7 +461,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         // A pose that closes on a clamped node is never taken, clear or not: its scene would press tissue that
         // cannot give (C0095: 13-27 kN on the blade, the clip held open).
         // (The arms between a fulcrum and the heel close as blade: the checks run from the hinge to the tips.)
-        const int gripped = clamped_gripped(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
+        const int gripped = clamped_gripped(ways[static_cast<size_t>(k.way)], hi, ax, F + l, k.bend);
         if (gripped > 0) {
             if (!first_gripped) {
                 first_gripped = &k;
@@ -407,8 +470,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             if (++checked >= 60000) break;
             continue;
         }
-        const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
-        const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, F + l);
+        const int in_way = approach_hits(ways[static_cast<size_t>(k.way)], hi, ax, F + l, k.bend);
+        const int pinched = parent_pinched(ways[static_cast<size_t>(k.way)], hi, ax, F + l, k.bend);
         const int h = in_way + pinched;
         if (!widest) {
             widest = &k;
@@ -473,13 +536,16 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     const double t_in = 0.8, t_close = 1.3, t_release = 1.5, t_out = 1.9;
     nlohmann::ordered_json j;
     j["bundle"] = bundle_ref;
-    j["clip_models"][std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm"] = {
+    const std::string model = std::string(CR > 0 ? "curved_" : "straight_") + std::to_string(static_cast<int>(blade)) + "mm";
+    j["clip_models"][model] = {
         {"jaw_length_mm", blade}, {"jaw_width_mm", JAW_W}, {"jaw_thickness_mm", JAW_T}, {"closed_gap_mm", 0.0}, {"max_opening_deg", at_fulcrum(o.max_opening_deg)},
         // The standard permanent clip's closing spring of configs/clips (placeholder figures: configs/clips/README.md).
         {"spring", {{"label_force_n", 1.5}, {"open_force_n", 2.5}, {"placeholder", true},
                     {"source", "configs/clips/README.md: placeholder within the 1-2.5 N of issue #15"}}}};
-    const std::string model = std::string("straight_") + std::to_string(static_cast<int>(blade)) + "mm";
     if (F > 0) j["clip_models"][model]["fulcrum_mm"] = F;  // the pose below is the fulcrum's (docs/scene_format.md)
+    // A curved clip bends towards axis × up when its radius is positive (the scene's up is w)
+    const double curve = CR == 0 ? 0.0 : chosen->bend * CR * (axis.cross(w).dot(n) >= 0 ? 1.0 : -1.0);
+    if (CR > 0) j["clip_models"][model]["jaw_curve_radius_mm"] = curve;
     j["outputs"] = {{"log", stem + "_log.csv"}, {"series", stem + "_series"}, {"report", stem + "_report.json"}};
     if (o.flow) j["outputs"]["flow"] = stem + "_flow.h5";
     nlohmann::ordered_json ap;
@@ -502,15 +568,23 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     char head[1280];
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (border %.1f mm, label edges %.1f mm),\n"
-                  "// normal towards the sac (%.3f, %.3f, %.3f). A straight %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
+                  "// normal towards the sac (%.3f, %.3f, %.3f). A %s %g mm clip comes in along the neck (turned and tilted as below), open %.0f deg,\n"
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
                   "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line (its border);\n"
                   "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach; %d lumen vertices of the parent\n"
                   "// (over %.0f mm from the neck) lie half the jaws' width or more between them; no clamped node (the domain's cut ends) lies within\n"
                   "// %.1f mm of the space the jaws close on. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
-                  blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
+                  CR > 0 ? "curved" : "straight", blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
     std::string header(head);
+    if (CR > 0) {
+        char cu[320];
+        std::snprintf(cu, sizeof cu,
+                      "// Its blades are curved: from the heel they bend on a circle of %g mm %s the sac (the model's jaw_curve_radius_mm, %g);\n"
+                      "// the cover, the approach and the parent are measured along and across the bent blades.\n",
+                      CR, chosen->bend > 0 ? "towards" : "away from", curve);
+        header += cu;
+    }
     if (F > 0) {
         char fu[320];
         std::snprintf(fu, sizeof fu,
@@ -526,7 +600,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         const Eigen::Vector3d nprime = std::sin(chosen->alpha) * way.side * way.u + std::cos(chosen->alpha) * n;
         double lo = 1e300, hi = -1e300;
         for (const auto& [q, len] : seg) {
-            const double h = (q - lift * n).dot(nprime);
+            const Eigen::Vector3d rel = q + nf.centre - hinge;
+            const double h = CR == 0 ? (q - lift * n).dot(nprime) : bent(chosen->bend, rel.dot(axis), rel.dot(nprime)).second;
             if (std::abs(h) > 0.5 * JAW_W) continue;  // not between the jaws
             lo = std::min(lo, h);
             hi = std::max(hi, h);

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "aneu/core/error.hpp"
+#include "aneu/fem/clip.hpp"
 
 namespace aneu::sim {
 namespace {
@@ -162,10 +163,40 @@ TriMesh read_trimesh(const std::string& path) {
     return m;
 }
 
+fem::ClipBlades Shape::bent() const {
+    fem::ClipBlades b;
+    b.length_mm = 2 * half.x();
+    b.curve_radius_mm = bend_radius;
+    b.curve_from_mm = bend_from;
+    return b;
+}
+
+std::vector<Eigen::Vector3d> Shape::bent_corners() const {
+    // Four corners of the cross-section at 65 places along the centre line (a 90° bend's chords then stray
+    // |R|(1 − cos(π/256)) ≈ 8e-5 |R| inside the arc).
+    const fem::ClipBlades b = bent();
+    std::vector<Eigen::Vector3d> out;
+    constexpr int N = 64;
+    for (int i = 0; i <= N; ++i) {
+        double r, a, dr, da;
+        b.centre_line(2 * half.x() * i / N, r, a, dr, da);
+        for (double e : {-half.y(), half.y()})
+            for (double z : {-half.z(), half.z()})
+                out.push_back(centre + (r - half.x() - e * da) * axes.col(0) + (a + e * dr) * axes.col(1) + z * axes.col(2));
+    }
+    return out;
+}
+
 double Shape::sdf(const Eigen::Vector3d& p) const {
     switch (kind) {
         case Kind::BOX: {
-            const Eigen::Vector3d q = (axes.transpose() * (p - centre)).cwiseAbs() - half;
+            Eigen::Vector3d l = axes.transpose() * (p - centre);
+            if (bend_radius != 0) {  // in the bent box's own coordinates: along and across its centre line
+                const fem::ClipBlades::FaceCoords fc = bent().face_coords(l.x() + half.x(), l.y());
+                l.x() = fc.s - half.x();
+                l.y() = fc.a;
+            }
+            const Eigen::Vector3d q = l.cwiseAbs() - half;
             return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
         }
         case Kind::CAPSULE: {
@@ -202,6 +233,16 @@ double Shape::sdf(const Eigen::Vector3d& p) const {
 Eigen::Vector3d Shape::support(const Eigen::Vector3d& n) const {
     switch (kind) {
         case Kind::BOX: {
+            if (bend_radius != 0) {  // the bent box's corners along its centre line
+                Eigen::Vector3d best = centre;
+                double lowest = std::numeric_limits<double>::infinity();
+                for (const Eigen::Vector3d& c : bent_corners())
+                    if (n.dot(c) < lowest) {
+                        lowest = n.dot(c);
+                        best = c;
+                    }
+                return best;
+            }
             Eigen::Vector3d p = centre;
             for (int k = 0; k < 3; ++k) p -= (n.dot(axes.col(k)) >= 0 ? 1.0 : -1.0) * half[k] * axes.col(k);
             return p;
@@ -221,6 +262,10 @@ Aabb Shape::bounds() const {
     Aabb bb;
     switch (kind) {
         case Kind::BOX:
+            if (bend_radius != 0) {
+                for (const Eigen::Vector3d& c : bent_corners()) bb.extend(c);
+                return bb;
+            }
             for (int s = 0; s < 8; ++s) {
                 Eigen::Vector3d p = centre;
                 for (int k = 0; k < 3; ++k) p += ((s >> k) & 1 ? 1.0 : -1.0) * half[k] * axes.col(k);

@@ -34,42 +34,6 @@ std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening
             }
             if (s < 0) sh.mesh.F.col(1).swap(sh.mesh.F.col(2));  // the mirror flips orientation
             sh.mesh.finish();
-        } else if (m.jaw_curve_radius_mm != 0) {
-            // A curved blade: a box swept along its centre line (fem::ClipBlades::centre_line), W wide across it.
-            fem::ClipBlades cb;
-            cb.length_mm = m.reach_mm();
-            cb.curve_radius_mm = m.jaw_curve_radius_mm;
-            cb.curve_from_mm = m.fulcrum_mm;
-            constexpr int N = 32;
-            sh.kind = Shape::Kind::MESH;
-            sh.mesh.V.resize(4 * (N + 1), 3);
-            for (int i = 0; i <= N; ++i) {
-                double r, a, dr, da;
-                cb.centre_line(cb.length_mm * i / N, r, a, dr, da);
-                const Eigen::Vector3d on = base + r * d + a * c, side = 0.5 * m.jaw_width_mm * (-da * d + dr * c);
-                const Eigen::Vector3d back = s * m.jaw_thickness_mm * e;
-                sh.mesh.V.row(4 * i + 0) = (on - side).transpose();
-                sh.mesh.V.row(4 * i + 1) = (on + side).transpose();
-                sh.mesh.V.row(4 * i + 2) = (on + side + back).transpose();
-                sh.mesh.V.row(4 * i + 3) = (on - side + back).transpose();
-            }
-            sh.mesh.F.resize(8 * N + 4, 3);
-            int f = 0;
-            for (int i = 0; i < N; ++i)
-                for (int k = 0; k < 4; ++k) {
-                    const int a0 = 4 * i + k, a1 = 4 * i + (k + 1) % 4, b0 = a0 + 4, b1 = a1 + 4;
-                    sh.mesh.F.row(f++) << a0, a1, b1;
-                    sh.mesh.F.row(f++) << a0, b1, b0;
-                }
-            sh.mesh.F.row(f++) << 0, 2, 1;
-            sh.mesh.F.row(f++) << 0, 3, 2;
-            sh.mesh.F.row(f++) << 4 * N, 4 * N + 1, 4 * N + 2;
-            sh.mesh.F.row(f++) << 4 * N, 4 * N + 2, 4 * N + 3;
-            double vol = 0;  // outward faces: a positive enclosed volume
-            for (Eigen::Index t = 0; t < sh.mesh.F.rows(); ++t)
-                vol += sh.mesh.V.row(sh.mesh.F(t, 0)).dot(sh.mesh.V.row(sh.mesh.F(t, 1)).cross(sh.mesh.V.row(sh.mesh.F(t, 2))));
-            if (vol < 0) sh.mesh.F.col(1).swap(sh.mesh.F.col(2));
-            sh.mesh.finish();
         } else {
             sh.kind = Shape::Kind::BOX;
             sh.axes.col(0) = d;
@@ -77,6 +41,8 @@ std::array<Shape, 2> clip_jaws(const ClipModel& m, const Pose& p, double opening
             sh.axes.col(2) = s * e;
             sh.half = Eigen::Vector3d(0.5 * m.reach_mm(), 0.5 * m.jaw_width_mm, 0.5 * m.jaw_thickness_mm);
             sh.centre = base + 0.5 * m.reach_mm() * d + s * 0.5 * m.jaw_thickness_mm * e;
+            sh.bend_radius = m.jaw_curve_radius_mm;  // a curved clip's jaw bends from the heel towards c (= axis × up)
+            sh.bend_from = m.fulcrum_mm;
         }
     }
     return jaws;

@@ -90,8 +90,14 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
     double plan_fulcrum = aneu::sim::PlanOptions{}.fulcrum_mm;
+    double plan_curve = aneu::sim::PlanOptions{}.curve_radius_mm;
     plan->add_option("--fulcrum-mm", plan_fulcrum, "the planned clip's blades turn about a fulcrum this far behind their heel (the model's fulcrum_mm; 0: about the heel)")
         ->check(CLI::Range(0.0, 60.0))
+        ->capture_default_str();
+    plan->add_option("--curve-radius-mm", plan_curve,
+                     "a curved clip: its blades bend from the heel on a circle of this radius, towards the sac or away from it as covers more of the neck "
+                     "(the model's jaw_curve_radius_mm; 0: straight)")
+        ->check(CLI::Range(0.0, 1000.0))
         ->capture_default_str();
     plan->add_flag("--flow", plan_flow, "the scene's outputs include the residual blood flow after the session (aneuprep flow, OpenFOAM: about a minute for the sample)");
 
@@ -147,6 +153,7 @@ int main(int argc, char** argv) {
             po.flow = plan_flow;
             po.min_cover = plan_min_cover;
             po.fulcrum_mm = plan_fulcrum;
+            po.curve_radius_mm = plan_curve;
             const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;

@@ -648,7 +648,7 @@ TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
 
 TEST(ClipFiles, ACurvedClipsJawsBendFromTheHeelAndATooTightCurveIsRefused) {
     // A 9 mm clip with a fulcrum 5 mm behind its heel, its blades curved at 12 mm towards axis × up: the model keeps
-    // the radius, its jaws (a box swept along the centre line) hold a point on the bent centre line 8 mm into the curve
+    // the radius, its jaws (a box bent along the centre line) hold a point on the bent centre line 8 mm into the curve
     // and not the straight blade's place there, and the blades' frame (blades_of, the patch and the spring) bends
     // from the heel. Refused: a curve tighter than the blade allows, a curve with a jaw mesh.
     test::TempDir d("curved");
@@ -664,12 +664,43 @@ TEST(ClipFiles, ACurvedClipsJawsBendFromTheHeelAndATooTightCurveIsRefused) {
     p.axis = Eigen::Vector3d::UnitX();
     p.up = Eigen::Vector3d::UnitZ();  // axis × up = −y: the blades bend towards −y
     const auto jaws = sim::clip_jaws(c, p, 0.0);
-    ASSERT_EQ(jaws[0].kind, sim::Shape::Kind::MESH);
+    ASSERT_EQ(jaws[0].kind, sim::Shape::Kind::BOX);
+    EXPECT_DOUBLE_EQ(jaws[0].bend_radius, 12.0);
     const double phi = 8.0 / 12.0;
     const Eigen::Vector3d on = p.position + Eigen::Vector3d(5.0 + 12.0 * std::sin(phi), -12.0 * (1 - std::cos(phi)), 0.25);  // 0.25 into jaw +1
     EXPECT_LT(jaws[0].sdf(on), -0.2);
     EXPECT_GT(jaws[0].sdf(Eigen::Vector3d(on.x(), p.position.y(), on.z())), 0.5);  // where a straight blade would be: outside
     EXPECT_LT(jaws[0].sdf(p.position + Eigen::Vector3d(3.0, 0.0, 0.25)), -0.2);  // the arms before the heel: straight
+    // Inside the swept jaw exactly where the bent blade is (along its centre line within the reach, across it within
+    // half the width, behind its face within its thickness), on a grid round it; opened 20°.
+    {
+        const auto open = sim::clip_jaws(c, p, 20.0);
+        fem::ClipBlades b;
+        b.hinge = p.position;
+        b.axis = p.axis;
+        b.up = p.up;
+        b.length_mm = c.reach_mm();
+        b.width_mm = c.jaw_width_mm;
+        b.curve_radius_mm = c.jaw_curve_radius_mm;
+        b.curve_from_mm = c.fulcrum_mm;
+        Eigen::Vector3d t, n, w;
+        b.frame(1, 20.0 * M_PI / 180, t, n, w);
+        int wrong = 0, inside = 0;
+        for (double x = -1; x <= 15; x += 0.37)
+            for (double y = -6; y <= 2; y += 0.23)
+                for (double z = -1; z <= 1.5; z += 0.17) {
+                    const Eigen::Vector3d q = p.position + x * t + y * w + z * (-n);  // -n: into jaw +1 from its face
+                    const fem::ClipBlades::FaceCoords fc = b.face_coords(x, y);
+                    const bool in = x >= 0 && fc.s <= b.length_mm && std::abs(fc.a) <= 0.5 * b.width_mm && z >= 0 && z <= c.jaw_thickness_mm;
+                    const double sd = open[0].sdf(q);
+                    if (std::abs(sd) < 0.02) continue;  // on its surface (the mesh's chords)
+                    inside += in;
+                    if ((sd < 0) != in && ++wrong <= 5)
+                        ADD_FAILURE() << "at (" << x << ", " << y << ", " << z << ") along, across, into the jaw: sdf " << sd << ", s " << fc.s << ", a " << fc.a;
+                }
+        EXPECT_GT(inside, 100);
+        EXPECT_EQ(wrong, 0);
+    }
     auto refused = [&](const json& model, const std::string& says) {
         json k = j;
         k["clip_models"]["straight"] = model;

@@ -41,6 +41,10 @@ struct PlanOptions {
     /// carries it, the applier's pose is the fulcrum's, its openings are the heel-hinged clip's scaled to open the
     /// jaws as wide at the neck's far end, and the arms between the fulcrum and the heel are checked as blade.
     double fulcrum_mm = 0.0;
+    /// A curved clip (ClipModel::jaw_curve_radius_mm; 0: straight): its blades bend from the heel on a circle of this
+    /// radius [mm], towards the sac or away from it, whichever covers more of the neck line; the pose search, the
+    /// clearance checks and the cover follow the bent blades.
+    double curve_radius_mm = 0.0;
 };
 
 /// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the

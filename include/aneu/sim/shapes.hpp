@@ -9,6 +9,10 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+namespace aneu::fem {
+struct ClipBlades;
+}
+
 namespace aneu::sim {
 
 /// Axis-aligned bounding box.
@@ -42,6 +46,10 @@ struct Shape {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     Eigen::Matrix3d axes = Eigen::Matrix3d::Identity();
     Eigen::Vector3d half = Eigen::Vector3d::Zero();
+    /// A BOX bent in the plane of its first two axes (a curved clip's jaw, fem::ClipBlades::curve_radius_mm): from
+    /// `bend_from` along its first axis (from its −x end) its centre line bends on a circle of radius |bend_radius|
+    /// towards +axes.col(1) (positive) or −axes.col(1); its length is along that line, its width across it. 0: straight.
+    double bend_radius = 0.0, bend_from = 0.0;
     // CAPSULE: segment a–b, radius.
     Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::Zero();
     double radius = 0.0;
@@ -56,6 +64,9 @@ struct Shape {
     Aabb bounds() const;
     /// Distance t ≥ 0 along direction `dir` from p (inside) to the shape's boundary; bisection on sdf.
     double exit_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& dir) const;
+    /// A bent BOX's centre line (fem::ClipBlades in its frame) and its cross-section's corners along it.
+    fem::ClipBlades bent() const;
+    std::vector<Eigen::Vector3d> bent_corners() const;
 };
 
 /// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection §5.1.5).
