@@ -492,15 +492,15 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     if (!chosen && first_gripped) {
         char why[768];
         std::snprintf(why, sizeof why,
-                      "%s: every straight clip pose that spans the neck (%.2f x %.2f mm) closes on the domain's clamped ends: the best-covering one (%.0f %% of the "
+                      "%s: every %s clip pose that spans the neck (%.2f x %.2f mm) closes on the domain's clamped ends: the best-covering one (%.0f %% of the "
                       "neck line) has %d clamped nodes (the bundle's 'fixed' set, where the vessels were cut) within %.1f mm of the space its jaws close on. "
                       "The model ends there and a clip would press tissue that cannot give; build the case with the vessels cut further from the neck, or plan it by hand (docs/scene_format.md)",
-                      m.case_id.c_str(), nf.length_mm, nf.width_mm, 100.0 * first_gripped->covered, first_gripped_nodes, EDGE_MM);
+                      m.case_id.c_str(), CR > 0 ? "curved" : "straight", nf.length_mm, nf.width_mm, 100.0 * first_gripped->covered, first_gripped_nodes, EDGE_MM);
         throw InputError(why);
     }
     if (!chosen) {
         throw InputError(m.case_id + ": the neck is " + std::to_string(nf.length_mm) + " x " + std::to_string(nf.width_mm) +
-                         " mm; the longest straight clip planned (15 mm, open up to " + std::to_string(o.max_opening_deg) + " deg) does not span it");
+                         " mm; the longest " + std::string(CR > 0 ? "curved" : "straight") + " clip planned (15 mm, open up to " + std::to_string(o.max_opening_deg) + " deg) does not span it");
     }
     // A pose whose jaws cover less than min_cover of the border is not across the neck (on a wide neck at a
     // bifurcation the only clear way may lie over the dome or the parents): refused, with what the best-covering
@@ -513,10 +513,10 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             std::snprintf(best, sizeof best, "no pose is clear, the one with the fewest vertices in the way or between the jaws (%d) covers %.0f %%", fewest, 100.0 * chosen->covered);
         char why[1024];
         std::snprintf(why, sizeof why,
-                      "%s: no straight clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
+                      "%s: no %s clip of the set (3-15 mm, open up to %.0f deg) covers %.0f %% of the neck's border (%.1f mm; neck %.2f x %.2f mm) "
                       "without cutting into the vessel on the way in or between its closing jaws: %s; the best-covering pose (%.0f %%) has %d outer-surface vertices within %.1f mm "
                       "of its open blades or parent lumen vertices between its jaws. Plan this neck by hand (docs/scene_format.md) or lower --min-cover",
-                      m.case_id.c_str(), o.max_opening_deg, 100.0 * o.min_cover, nf.line_mm, nf.length_mm, nf.width_mm, best,
+                      m.case_id.c_str(), CR > 0 ? "curved" : "straight", o.max_opening_deg, 100.0 * o.min_cover, nf.line_mm, nf.length_mm, nf.width_mm, best,
                       widest ? 100.0 * widest->covered : 0.0, widest_hits, CLEAR);
         throw InputError(why);
     }

@@ -606,6 +606,21 @@ TEST(ClipFiles, ShippedClipModelsReadWithTheirLabelForce) {
     ASSERT_TRUE(c.spring);
 }
 
+namespace {
+/// Scene j with its clip model "straight" replaced by `model` is refused with an input error that says `says`.
+void expect_clip_model_refused(const json& j, const json& model, const std::string& says, const std::string& path) {
+    json k = j;
+    k["clip_models"]["straight"] = model;
+    put(path, k.dump());
+    try {
+        sim::read_scene(path);
+        ADD_FAILURE() << "accepted " << model.dump();
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+}
+}  // namespace
+
 TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     // A clip model whose blades turn about a fulcrum 20 mm behind their heel (ClipModel::fulcrum_mm): its jaws reach
     // 20 + 9 mm from the pose's position, and its spring gives its label force at the ISO 9713 point measured from the
@@ -628,17 +643,7 @@ TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     const sim::ClipModel heel = sim::read_clip_file(std::string(ANEU_SOURCE_DIR) + "/configs/clips/straight_9mm.json");
     EXPECT_EQ(heel.turn_per_heel_turn(), 1.0);  // without a fulcrum the caps are as they were, to the bit
     EXPECT_NEAR(c.spring->torque(2 * std::asin(0.5 / r)) / heel.spring->torque(2 * std::asin(0.5 / 6.0)), 26.0 / 6.0, 1e-9);
-    auto refused = [&](const json& model, const std::string& says) {
-        json k = j;
-        k["clip_models"]["straight"] = model;
-        put(d.file("bad.json"), k.dump());
-        try {
-            sim::read_scene(d.file("bad.json"));
-            ADD_FAILURE() << "accepted " << model.dump();
-        } catch (const InputError& e) {
-            EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
-        }
-    };
+    auto refused = [&](const json& model, const std::string& says) { expect_clip_model_refused(j, model, says, d.file("bad.json")); };
     refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", -1.0}}, "fulcrum_mm");
     refused({{"jaw_length_mm", 9.0}, {"fulcrum_mm", 95.0}}, "expected at most 100 mm");
     const std::string stl = d.file("jaw.stl");
@@ -701,17 +706,7 @@ TEST(ClipFiles, ACurvedClipsJawsBendFromTheHeelAndATooTightCurveIsRefused) {
         EXPECT_GT(inside, 100);
         EXPECT_EQ(wrong, 0);
     }
-    auto refused = [&](const json& model, const std::string& says) {
-        json k = j;
-        k["clip_models"]["straight"] = model;
-        put(d.file("bad.json"), k.dump());
-        try {
-            sim::read_scene(d.file("bad.json"));
-            ADD_FAILURE() << "accepted " << model.dump();
-        } catch (const InputError& e) {
-            EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
-        }
-    };
+    auto refused = [&](const json& model, const std::string& says) { expect_clip_model_refused(j, model, says, d.file("bad.json")); };
     refused({{"jaw_length_mm", 9.0}, {"jaw_curve_radius_mm", 5.0}}, "bends past 90 degrees");
     refused({{"jaw_length_mm", 9.0}, {"jaw_curve_radius_mm", -1.0}}, "jaw_curve_radius_mm");
     const std::string stl = d.file("jaw.stl");
