@@ -570,6 +570,11 @@ double neck_cut_off_fraction(const NeckOcclusion& occ, const NeckChannel& channe
 std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vector3d>>& loops, const std::vector<JawsBox>& jaws) {
     constexpr double NaN = std::numeric_limits<double>::quiet_NaN();
     double len = 0, in = 0, beside = 0;
+    std::vector<fem::ClipBlades> bent(jaws.size());  // (a curved blade's place along and across its centre line)
+    for (size_t ji = 0; ji < jaws.size(); ++ji) {
+        bent[ji].curve_radius_mm = jaws[ji].curve_radius_mm;
+        bent[ji].curve_from_mm = jaws[ji].curve_from_mm;
+    }
     for (const auto& pts : loops)
         for (size_t k = 0; k < pts.size(); ++k) {
             const Eigen::Vector3d& q = pts[(k + 1) % pts.size()];
@@ -577,12 +582,10 @@ std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vect
             const double seg = (q - pts[k]).norm();
             len += seg;
             bool inside = false;
-            for (const JawsBox& j : jaws) {
+            for (size_t ji = 0; ji < jaws.size(); ++ji) {
+                const JawsBox& j = jaws[ji];
                 const Eigen::Vector3d r = mid - j.hinge, side = j.axis.cross(j.up).normalized();
-                fem::ClipBlades cb;  // (a curved blade's place along and across its centre line)
-                cb.curve_radius_mm = j.curve_radius_mm;
-                cb.curve_from_mm = j.curve_from_mm;
-                const fem::ClipBlades::FaceCoords fc = cb.face_coords(r.dot(j.axis), r.dot(side));
+                const fem::ClipBlades::FaceCoords fc = bent[ji].face_coords(r.dot(j.axis), r.dot(side));
                 const double along = fc.s, wide = std::abs(fc.a) - 0.5 * j.width_mm - j.margin_mm;
                 if (r.dot(j.axis) < 0 || along > j.length_mm) continue;
                 if (wide > 0) beside = std::max(beside, wide);

@@ -4,6 +4,7 @@
 #include "aneu/sim/plan.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -127,29 +128,30 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // +a, −1 away, 0 straight) from the heel, in the blade's frame (r along it from the hinge, a across it).
     const double CR = o.curve_radius_mm;
     if (!(CR == 0 || CR >= 2) || !std::isfinite(CR)) throw InputError("plan: --curve-radius-mm " + std::to_string(CR) + ", expected 0 (straight) or a radius >= 2 mm");
+    std::array<fem::ClipBlades, 2> bends;  // bent towards +a, away (made once: `bent` runs for every vertex of every pose)
+    for (int k = 0; k < 2; ++k) {
+        bends[static_cast<size_t>(k)].curve_radius_mm = (k == 0 ? 1.0 : -1.0) * CR;
+        bends[static_cast<size_t>(k)].curve_from_mm = F;
+    }
     auto bent = [&](double bend, double r, double a) {
         if (bend == 0 || CR == 0) return std::pair<double, double>(r, a);
-        fem::ClipBlades cb;
-        cb.curve_radius_mm = bend * CR;
-        cb.curve_from_mm = F;
-        const fem::ClipBlades::FaceCoords fc = cb.face_coords(r, a);
+        const fem::ClipBlades::FaceCoords fc = bends[bend > 0 ? 0 : 1].face_coords(r, a);
         return std::pair<double, double>(fc.s, fc.a);
     };
-    // The blade lengths a curved clip can have: bent 90° at most (fem::ClipBlades::check_curve).
-    auto blade_fits = [&](double l) {
-        if (CR == 0) return true;
-        fem::ClipBlades cb;
+    // The standard blades (3 … 15 mm) a curved clip can have: bent 90° at most (fem::ClipBlades::check_curve, asked
+    // once per length, not per pose).
+    std::array<bool, 16> fits{};
+    for (int l = 3; l <= 15; l += 2) {
+        fem::ClipBlades cb = bends[0];
         cb.length_mm = F + l;
         cb.width_mm = 1.0;
-        cb.curve_radius_mm = CR;
-        cb.curve_from_mm = F;
         try {
             cb.check_curve();
+            fits[static_cast<size_t>(l)] = true;
         } catch (const InputError&) {
-            return false;
         }
-        return true;
-    };
+    }
+    auto blade_fits = [&](double l) { return CR == 0 || fits[static_cast<size_t>(l)]; };
     // How far along the axis a blade of length l reaches from the hinge (bent: its chord).
     auto reach_along = [&](double l) { return CR == 0 ? F + l : F + CR * std::sin(std::min(l / CR, 0.5 * PI)); };
     auto at_fulcrum = [&](double heel_deg) {
