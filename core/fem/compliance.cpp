@@ -577,8 +577,11 @@ struct OverFace {
     Eigen::Vector3d nh;
     double d = 0, b0 = 0, b1 = 0, b2 = 0;
 };
-bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, OverFace& o) {
-    constexpr double OVER = -0.1;
+/// `over`: the margin beyond the edges (OVER_FACE; a row the vertex had in the last pass keeps it to OVER_KEPT below).
+constexpr double OVER_FACE = -0.1;
+bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, OverFace& o,
+               double over = OVER_FACE) {
+    const double OVER = over;
     const Eigen::Vector3d e1 = b - a, e2 = c - a, nn = e1.cross(e2);
     const double area2 = nn.norm();
     if (!(area2 > 0)) return false;
@@ -733,6 +736,24 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         // geometry passes never settled and every frame ended on one of two states.)
         std::vector<std::pair<double, double>> score;  // per kept wall row: (d, inside), when filtering
         const size_t wall_start = rows.size();
+        // The faces of each vertex's rows in `warm` (2 + f; at most two a vertex, below). A vertex pressed on a face
+        // near its edge slides along it within a pass; where it ends a little beyond the edge (beyond OVER_FACE),
+        // over no face of its pairs (the wedge above a ridge) or over the neighbour only, the next pass had no row on
+        // that face and took it back through it: the sample's held clip, 0.04-0.17 mm behind a face in a frame's
+        // last pass, every time after its pass before had ended 0.12-0.24 of the face beyond that edge (session 44,
+        // ANEU_WALL_TRACE). So a face a vertex's row had in `warm` stays its row while the vertex lies within
+        // OVER_KEPT of the face (hysteresis; at 0.3 some slid on to 0.31 and back through, the rows' push along the
+        // normal carrying them sideways through the shell's compliance): beyond an edge, the face's plane holds the vertex as far out as it or
+        // further (beyond a ridge: out by at most the slide times the ridge's slope; beyond a valley: the
+        // neighbour's row is the stricter).
+        constexpr double OVER_KEPT = -0.5;
+        std::vector<std::array<int, 2>> had(static_cast<size_t>(nc), std::array<int, 2>{-1, -1});
+        if (warm)
+            for (const auto& [v, sf] : warm->constraint)
+                if (sf >= 2 && v >= 0 && v < nc) {
+                    auto& h = had[static_cast<size_t>(v)];
+                    (h[0] < 0 ? h[0] : h[1]) = sf;
+                }
         for (const auto& [v, f] : walls->pairs) {
             if (v < 0 || v >= nc || f < 0 || f >= walls->faces.rows())
                 throw InputError("compliant clip: wall pair (" + std::to_string(v) + ", " + std::to_string(f) + ") outside the candidates or faces");
@@ -743,7 +764,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 if (r.k[static_cast<size_t>(a)] < 0 || r.k[static_cast<size_t>(a)] >= nc) throw InputError("compliant clip: wall face " + std::to_string(f) + " names a node outside the candidates");
             // Hard contact on the face's plane where the vertex lies over the face (over_face).
             OverFace of;
-            if (!over_face(Xl.row(r.k[0]).transpose(), Xl.row(r.k[1]).transpose(), Xl.row(r.k[2]).transpose(), Xl.row(r.k[3]).transpose(), of)) continue;
+            const auto& h = had[static_cast<size_t>(v)];
+            const bool was = h[0] == 2 + f || h[1] == 2 + f;
+            if (!over_face(Xl.row(r.k[0]).transpose(), Xl.row(r.k[1]).transpose(), Xl.row(r.k[2]).transpose(), Xl.row(r.k[3]).transpose(), of,
+                           was ? OVER_KEPT : OVER_FACE))
+                continue;
             const Eigen::Vector3d& nh = of.nh;
             const double d = of.d, b0 = of.b0, b1 = of.b1, b2 = of.b2;
             wall_min = std::min(wall_min, d);
@@ -773,25 +798,35 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 double& dn = nearest[static_cast<size_t>(rows[i].k[0])];
                 dn = std::min(dn, score[i - wall_start].first);
             }
-            std::vector<int> kept(static_cast<size_t>(nc), -1);  // per vertex: its row's face (2 + f) in `warm`
-            if (warm)
-                for (const auto& [v, sf] : warm->constraint)
-                    if (sf >= 2 && v >= 0 && v < nc) kept[static_cast<size_t>(v)] = sf;
             std::vector<long long> best(static_cast<size_t>(nc), -1);  // per vertex: its row
             std::vector<char> stays(static_cast<size_t>(nc), 0);       // ... its face in `warm`
+            auto in_warm = [&](size_t v, int sf) { return had[v][0] == sf || had[v][1] == sf; };
             for (size_t i = wall_start; i < rows.size(); ++i) {
                 const size_t v = static_cast<size_t>(rows[i].k[0]);
                 if (score[i - wall_start].first > nearest[v] + 0.02 || stays[v]) continue;
-                if (rows[i].s == kept[v]) {
+                if (in_warm(v, rows[i].s)) {
                     best[v] = static_cast<long long>(i);
                     stays[v] = 1;
                 } else if (best[v] < 0 || score[i - wall_start].second > score[static_cast<size_t>(best[v]) - wall_start].second) {
                     best[v] = static_cast<long long>(i);
                 }
             }
+            // A second row: the vertex's face in `warm` that its best row is not, or one it lies behind (a pass took it
+            // there, through a face its row was not on), where the two faces' planes differ by more than 10° (a
+            // valley's two sides: one row alone lets the vertex through the other face; on nearly parallel faces the
+            // second row would only make the LCP degenerate). The nearest such.
+            constexpr double SECOND_COS = 0.9848;  // cos 10°
+            std::vector<long long> second(static_cast<size_t>(nc), -1);
+            for (size_t i = wall_start; i < rows.size(); ++i) {
+                const size_t v = static_cast<size_t>(rows[i].k[0]);
+                const long long b = best[v];
+                if (b < 0 || b == static_cast<long long>(i) || !(in_warm(v, rows[i].s) || score[i - wall_start].first < 0)) continue;
+                if (std::abs(rows[i].g[0].dot(rows[static_cast<size_t>(b)].g[0])) >= SECOND_COS) continue;
+                if (second[v] < 0 || score[i - wall_start].first < score[static_cast<size_t>(second[v]) - wall_start].first) second[v] = static_cast<long long>(i);
+            }
             size_t w = wall_start;  // the kept rows moved down in place
             for (size_t i = wall_start; i < rows.size(); ++i)
-                if (best[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i)) {
+                if (best[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i) || second[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i)) {
                     if (w != i) rows[w] = std::move(rows[i]);
                     ++w;
                 }
@@ -989,7 +1024,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
 /// Pairs whose vertex lay further than opt.wall_behind_mm behind its face's plane where the frame started (`start`: a
 /// crease, the far side of a fold; solve_pass makes them no constraint) are left out.
 double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, const Eigen::VectorXd& u, const Eigen::VectorXd& start,
-                         const CompliantOptions& opt) {
+                         const CompliantOptions& opt, std::array<int, 2>* worst = nullptr) {
     const Eigen::MatrixX3d& Xf = lin.free_positions();
     const Eigen::VectorXd& fu = lin.free_candidate_u();
     auto at = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
@@ -998,7 +1033,10 @@ double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, 
     for (const auto& [v, f] : walls.pairs) {
         if (plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2))) < -opt.wall_behind_mm) continue;
         OverFace of;
-        if (over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of)) out = std::min(out, of.d);
+        if (over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of) && of.d < out) {
+            out = of.d;
+            if (worst) *worst = {v, f};
+        }
     }
     return out;
 }
@@ -1015,9 +1053,13 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // moves): passes re-linearise them where the last pass ended, on the same compliance, until the candidates
     // move less than the sweeps' tolerance.
     CompliantFrame f = solve_pass(lin, blades, spring, theta_held, theta_start, warm, opt, walls, start);
+    static const bool wall_trace = std::getenv("ANEU_WALL_TRACE") != nullptr;
+    std::vector<CompliantFrame> pass_ends;  // ANEU_WALL_TRACE: each pass's end, for the worst crossing's history
+    if (wall_trace && walls) pass_ends.push_back(f);
     int passes = 1;
     for (; passes < opt.geometry_passes; ++passes) {
         CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+        if (wall_trace && walls) pass_ends.push_back(g);
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
         g.lcp_s += f.lcp_s;
@@ -1038,11 +1080,51 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
             break;
         }
     }
+    // A frame whose walls end through each other by more than opt.wall_crossed_mm (a pass that moved a vertex over a
+    // face its rows left out) takes more passes, from there, while they do: the next has that face's row.
+    if (walls)
+        for (int extra = 0; extra < opt.wall_extra_passes; ++extra) {
+            if (wall_min_distance(lin, *walls, f.candidate_u, start, opt) >= -opt.wall_crossed_mm) break;
+            CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+            g.rows_s += f.rows_s;
+            g.delassus_s += f.delassus_s;
+            g.lcp_s += f.lcp_s;
+            if (wall_trace) pass_ends.push_back(g);
+            f = std::move(g);
+            ++passes;
+        }
     f.passes = passes;
     // Where the frame ends, on the pairs it constrains (the passes measured it where each started, creases included:
     // the sample's held walls read −0.122 mm there, while its lumen at the end has them 0.002 mm through each other on
     // the neck line and 0.021 mm at most anywhere, session 35).
-    if (walls) f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt);
+    std::array<int, 2> worst{-1, -1};
+    if (walls) f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt, &worst);
+    if (wall_trace && walls && f.wall_min_distance_mm < -0.02 && worst[0] >= 0) {
+        // The worst pair's history: where it stood at the start and after each pass, and which rows its vertex had.
+        const Eigen::MatrixX3d& Xf = lin.free_positions();
+        const Eigen::VectorXd& fu = lin.free_candidate_u();
+        auto at = [&](const Eigen::VectorXd& u, int k) { return Eigen::Vector3d(Xf.row(k).transpose() + u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
+        const int v = worst[0], fc = worst[1];
+        auto state = [&](const Eigen::VectorXd& u) {
+            OverFace of;
+            const bool over = over_face(at(u, v), at(u, walls->faces(fc, 0)), at(u, walls->faces(fc, 1)), at(u, walls->faces(fc, 2)), of);
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "d %+.4f b (%.2f %.2f %.2f)%s", of.d, of.b0, of.b1, of.b2, over ? "" : " not over");
+            return std::string(buf);
+        };
+        std::fprintf(stderr, "wall worst: vertex %d face %d (%d %d %d): start %s\n", v, fc, walls->faces(fc, 0), walls->faces(fc, 1), walls->faces(fc, 2),
+                     state(start).c_str());
+        for (size_t p = 0; p < pass_ends.size(); ++p) {
+            std::string rows_of_v;
+            for (size_t i = 0; i < pass_ends[p].constraint.size(); ++i)
+                if (pass_ends[p].constraint[i].first == v && pass_ends[p].constraint[i].second >= 2)
+                    rows_of_v += " " + std::to_string(pass_ends[p].constraint[i].second - 2) + ":" + std::to_string(i < pass_ends[p].lambda.size() ? pass_ends[p].lambda[i] : 0.0);
+            const double moved = (pass_ends[p].candidate_u - (p == 0 ? start : pass_ends[p - 1].candidate_u)).lpNorm<Eigen::Infinity>();
+            const double vmoved = (pass_ends[p].candidate_u.segment<3>(3 * v) - (p == 0 ? start : pass_ends[p - 1].candidate_u).segment<3>(3 * v)).norm();
+            std::fprintf(stderr, "wall worst: pass %zu end %s; moved %.4f mm (its vertex %.4f); its wall rows (face:force)%s\n", p + 1, state(pass_ends[p].candidate_u).c_str(),
+                         moved, vmoved, rows_of_v.empty() ? " none" : rows_of_v.c_str());
+        }
+    }
     f.seconds = sw.seconds();
     return f;
 }

@@ -382,6 +382,145 @@ TEST(CompliantClip, HeldOnOneLinearisationAVertexOverAnEdgeKeepsItsFaceAndThePas
 
 namespace {
 
+/// A wall vertex over a crease of the opposite wall (CompliantOptions::wall_one_face's rows), the vertex's own body
+/// pushing it through: block B (1 × 1 × 1 mm, its bottom held) whose top is creased along z at x = 0.5 (y = c |x − 0.5|:
+/// c > 0 a valley, c < 0 a ridge) and a 0.2 mm cube A (its top held) whose bottom corner v stands 5 µm above where
+/// the test puts it. A is linearised squeezed 0.1 mm (its bottom moved by `squeeze` from rest): its free step takes v
+/// back by −squeeze, through B's faces unless a row holds it. Faces f (x ≤ 0.5) and g (x ≥ 0.5) of B's top share the
+/// crease's edge; their normals point up, out of B. The blades stand far off.
+struct VertexOverACrease {
+    Eigen::MatrixX3d X;
+    std::unique_ptr<fem::NeoHookeanSolid> solid;
+    Eigen::VectorXi fixed;
+    std::vector<int> cand;  // v, then B's top nodes
+    Eigen::MatrixX3i faces; // f, g in candidate numbering
+    Eigen::VectorXd u0;
+    Eigen::MatrixX3d Xc;
+    fem::ClipBlades blades;
+    VertexOverACrease(double crease, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze) {
+        const fem::StructuredMesh b = fem::box_mesh(1.0, 1.0, 1.0, 2, 2, 2), a = fem::box_mesh(0.2, 0.2, 0.2, 1, 1, 1);
+        const Eigen::Index nb = b.V.rows();
+        X.resize(nb + a.V.rows(), 3);
+        X.topRows(nb) = b.V;
+        for (Eigen::Index i = 0; i < nb; ++i) {
+            X(i, 1) -= 1.0;
+            if (b.V(i, 1) > 1.0 - 1e-9) X(i, 1) += crease * std::abs(b.V(i, 0) - 0.5);
+        }
+        // A's corner (0, 0, 0) is v, at v_at less the squeeze (its rest place: A overlaps B there, as far as the squeeze).
+        const Eigen::RowVector3d at = (v_at - squeeze).transpose();
+        for (Eigen::Index i = 0; i < a.V.rows(); ++i) X.row(nb + i) = a.V.row(i) + at;
+        Eigen::MatrixXi T(b.T.rows() + a.T.rows(), 4);
+        T.topRows(b.T.rows()) = b.T;
+        T.bottomRows(a.T.rows()) = a.T.array() + static_cast<int>(nb);
+        solid = std::make_unique<fem::NeoHookeanSolid>(X, T, Eigen::VectorXi::Zero(T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
+        std::vector<int> fd;
+        u0 = Eigen::VectorXd::Zero(3 * X.rows());
+        int v = -1;
+        for (Eigen::Index i = 0; i < X.rows(); ++i) {
+            const bool in_a = i >= nb;
+            const double y0 = in_a ? a.V(i - nb, 1) : b.V(i, 1);
+            if ((!in_a && y0 < 1e-9) || (in_a && y0 > 0.2 - 1e-9))
+                for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+            else if (in_a)
+                u0.segment<3>(3 * i) = squeeze;  // A's bottom layer moved back from where it rests
+            if (in_a && (a.V.row(i - nb)).norm() < 1e-12) v = static_cast<int>(i);
+        }
+        fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+        cand.push_back(v);
+        auto node = [&](double x, double z) {  // B's top node at (x, z), as a candidate
+            for (Eigen::Index i = 0; i < nb; ++i)
+                if (b.V(i, 1) > 1.0 - 1e-9 && std::abs(b.V(i, 0) - x) < 1e-9 && std::abs(b.V(i, 2) - z) < 1e-9) {
+                    cand.push_back(static_cast<int>(i));
+                    return static_cast<int>(cand.size() - 1);
+                }
+            return -1;
+        };
+        const int f0 = node(0.0, 0.0), fe0 = node(0.5, 0.0), fe1 = node(0.5, 1.0), g0 = node(1.0, 0.0);
+        faces.resize(2, 3);
+        faces << f0, fe1, fe0,   // (b − a) × (c − a) up
+            fe0, fe1, g0;
+        Xc.resize(static_cast<Eigen::Index>(cand.size()), 3);
+        for (size_t k = 0; k < cand.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = X.row(cand[k]);
+        blades.hinge = Eigen::Vector3d(-50.0, 0.0, 0.5);
+        blades.length_mm = 3.0;
+    }
+    /// The frame from v's rows in a warm frame that ended where A was linearised.
+    fem::CompliantFrame frame(const std::vector<int>& warm_faces, const std::vector<std::array<int, 2>>& pairs) const {
+        const fem::Linearisation lin(*solid, X, fixed, u0, cand);
+        fem::CompliantFrame warm;
+        warm.theta = 0.5;
+        warm.candidate_u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(cand.size()));
+        for (size_t k = 0; k < cand.size(); ++k) warm.candidate_u.segment<3>(3 * static_cast<Eigen::Index>(k)) = u0.segment<3>(3 * cand[k]);
+        warm.candidate_forces = Eigen::VectorXd::Zero(warm.candidate_u.size());
+        for (int f : warm_faces) {
+            warm.constraint.emplace_back(0, 2 + f);
+            warm.lambda.push_back(0.01);
+        }
+        fem::CompliantWalls walls;
+        walls.faces = faces;
+        walls.pairs = pairs;
+        fem::CompliantOptions opt;
+        opt.wall_one_face = true;
+        return fem::solve_compliant_clip(lin, blades, test_spring(), 0.5, 0.5, &warm, opt, &walls);
+    }
+};
+
+int wall_rows_of_v(const fem::CompliantFrame& f) {
+    int n = 0;
+    for (const auto& c : f.constraint) n += c.first == 0 && c.second >= 2;
+    return n;
+}
+
+}  // namespace
+
+TEST(CompliantClip, AVertexSlidPastItsFacesEdgeKeepsItsRowAndAValleysTwoSidesBothHoldIt) {
+    // The sample's held clip (session 44, ANEU_WALL_TRACE): a pressed vertex slid along its face within a pass and
+    // ended 0.12-0.24 of the face beyond its edge, over none of its pairs' faces within the tenth that makes a row
+    // (the wedge over a ridge); the next pass had no row on it and took it 0.04-0.17 mm back through the face.
+    const double y5 = 0.005;
+    {
+        // A ridge (c = −0.3), v 0.1 mm beyond face f's edge (0.2 of f's 0.5 mm), 5 µm above f's plane, pushed down
+        // 0.1 mm. With f its row in the last pass, the row holds it (hysteresis to 0.5); without, it goes through.
+        const Eigen::Vector3d at(0.6, 0.3 * 0.1 + y5, 0.5 - 0.1);  // f's plane rises on beyond the ridge
+        const VertexOverACrease c(-0.3, at, Eigen::Vector3d(0, 0.1, 0));
+        // v's distance from f's plane where the frame ends (beyond the tenth, the frames' measure leaves it out)
+        const fem::Linearisation lin(*c.solid, c.X, c.fixed, c.u0, c.cand);
+        auto from_f = [&](const fem::CompliantFrame& f) {  // f's plane where its corners end
+            const Eigen::VectorXd ud = lin.displacement(f.candidate_forces);
+            auto x = [&](int k) { return Eigen::Vector3d(c.X.row(c.cand[static_cast<size_t>(k)]).transpose() + ud.segment<3>(3 * c.cand[static_cast<size_t>(k)])); };
+            const Eigen::Vector3d a = x(c.faces(0, 0)), n = (x(c.faces(0, 1)) - a).cross(x(c.faces(0, 2)) - a).normalized();
+            return n.dot(x(0) - a);
+        };
+        const fem::CompliantFrame kept = c.frame({0}, {{0, 0}});
+        EXPECT_EQ(wall_rows_of_v(kept), 1);
+        EXPECT_GT(from_f(kept), -1e-3);
+        EXPECT_GT(kept.wall_contacts, 0);
+        const fem::CompliantFrame fresh = c.frame({}, {{0, 0}});  // not its row before: beyond the tenth, no row
+        EXPECT_EQ(wall_rows_of_v(fresh), 0);
+        EXPECT_LT(from_f(fresh), -0.02);
+        std::printf("ridge: v %.5f mm from f's plane with its row kept, %.4f mm without\n", from_f(kept), from_f(fresh));
+    }
+    {
+        // A valley (c = 0.3, the normals 33° apart), v 0.02 mm on g's side of the crease, 5 µm above g, pushed down
+        // and towards f. Rows on both faces in the last pass: both stay (one row would let it through the other face).
+        const Eigen::Vector3d at(0.52, 0.3 * 0.02 + y5, 0.5);
+        const VertexOverACrease c(0.3, at, Eigen::Vector3d(0.08, 0.08, 0));
+        const fem::CompliantFrame both = c.frame({0, 1}, {{0, 0}, {0, 1}});
+        EXPECT_EQ(wall_rows_of_v(both), 2);
+        EXPECT_GT(both.wall_min_distance_mm, -1e-3);
+        EXPECT_GT(both.wall_contacts, 0);
+        // From a row on g alone: it keeps g's and slides along g through f in the first pass; the next takes f's row
+        // too (v behind f, over it) and the frame ends with v out of both.
+        const fem::CompliantFrame one = c.frame({1}, {{0, 0}, {0, 1}});
+        EXPECT_EQ(wall_rows_of_v(one), 2);
+        EXPECT_GT(one.wall_min_distance_mm, -1e-3);
+        std::printf("valley: v held %.5f mm from the nearer face with %d rows; from g's row alone %.5f mm, %d rows\n", both.wall_min_distance_mm,
+                    wall_rows_of_v(both), one.wall_min_distance_mm, wall_rows_of_v(one));
+    }
+}
+
+namespace {
+
 /// The box-constrained LCP's solution by enumeration: each row at its lower bound, free, or at its upper bound; the
 /// one assignment whose solve keeps the free rows within their bounds and the bounded rows' w of the right sign.
 Eigen::VectorXd box_lcp_by_enumeration(const Eigen::MatrixXd& A, const Eigen::VectorXd& q, const Eigen::VectorXd& lo, const Eigen::VectorXd& hi) {

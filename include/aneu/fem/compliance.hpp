@@ -104,6 +104,10 @@ struct CompliantOptions {
     /// Passes per frame: each re-linearises the gaps where the last ended (a normal turns as its face moves), on the
     /// same compliance; they stop when the candidates move less than 1000 × tolerance_mm between two.
     int geometry_passes = 3;
+    /// A frame whose walls end through each other by more than this (a vertex over a face its last pass had no row
+    /// on) takes up to wall_extra_passes more passes while they do (the limit is 0.02 mm)
+    double wall_crossed_mm = 0.01;
+    int wall_extra_passes = 3;
     /// Coulomb friction between the blades and the tissue they press (0: frictionless, as until session 32); held or
     /// released (a released clip's friction rows do not follow θ within the frame: a stick point on a blade face moves
     /// along it by (closed gap / 2) Δθ / 2 as the blade turns, 0 for blades that close flat). aneusim's blades have
@@ -113,8 +117,11 @@ struct CompliantOptions {
     /// on the blade's face, each candidate's share of the cell's friction that of its normal force (compliance.cpp;
     /// BladeLoads::sliding then counts cells); 0: two rows for every pressed candidate
     double friction_cell_mm = 0;
-    /// One wall row per vertex: of the faces it lies over within 0.02 mm of the nearest, the one its projection lies
-    /// deepest inside (nearly parallel rows of one vertex over neighbouring faces make the LCP degenerate)
+    /// One wall row per vertex: of the faces it lies over within 0.02 mm of the nearest, its face in the last pass or
+    /// frame if it is one of them, else the one its projection lies deepest inside (nearly parallel rows of one
+    /// vertex over neighbouring faces make the LCP degenerate); and a second row on its other face in the last pass
+    /// where the two faces' planes differ by more than 10° (a valley's sides). Either way a face a vertex had a row
+    /// on in the last pass keeps it while the vertex lies within 0.5 of the face beyond its edges (others: 0.1).
     bool wall_one_face = false;
 };
 
