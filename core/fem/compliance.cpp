@@ -1099,6 +1099,31 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // the neck line and 0.021 mm at most anywhere, session 35).
     std::array<int, 2> worst{-1, -1};
     if (walls) f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt, &worst);
+    if (wall_trace && walls && f.wall_contacts > 0) {
+        // How much of the walls' force the rows kept beyond their face's edge carry (OVER_KEPT: the face's plane holds a
+        // vertex beyond its edge, over a ridge as far out as the plane or further), and how far those vertices stand
+        // from the nearest face they lie over by the ordinary rule (a gap the kept row may hold open).
+        const Eigen::MatrixX3d& Xf = lin.free_positions();
+        const Eigen::VectorXd& fu = lin.free_candidate_u();
+        auto at = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + f.candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
+        int n_beyond = 0;
+        double force = 0, beyond = 0, gap = 0;
+        for (size_t i = 0; i < f.constraint.size() && i < f.lambda.size(); ++i) {
+            const auto [v, sf] = f.constraint[i];
+            if (sf < 2 || !(f.lambda[i] > 0)) continue;
+            force += f.lambda[i];
+            OverFace of;
+            const int fc = sf - 2;
+            if (over_face(at(v), at(walls->faces(fc, 0)), at(walls->faces(fc, 1)), at(walls->faces(fc, 2)), of)) continue;
+            ++n_beyond;
+            beyond += f.lambda[i];
+            double nearest = std::numeric_limits<double>::infinity();
+            for (const auto& [pv, pf] : walls->pairs)
+                if (pv == v && over_face(at(v), at(walls->faces(pf, 0)), at(walls->faces(pf, 1)), at(walls->faces(pf, 2)), of)) nearest = std::min(nearest, of.d);
+            if (std::isfinite(nearest)) gap = std::max(gap, nearest);
+        }
+        std::fprintf(stderr, "wall rows beyond their face's edge: %d pressed, %.4f of %.4f N, the largest gap to a face they lie over %.4f mm\n", n_beyond, beyond, force, gap);
+    }
     if (wall_trace && walls && f.wall_min_distance_mm < -0.02 && worst[0] >= 0) {
         // The worst pair's history: where it stood at the start and after each pass, and which rows its vertex had.
         const Eigen::MatrixX3d& Xf = lin.free_positions();
