@@ -580,8 +580,7 @@ struct OverFace {
 /// `over`: the margin beyond the edges (OVER_FACE; a row the vertex had in the last pass keeps it to OVER_KEPT below).
 constexpr double OVER_FACE = -0.1;
 bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, OverFace& o,
-               double over = OVER_FACE) {
-    const double OVER = over;
+               double OVER = OVER_FACE) {
     const Eigen::Vector3d e1 = b - a, e2 = c - a, nn = e1.cross(e2);
     const double area2 = nn.norm();
     if (!(area2 > 0)) return false;
@@ -743,9 +742,9 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         // last pass, every time after its pass before had ended 0.12-0.24 of the face beyond that edge (session 44,
         // ANEU_WALL_TRACE). So a face a vertex's row had in `warm` stays its row while the vertex lies within
         // OVER_KEPT of the face (hysteresis; at 0.3 some slid on to 0.31 and back through, the rows' push along the
-        // normal carrying them sideways through the shell's compliance): beyond an edge, the face's plane holds the vertex as far out as it or
-        // further (beyond a ridge: out by at most the slide times the ridge's slope; beyond a valley: the
-        // neighbour's row is the stricter).
+        // normal carrying them sideways through the shell's compliance). Beyond an edge the face's plane holds the
+        // vertex as far out as the surface or further: beyond a ridge, out by at most the slide times the ridge's
+        // slope (the sample: 0.025 mm at most); beyond a valley the neighbour's row is the stricter.
         constexpr double OVER_KEPT = -0.5;
         std::vector<std::array<int, 2>> had(static_cast<size_t>(nc), std::array<int, 2>{-1, -1});
         if (warm)
@@ -1041,6 +1040,60 @@ double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, 
     return out;
 }
 
+/// ANEU_WALL_TRACE (stderr), at a frame's end `f`: how much of the walls' force the rows kept beyond their face's edge
+/// carry (OVER_KEPT: the face's plane holds a vertex beyond its edge, over a ridge as far out as the plane or further)
+/// and how far those vertices stand from the nearest face they lie over by the ordinary rule (a gap the kept row may
+/// hold open); and where the walls end more than 0.02 mm through each other, the worst pair's history: where it stood
+/// at the start and after each pass (`pass_ends`), and which rows its vertex had.
+void trace_walls(const Linearisation& lin, const CompliantWalls& walls, const CompliantFrame& f, const Eigen::VectorXd& start, const std::array<int, 2>& worst,
+                 const std::vector<CompliantFrame>& pass_ends) {
+    const Eigen::MatrixX3d& Xf = lin.free_positions();
+    const Eigen::VectorXd& fu = lin.free_candidate_u();
+    auto at = [&](const Eigen::VectorXd& u, int k) { return Eigen::Vector3d(Xf.row(k).transpose() + u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
+    auto over = [&](const Eigen::VectorXd& u, int v, int fc, OverFace& of) {
+        return over_face(at(u, v), at(u, walls.faces(fc, 0)), at(u, walls.faces(fc, 1)), at(u, walls.faces(fc, 2)), of);
+    };
+    if (f.wall_contacts > 0) {
+        int n_beyond = 0;
+        double force = 0, beyond = 0, gap = 0;
+        for (size_t i = 0; i < f.constraint.size() && i < f.lambda.size(); ++i) {
+            const auto [v, sf] = f.constraint[i];
+            if (sf < 2 || !(f.lambda[i] > 0)) continue;
+            force += f.lambda[i];
+            OverFace of;
+            if (over(f.candidate_u, v, sf - 2, of)) continue;
+            ++n_beyond;
+            beyond += f.lambda[i];
+            double nearest = std::numeric_limits<double>::infinity();
+            for (const auto& [pv, pf] : walls.pairs)
+                if (pv == v && over(f.candidate_u, v, pf, of)) nearest = std::min(nearest, of.d);
+            if (std::isfinite(nearest)) gap = std::max(gap, nearest);
+        }
+        std::fprintf(stderr, "wall rows beyond their face's edge: %d pressed, %.4f of %.4f N, the largest gap to a face they lie over %.4f mm\n", n_beyond, beyond, force, gap);
+    }
+    if (!(f.wall_min_distance_mm < -0.02) || worst[0] < 0) return;
+    const int v = worst[0], fc = worst[1];
+    auto state = [&](const Eigen::VectorXd& u) {
+        OverFace of;
+        const bool is_over = over(u, v, fc, of);
+        char buf[160];
+        std::snprintf(buf, sizeof buf, "d %+.4f b (%.2f %.2f %.2f)%s", of.d, of.b0, of.b1, of.b2, is_over ? "" : " not over");
+        return std::string(buf);
+    };
+    std::fprintf(stderr, "wall worst: vertex %d face %d (%d %d %d): start %s\n", v, fc, walls.faces(fc, 0), walls.faces(fc, 1), walls.faces(fc, 2), state(start).c_str());
+    for (size_t p = 0; p < pass_ends.size(); ++p) {
+        std::string rows_of_v;
+        for (size_t i = 0; i < pass_ends[p].constraint.size(); ++i)
+            if (pass_ends[p].constraint[i].first == v && pass_ends[p].constraint[i].second >= 2)
+                rows_of_v += " " + std::to_string(pass_ends[p].constraint[i].second - 2) + ":" + std::to_string(i < pass_ends[p].lambda.size() ? pass_ends[p].lambda[i] : 0.0);
+        const Eigen::VectorXd& from = p == 0 ? start : pass_ends[p - 1].candidate_u;
+        const double moved = (pass_ends[p].candidate_u - from).lpNorm<Eigen::Infinity>();
+        const double vmoved = (pass_ends[p].candidate_u.segment<3>(3 * v) - from.segment<3>(3 * v)).norm();
+        std::fprintf(stderr, "wall worst: pass %zu end %s; moved %.4f mm (its vertex %.4f); its wall rows (face:force)%s\n", p + 1, state(pass_ends[p].candidate_u).c_str(),
+                     moved, vmoved, rows_of_v.empty() ? " none" : rows_of_v.c_str());
+    }
+}
+
 }  // namespace
 
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
@@ -1080,11 +1133,15 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
             break;
         }
     }
+    // Where the frame ends, on the pairs it constrains (the passes measured it where each started, creases included:
+    // the sample's held walls read −0.122 mm there, while its lumen at the end has them 0.002 mm through each other on
+    // the neck line and 0.021 mm at most anywhere, session 35).
+    std::array<int, 2> worst{-1, -1};
+    if (walls) f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt, &worst);
     // A frame whose walls end through each other by more than opt.wall_crossed_mm (a pass that moved a vertex over a
     // face its rows left out) takes more passes, from there, while they do: the next has that face's row.
     if (walls)
-        for (int extra = 0; extra < opt.wall_extra_passes; ++extra) {
-            if (wall_min_distance(lin, *walls, f.candidate_u, start, opt) >= -opt.wall_crossed_mm) break;
+        for (int extra = 0; extra < opt.wall_extra_passes && f.wall_min_distance_mm < -opt.wall_crossed_mm; ++extra) {
             CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
             g.rows_s += f.rows_s;
             g.delassus_s += f.delassus_s;
@@ -1092,64 +1149,10 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
             if (wall_trace) pass_ends.push_back(g);
             f = std::move(g);
             ++passes;
+            f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt, &worst);
         }
     f.passes = passes;
-    // Where the frame ends, on the pairs it constrains (the passes measured it where each started, creases included:
-    // the sample's held walls read −0.122 mm there, while its lumen at the end has them 0.002 mm through each other on
-    // the neck line and 0.021 mm at most anywhere, session 35).
-    std::array<int, 2> worst{-1, -1};
-    if (walls) f.wall_min_distance_mm = wall_min_distance(lin, *walls, f.candidate_u, start, opt, &worst);
-    if (wall_trace && walls && f.wall_contacts > 0) {
-        // How much of the walls' force the rows kept beyond their face's edge carry (OVER_KEPT: the face's plane holds a
-        // vertex beyond its edge, over a ridge as far out as the plane or further), and how far those vertices stand
-        // from the nearest face they lie over by the ordinary rule (a gap the kept row may hold open).
-        const Eigen::MatrixX3d& Xf = lin.free_positions();
-        const Eigen::VectorXd& fu = lin.free_candidate_u();
-        auto at = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + f.candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
-        int n_beyond = 0;
-        double force = 0, beyond = 0, gap = 0;
-        for (size_t i = 0; i < f.constraint.size() && i < f.lambda.size(); ++i) {
-            const auto [v, sf] = f.constraint[i];
-            if (sf < 2 || !(f.lambda[i] > 0)) continue;
-            force += f.lambda[i];
-            OverFace of;
-            const int fc = sf - 2;
-            if (over_face(at(v), at(walls->faces(fc, 0)), at(walls->faces(fc, 1)), at(walls->faces(fc, 2)), of)) continue;
-            ++n_beyond;
-            beyond += f.lambda[i];
-            double nearest = std::numeric_limits<double>::infinity();
-            for (const auto& [pv, pf] : walls->pairs)
-                if (pv == v && over_face(at(v), at(walls->faces(pf, 0)), at(walls->faces(pf, 1)), at(walls->faces(pf, 2)), of)) nearest = std::min(nearest, of.d);
-            if (std::isfinite(nearest)) gap = std::max(gap, nearest);
-        }
-        std::fprintf(stderr, "wall rows beyond their face's edge: %d pressed, %.4f of %.4f N, the largest gap to a face they lie over %.4f mm\n", n_beyond, beyond, force, gap);
-    }
-    if (wall_trace && walls && f.wall_min_distance_mm < -0.02 && worst[0] >= 0) {
-        // The worst pair's history: where it stood at the start and after each pass, and which rows its vertex had.
-        const Eigen::MatrixX3d& Xf = lin.free_positions();
-        const Eigen::VectorXd& fu = lin.free_candidate_u();
-        auto at = [&](const Eigen::VectorXd& u, int k) { return Eigen::Vector3d(Xf.row(k).transpose() + u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
-        const int v = worst[0], fc = worst[1];
-        auto state = [&](const Eigen::VectorXd& u) {
-            OverFace of;
-            const bool over = over_face(at(u, v), at(u, walls->faces(fc, 0)), at(u, walls->faces(fc, 1)), at(u, walls->faces(fc, 2)), of);
-            char buf[160];
-            std::snprintf(buf, sizeof buf, "d %+.4f b (%.2f %.2f %.2f)%s", of.d, of.b0, of.b1, of.b2, over ? "" : " not over");
-            return std::string(buf);
-        };
-        std::fprintf(stderr, "wall worst: vertex %d face %d (%d %d %d): start %s\n", v, fc, walls->faces(fc, 0), walls->faces(fc, 1), walls->faces(fc, 2),
-                     state(start).c_str());
-        for (size_t p = 0; p < pass_ends.size(); ++p) {
-            std::string rows_of_v;
-            for (size_t i = 0; i < pass_ends[p].constraint.size(); ++i)
-                if (pass_ends[p].constraint[i].first == v && pass_ends[p].constraint[i].second >= 2)
-                    rows_of_v += " " + std::to_string(pass_ends[p].constraint[i].second - 2) + ":" + std::to_string(i < pass_ends[p].lambda.size() ? pass_ends[p].lambda[i] : 0.0);
-            const double moved = (pass_ends[p].candidate_u - (p == 0 ? start : pass_ends[p - 1].candidate_u)).lpNorm<Eigen::Infinity>();
-            const double vmoved = (pass_ends[p].candidate_u.segment<3>(3 * v) - (p == 0 ? start : pass_ends[p - 1].candidate_u).segment<3>(3 * v)).norm();
-            std::fprintf(stderr, "wall worst: pass %zu end %s; moved %.4f mm (its vertex %.4f); its wall rows (face:force)%s\n", p + 1, state(pass_ends[p].candidate_u).c_str(),
-                         moved, vmoved, rows_of_v.empty() ? " none" : rows_of_v.c_str());
-        }
-    }
+    if (wall_trace && walls) trace_walls(lin, *walls, f, start, worst, pass_ends);
     f.seconds = sw.seconds();
     return f;
 }
