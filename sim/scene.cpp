@@ -136,11 +136,7 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
     c.jaw_curve_radius_mm = o.num("jaw_curve_radius_mm", c.jaw_curve_radius_mm, -1000, 1000);
     if (c.jaw_curve_radius_mm != 0) {
         if (c.jaw_mesh) o.fail("\"jaw_curve_radius_mm\" with a jaw_mesh: expected 0 (a mesh jaw has its own shape)");
-        fem::ClipBlades b;
-        b.length_mm = c.reach_mm();
-        b.width_mm = c.jaw_width_mm;
-        b.curve_radius_mm = c.jaw_curve_radius_mm;
-        b.curve_from_mm = c.fulcrum_mm;
+        const fem::ClipBlades b = c.blades(Pose{});
         try {
             b.check_curve();
         } catch (const InputError& e) {

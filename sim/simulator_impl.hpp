@@ -29,19 +29,7 @@
 namespace aneu::sim {
 
 /// A clip's jaws as the blades of fem::ClipBody, at its pose (collision, spring balance, the nonlinear patch).
-inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) {
-    fem::ClipBlades b;
-    b.hinge = c.pose.position;
-    b.axis = c.pose.axis;
-    b.up = c.pose.up;
-    b.length_mm = cm.reach_mm();  // from the fulcrum (the arms and box behind the heel taken as blade)
-    b.width_mm = cm.jaw_width_mm;
-    b.thickness_mm = cm.jaw_thickness_mm;
-    b.closed_gap_mm = cm.closed_gap_mm;
-    b.curve_radius_mm = cm.jaw_curve_radius_mm;  // a curved clip's blades bend from the heel
-    b.curve_from_mm = cm.fulcrum_mm;
-    return b;
-}
+inline fem::ClipBlades blades_of(const Clip& c, const ClipModel& cm) { return cm.blades(c.pose); }
 
 /// A compliance patch's linearisation made on its own thread (threaded mode): the state it was made at, the result
 /// (null with `failed` set: refused, e.g. an element inverted there), its time, and whether it is done.

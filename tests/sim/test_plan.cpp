@@ -32,6 +32,22 @@ struct PlannedTube {
     }
     ~PlannedTube() { fs::remove_all(dir); }
 };
+
+/// A run's log rows before time t (the way in, before the applier starts closing): each with no contact node. Their count.
+int contact_free_rows_before(const std::string& log_path, double t) {
+    std::ifstream log(log_path);
+    std::string line;
+    std::getline(log, line);
+    EXPECT_EQ(line.rfind("t_s,contact_nodes,", 0), 0u) << line;
+    int rows = 0;
+    while (std::getline(log, line)) {
+        const double tt = std::stod(line);
+        if (tt >= t - 1e-9) break;
+        ++rows;
+        EXPECT_EQ(std::stoi(line.substr(line.find(',') + 1)), 0) << "contact on the way in at t = " << tt;
+    }
+    return rows;
+}
 }  // namespace
 
 TEST(Plan, NeckFrameOfAKnownNeck) {
@@ -232,17 +248,7 @@ TEST(Plan, AClipWithAFulcrumBehindTheHeelIsPlannedFromTheFulcrum) {
     const sim::Assessment a = sim::run_scene(s, opt);
     EXPECT_EQ(a.clips_deposited, 1);
     EXPECT_GT(a.peak_vessel_force_n, 0.0) << "the clip touched the vessel";
-    std::ifstream log(run.log);
-    std::string line;
-    std::getline(log, line);
-    int rows_in = 0;
-    while (std::getline(log, line)) {
-        const double tt = std::stod(line);
-        if (tt >= keys[1].t - 1e-9) break;
-        ++rows_in;
-        EXPECT_EQ(std::stoi(line.substr(line.find(',') + 1)), 0) << "contact on the way in at t = " << tt;
-    }
-    EXPECT_GT(rows_in, 100);
+    EXPECT_GT(contact_free_rows_before(run.log, keys[1].t), 100);
 }
 
 // A curved clip (PlanOptions::curve_radius_mm, the model's jaw_curve_radius_mm) turning about a fulcrum 10 mm back:
@@ -275,13 +281,7 @@ TEST(Plan, ACurvedClipIsPlannedAlongAndAcrossItsBentBlades) {
     const auto& keys = sc.instruments[0].keys;
     ASSERT_GE(keys.size(), 4u);
     const sim::Pose& closed = keys[2].pose;
-    fem::ClipBlades b;
-    b.hinge = closed.position;
-    b.axis = closed.axis;
-    b.up = closed.up;
-    b.length_mm = cm.reach_mm();
-    b.curve_radius_mm = cm.jaw_curve_radius_mm;
-    b.curve_from_mm = F;
+    const fem::ClipBlades b = cm.blades(closed);
     const Eigen::Vector3d w = b.axis.cross(b.up);
     int in = 0, all = 0;
     for (const auto& loop : m.surface.lumen.neck_loops)
@@ -302,17 +302,7 @@ TEST(Plan, ACurvedClipIsPlannedAlongAndAcrossItsBentBlades) {
     sim::RunOptions opt;
     opt.deterministic = true;
     sim::run_scene(s, opt);
-    std::ifstream log(run.log);
-    std::string line;
-    std::getline(log, line);
-    int rows = 0;
-    while (std::getline(log, line)) {
-        const double tt = std::stod(line);
-        if (tt >= keys[1].t - 1e-9) break;
-        ++rows;
-        EXPECT_EQ(std::stoi(line.substr(line.find(',') + 1)), 0) << "contact on the way in at t = " << tt;
-    }
-    EXPECT_GT(rows, 100);
+    EXPECT_GT(contact_free_rows_before(run.log, keys[1].t), 100);
     po.curve_radius_mm = 1.5;
     EXPECT_THROW(sim::plan_scene(m, "tube.h5", "planned", po), InputError);
 }

@@ -680,14 +680,7 @@ TEST(ClipFiles, ACurvedClipsJawsBendFromTheHeelAndATooTightCurveIsRefused) {
     // half the width, behind its face within its thickness), on a grid round it; opened 20°.
     {
         const auto open = sim::clip_jaws(c, p, 20.0);
-        fem::ClipBlades b;
-        b.hinge = p.position;
-        b.axis = p.axis;
-        b.up = p.up;
-        b.length_mm = c.reach_mm();
-        b.width_mm = c.jaw_width_mm;
-        b.curve_radius_mm = c.jaw_curve_radius_mm;
-        b.curve_from_mm = c.fulcrum_mm;
+        const fem::ClipBlades b = c.blades(p);
         Eigen::Vector3d t, n, w;
         b.frame(1, 20.0 * M_PI / 180, t, n, w);
         int wrong = 0, inside = 0;

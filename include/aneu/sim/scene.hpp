@@ -51,6 +51,21 @@ struct ClipModel {
     double jaw_curve_radius_mm = 0.0;
     /// The jaws' length from the fulcrum: fulcrum_mm + jaw_length_mm.
     double reach_mm() const { return fulcrum_mm + jaw_length_mm; }
+    /// Its jaws as fem::ClipBlades with the fulcrum at `at` (the simulator's contact, spring balance and patch; the
+    /// arms and box behind the heel taken as blade, a curved clip's blades bent from the heel).
+    fem::ClipBlades blades(const Pose& at) const {
+        fem::ClipBlades b;
+        b.hinge = at.position;
+        b.axis = at.axis;
+        b.up = at.up;
+        b.length_mm = reach_mm();
+        b.width_mm = jaw_width_mm;
+        b.thickness_mm = jaw_thickness_mm;
+        b.closed_gap_mm = closed_gap_mm;
+        b.curve_radius_mm = jaw_curve_radius_mm;
+        b.curve_from_mm = fulcrum_mm;
+        return b;
+    }
     /// An opening step's share that gives the blade's middle the travel the same step gives a clip turning at its
     /// heel: (L/2) / (fulcrum + L/2), 1 without a fulcrum (the simulator's per-frame caps on the opening, in degrees
     /// for a clip turning at its heel, are scaled by it).
