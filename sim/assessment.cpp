@@ -2,6 +2,7 @@
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
 #include "aneu/fem/assembly.hpp"
+#include "aneu/fem/contact.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
 
@@ -351,6 +352,28 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
     return out;
 }
 
+LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings, double depth_mm) {
+    LumenCrossing out;
+    if (lumen.F.rows() == 0) return out;
+    // surface_crossings counts a vertex behind a face against the face's normal: the lumen's faces turned into it.
+    const Eigen::MatrixX3i inward = lumen.F(Eigen::all, std::vector<int>{0, 2, 1});
+    Eigen::VectorXd u(3 * y.rows());
+    for (Eigen::Index v = 0; v < y.rows(); ++v) u.segment<3>(3 * v) = (y.row(v) - lumen.X.row(v)).transpose();
+    constexpr double ROUNDOFF_MM = 1e-3;  // a vertex pressed onto a face, a hair behind its plane
+    std::vector<int> through;
+    for (const fem::SurfaceCrossing& c : fem::surface_crossings(lumen.X, inward, u, exclude_rings, depth_mm)) {
+        if (c.depth_mm <= ROUNDOFF_MM) continue;
+        through.push_back(c.v);
+        if (c.depth_mm > out.depth_mm) {
+            out.depth_mm = c.depth_mm;
+            out.at = y.row(c.v).transpose();
+        }
+    }
+    std::sort(through.begin(), through.end());
+    out.vertices = static_cast<int>(std::unique(through.begin(), through.end()) - through.begin());
+    return out;
+}
+
 double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm) {
     DeformedLumen balls(lumen.F, y, lumen.wall_mm);
     return balls.width(face, w, cap_mm);
@@ -670,6 +693,10 @@ Assessment Simulator::Impl::assess() {
     out.neck_length_mm = occ.length_mm;
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
+    const LumenCrossing crossing = lumen_crossing(measured, ym);
+    out.lumen_crossing_mm = crossing.depth_mm;
+    out.lumen_crossing_vertices = crossing.vertices;
+    out.lumen_crossing_at = crossing.at;
     out.neck_line.clear();
     NeckChannel channel;
     {

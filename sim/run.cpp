@@ -522,6 +522,9 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["neck_measured_on"] = a.neck_on_quadratic_surface ? "quadratic surface" : "corner triangles";
     if (a.neck_min_gap_mm >= 0 || a.neck_interpenetration_mm > 0) j["neck_min_gap_mm"] = a.neck_min_gap_mm;
     j["neck_interpenetration_mm"] = a.neck_interpenetration_mm;
+    j["lumen_crossing_mm"] = a.lumen_crossing_mm;  // the lumen through itself anywhere (its deepest vertex behind a face)
+    j["lumen_crossing_vertices"] = a.lumen_crossing_vertices;
+    if (a.lumen_crossing_vertices > 0) j["lumen_crossing_at"] = {a.lumen_crossing_at.x(), a.lumen_crossing_at.y(), a.lumen_crossing_at.z()};
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         j["neck_in_jaws_fraction"] = a.neck_in_jaws_fraction;
@@ -699,6 +702,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         std::snprintf(buf, sizeof buf, "  neck line in the jaws      %.0f %% (within their width; the farthest beside it %.2f mm)\n", 100.0 * a.neck_in_jaws_fraction,
                       a.neck_beside_jaws_mm);
+        o << buf;
+    }
+    if (a.lumen_crossing_vertices > 0) {
+        std::snprintf(buf, sizeof buf, "  lumen through itself       %.3f mm deep at (%.2f, %.2f, %.2f); %d vertices behind a face\n", a.lumen_crossing_mm,
+                      a.lumen_crossing_at.x(), a.lumen_crossing_at.y(), a.lumen_crossing_at.z(), a.lumen_crossing_vertices);
         o << buf;
     }
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';

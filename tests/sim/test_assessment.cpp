@@ -167,6 +167,31 @@ TEST(NeckOcclusion, AStaircaseNeckLineIsMeasuredOnTheBorderItFollows) {
                 2 * (open.points[0][1] - open.points[0][0]).norm(), 1e-9);
 }
 
+TEST(LumenCrossing, WallsPressedThroughEachOtherAreCrossedByTheirDepthABulgeIsNot) {
+    const SimLumen s = tube();
+    // Open, flattened to a slit, pressed flat: nothing of the lumen lies behind a face of it.
+    EXPECT_EQ(lumen_crossing(s, s.X).vertices, 0);
+    EXPECT_EQ(lumen_crossing(s, pinched(s, 0.0, 0.3)).vertices, 0);
+    EXPECT_LE(lumen_crossing(s, pinched(s, 0.0, 0.0)).depth_mm, 0.005);
+    // Pressed 0.1 mm through each other: each flat side's vertices lie 0.1 mm behind the other side's faces (and the
+    // inverted folds' inner halves behind their outer ones by less); the deepest is where the pinch is flat.
+    const LumenCrossing through = lumen_crossing(s, pinched(s, 0.0, -0.1));
+    EXPECT_NEAR(through.depth_mm, 0.1, 0.005);
+    EXPECT_LE(std::abs(through.at.z()), 1.5 + 1e-9);
+    EXPECT_GT(through.vertices, 2 * NT / 4 * 10) << "about half of each ring in the 3 mm flat, on both sides";
+    // Shallower than the depth searched only (deeper: another part of the vessel, not this wall), and the inverted
+    // folds' vertices over faces one or two rings away count with one ring left out, not with two.
+    const LumenCrossing shallow = lumen_crossing(s, pinched(s, 0.0, -0.1), 1, 0.05);
+    EXPECT_LT(shallow.depth_mm, 0.05);
+    EXPECT_LT(shallow.vertices, through.vertices);
+    EXPECT_LT(lumen_crossing(s, pinched(s, 0.0, -0.1), 2).vertices, through.vertices);
+    // A vertex pushed 0.2 mm out of the lumen takes its own faces with it: a bulge, not a crossing.
+    Eigen::MatrixX3d bulge = s.X;
+    const int v = (NZ / 2) * NT + 5;
+    bulge.row(v) += 0.2 * Eigen::RowVector3d(s.X(v, 0), s.X(v, 1), 0).normalized();
+    EXPECT_EQ(lumen_crossing(s, bulge).vertices, 0);
+}
+
 // The channel through the neck: the widest lumen joining the sac (faces with z > 1 mm) to the parent (z < −1 mm).
 TEST(NeckChannel, AnOpenTubeIsWideOpenAndItsWidthIsItsDiameter) {
     const SimLumen s = tube();

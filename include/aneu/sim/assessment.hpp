@@ -39,6 +39,19 @@ struct NeckOcclusion {
 /// neck closes none.
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm);
 
+/// The lumen passing through itself anywhere, not only on the neck line: lumen vertices lying behind a lumen face (out
+/// of the lumen, into that face's wall) by more than 1 µm and at most `depth_mm`, their projection inside the face, that
+/// did not lie behind it at rest (fem::surface_crossings); faces within `exclude_rings` edges of the vertex do not
+/// count. One ring, not the compliance frames' two: an over-bent fold (the lumen's surface folded back onto itself
+/// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
+/// edge with unless an element between them turned inside out.
+struct LumenCrossing {
+    double depth_mm = 0.0;                         ///< the deepest (0: none)
+    int vertices = 0;                              ///< lumen vertices through a face
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the deepest vertex, deformed
+};
+LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = 1, double depth_mm = 0.5);
+
 /// The lumen's edge length round each face at rest: the mean, over the faces sharing a vertex with it, of their
 /// shortest edge (on a mesh of edge h, about h; across a stretched mesh, its fine direction: the resolution across
 /// a fold, which sets the channel a flattened fold keeps on the mesh: bench/bench_fold.cpp, patch_sim_notes.md).

@@ -80,6 +80,11 @@ struct Assessment {
     double neck_length_mm = 0.0;
     double neck_min_gap_mm = 0.0;             ///< smallest lumen gap across the neck line (negative: walls pass through)
     double neck_interpenetration_mm = 0.0;    ///< deepest inner wall through the opposite one on the neck line
+    /// The lumen through itself anywhere (lumen_crossing, assessment.hpp): the deepest lumen vertex behind a lumen face
+    /// (0: none), how many vertices are through one, where the deepest is.
+    double lumen_crossing_mm = 0.0;
+    int lumen_crossing_vertices = 0;
+    Eigen::Vector3d lumen_crossing_at = Eigen::Vector3d::Zero();
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
     /// Where the neck line ended up against the clips' jaws, held or deposited, at any opening: the fraction of it (by
     /// length on the deformed lumen, as neck_closed_fraction) lying within a clip's jaws (along their length, within
