@@ -894,6 +894,21 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         }
         Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
+        // ANEU_WALL_TRACE: the patch's inner walls through each other after the frame, whatever the frames' rows (one ring
+        // left out, as sim::lumen_crossing): how many vertices, the deepest, whether it and the face's corners are the
+        // frames' candidates, where in the jaws' frame (session 45: C0054's walls crossed over ten frames at a fold).
+        if (std::getenv("ANEU_WALL_TRACE") && P.inner.rows() > 0) {
+            const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), 1, 0.5);
+            const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
+            if (deep != cr.end() && deep->depth_mm > 0.01) {
+                const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;
+                const std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
+                auto cand = [&](int a) { return C && std::find(C->cand.begin(), C->cand.end(), a) != C->cand.end() ? 1 : 0; };
+                std::fprintf(stderr, "walls crossed t=%.4f: %zu vertex-face crossings, deepest %.4f mm node %d (candidate %d) behind face %d (candidate corners %d%d%d) at r %.3f across %.3f up %.3f mm\n",
+                             fr.t, cr.size(), deep->depth_mm, deep->v, cand(deep->v), deep->f, cand(P.inner(deep->f, 0)), cand(P.inner(deep->f, 1)),
+                             cand(P.inner(deep->f, 2)), rel.dot(blades.axis), rel.dot(blades.axis.cross(blades.up)), rel.dot(blades.up));
+            }
+        }
         P.grips = std::move(grips);
         P.gripped = restarted ? P.gripped_ok : true;
         P.hinge_prev = blades.hinge;

@@ -987,3 +987,82 @@ TEST(CompliantClip, FramesCarriedToAnotherCandidateSetKeepTheRowsOfTheNodesAndFa
     EXPECT_THROW(fem::carry_compliant_frames(to, bad, to, tf, u, f, ws), InputError);
     EXPECT_THROW(fem::carry_compliant_frames(to, tf, {10, 30}, Eigen::MatrixX3i(), u, f, ws), InputError);
 }
+
+TEST(CompliantClip, TheWallSearchPairsTheTwoWallsOfATightFoldThatTwoRingsWouldLeaveOut) {
+    // A strip folded flat into a U, as a clip flattens a neck to a slit: its lower wall runs back under its upper one
+    // 2ρ = 0.064 mm below it, joined at the fold by a single row of cells. Each upper vertex of the first row from the
+    // fold lies over a lower face, most of them over one with a corner two edges from it (through the fold). The
+    // frames' wall search (one ring left out) pairs every such vertex with the face under it; ContactBody's default
+    // (two rings) leaves such faces out; neither pairs a wall with its own faces. Farther from the fold both pair the
+    // walls. Session 45: two rings hid C0054's walls crossing at such a fold, 0.198 mm deep.
+    const double h = 0.1, rho = h / 3.14159265358979323846;
+    const int K = 6, NY = 6;  // vertices per wall along x (k = 0 at the fold), across y
+    Eigen::MatrixX3d X(2 * K * NY, 3);
+    auto id = [&](int wall, int k, int j) { return (wall * K + k) * NY + j; };  // wall 0 upper (z = +ρ), 1 lower
+    for (int w = 0; w < 2; ++w)
+        for (int k = 0; k < K; ++k)
+            for (int j = 0; j < NY; ++j)  // the upper wall's grid a third of a cell off the lower's: over its faces
+                X.row(id(w, k, j)) << k * h - (w == 0 ? h / 3 : 0.0), j * h + (w == 0 ? h / 3 : 0.0), w == 0 ? rho : -rho;
+    // The strip's cells in order along it: lower wall from its far end to the fold, across it, upper wall outwards.
+    std::vector<std::vector<int>> column;
+    for (int k = K - 1; k >= 0; --k) {
+        column.emplace_back();
+        for (int j = 0; j < NY; ++j) column.back().push_back(id(1, k, j));
+    }
+    for (int k = 0; k < K; ++k) {
+        column.emplace_back();
+        for (int j = 0; j < NY; ++j) column.back().push_back(id(0, k, j));
+    }
+    std::vector<Eigen::Vector3i> tri;
+    for (size_t c = 0; c + 1 < column.size(); ++c)
+        for (int j = 0; j + 1 < NY; ++j) {
+            const int a = column[c][j], b = column[c + 1][j], cc = column[c + 1][j + 1], d = column[c][j + 1];
+            for (Eigen::Vector3i t : {Eigen::Vector3i(a, b, cc), Eigen::Vector3i(a, cc, d)}) {
+                // Normals into the fold, towards the opposite wall: −z on the upper wall, +z on the lower, +x across.
+                const Eigen::Vector3d p = X.row(t[0]), q = X.row(t[1]), r = X.row(t[2]), m = (p + q + r) / 3;
+                const Eigen::Vector3d inside(std::max(m.x(), 0.0) + h, m.y(), 0.0);
+                if ((q - p).cross(r - p).dot(inside - m) < 0) std::swap(t[1], t[2]);
+                tri.push_back(t);
+            }
+        }
+    Eigen::MatrixX3i F(static_cast<Eigen::Index>(tri.size()), 3);
+    for (size_t f = 0; f < tri.size(); ++f) F.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
+    const Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * X.rows());
+    // The lower wall's face whose xy triangle holds the point's (−1: none).
+    auto face_under = [&](int v) {
+        const Eigen::Vector2d p = X.row(v).head<2>().transpose();
+        for (Eigen::Index f = 0; f < F.rows(); ++f) {
+            bool lower = true;
+            for (int k = 0; k < 3; ++k) lower = lower && X(F(f, k), 2) < 0;
+            if (!lower) continue;
+            const Eigen::Vector2d a = X.row(F(f, 0)).head<2>().transpose(), b = X.row(F(f, 1)).head<2>().transpose(), c = X.row(F(f, 2)).head<2>().transpose();
+            auto side = [](const Eigen::Vector2d& o, const Eigen::Vector2d& e, const Eigen::Vector2d& q) { return (e - o).x() * (q - o).y() - (e - o).y() * (q - o).x(); };
+            const double s0 = side(a, b, p), s1 = side(b, c, p), s2 = side(c, a, p);
+            if ((s0 >= 0 && s1 >= 0 && s2 >= 0) || (s0 <= 0 && s1 <= 0 && s2 <= 0)) return static_cast<int>(f);
+        }
+        return -1;
+    };
+    // Of the upper wall's row k (inner vertices across), how many are paired with the face under them.
+    auto paired_over = [&](const fem::ContactParams& p, int k) {
+        const std::vector<std::array<int, 2>> pairs = fem::contact_pairs(X, F, u, p);
+        for (const auto& pr : pairs) {
+            bool same = true;  // a face wholly on the vertex's own wall
+            for (int c = 0; c < 3; ++c) same = same && std::abs(X(F(pr[1], c), 2) - X(pr[0], 2)) < 1e-12;
+            EXPECT_FALSE(same) << "vertex " << pr[0] << " paired with a face of its own wall, " << pr[1];
+        }
+        int n = 0;
+        for (int j = 1; j + 2 < NY; ++j) {
+            const int v = id(0, k, j), f = face_under(v);
+            EXPECT_GE(f, 0) << "vertex " << v << " lies over the lower wall";
+            n += std::any_of(pairs.begin(), pairs.end(), [&](const std::array<int, 2>& pr) { return pr[0] == v && pr[1] == f; });
+        }
+        return n;
+    };
+    const int row = NY - 3;  // inner vertices of a row
+    const fem::CompliantWallSearch ws;
+    EXPECT_EQ(ws.params.exclude_rings, 1);
+    EXPECT_EQ(paired_over(ws.params, 1), row) << "the frames' search pairs the fold's first row with the faces under it";
+    EXPECT_LT(paired_over(fem::ContactParams{}, 1), row) << "two rings leave faces out (those with a corner at the fold)";
+    EXPECT_EQ(paired_over(ws.params, 3), row);
+    EXPECT_EQ(paired_over(fem::ContactParams{}, 3), row);
+}
