@@ -57,6 +57,8 @@ fields = [
         report.get("neck_sealed", "-"), report.get("neck_interpenetration_mm", float("nan")),
         report.get("neck_measured_on", "corner triangles").replace(" ", "_"),
         "%.3f" % report["neck_channel_edge_mm"] if report.get("neck_channel_edge_mm") is not None else "-"),
+    "lumen_crossing_mm=%s" % ("%.4f (%d vertices)" % (report["lumen_crossing_mm"], report.get("lumen_crossing_vertices", 0))
+                              if report.get("lumen_crossing_mm") is not None else "-"),
     "parent_narrowed=%s parent_mm=%s" % (
         "%.1f%%" % (100 * report["parent_narrowing"]) if report.get("parent_narrowing") is not None else "-",
         "%.2f/%.2f" % (report["parent_channel_mm"], report["parent_channel_rest_mm"]) if report.get("parent_narrowing") is not None else "-"),

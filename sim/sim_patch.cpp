@@ -743,7 +743,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             res.converged = f.complementarity_mm <= 1e-3;
             if (!res.converged) res.failure = "complementarity " + std::to_string(f.complementarity_mm) + " mm left";
             loads = f.loads;
-            wall_min = f.wall_min_distance_mm;
+            // Whatever is through a face at the frame's end counts, as the Newton frames' crossings do below (a vertex
+            // behind a face where the frame started has no row to push it out).
+            wall_min = f.wall_crossed_mm > 0 ? std::min(f.wall_min_distance_mm, -f.wall_crossed_mm) : f.wall_min_distance_mm;
             touching = f.wall_contacts;
             P.stats.wall_resolves += repeats;
             its += f.passes;

@@ -319,6 +319,7 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
     // times under the 0.02 mm), none went through a face.
     EXPECT_LT(deepest(with.u), 1e-3);
     EXPECT_EQ(with.f.wall_crossings, 0);
+    EXPECT_LT(with.f.wall_crossed_mm, 1e-3);  // the frame's own check of its end, rows or none
     EXPECT_GT(with.f.wall_contacts, 20);
     EXPECT_LT(std::abs(with.f.wall_min_distance_mm), 1e-3);
     // Its contact problem solved exactly, not left to the sweeps (block pivoting that cycled on pressed walls used to

@@ -166,6 +166,9 @@ struct CompliantFrame {
     /// the pairs not behind that plane by more than CompliantOptions::wall_behind_mm where it started (creases; inf: none)
     double wall_min_distance_mm = 0;
     int wall_crossings = 0;            ///< solve_compliant_clip_walls: wall vertices newly behind a face after its last solve
+    /// solve_compliant_clip_walls: the deepest wall vertex behind a wall face where the frame ended, whatever its rows
+    /// (fem::surface_crossings with the search's rings, deeper than 1 µm; crossings it started with included; 0: none)
+    double wall_crossed_mm = 0;
     int sweeps = 0;
     int passes = 0;                    ///< geometry passes (CompliantOptions::geometry_passes)
     int pivots = 0;                    ///< block-pivoting solves that finished the sweeps (0: the sweeps converged)
@@ -207,6 +210,7 @@ struct CompliantWallSearch {
     int searches = 0;  ///< pair searches so far
     Eigen::VectorXd ended_at;
     std::vector<std::pair<int, int>> ended_behind;
+    double ended_deepest = 0;  ///< the deepest of them
 };
 
 /// A frame with the inner walls' contact: the pairs (fem::contact_pairs with ws.params, its close vertices included;
