@@ -37,6 +37,9 @@ constexpr double RESELECT_MARGIN_RAD = 2.0 * DEG;
 // ... and a hinge that moves this far from where they were selected makes the frames due for another (the selection
 // keeps nodes within 0.1 mm of the wedge).
 constexpr double RESELECT_HINGE_MM = 0.05;
+// A frame beyond its linearisation's linear range is solved again on one made where it got to, at most this many
+// times (each a refresh: ~7-10 s on the sample).
+constexpr int RANGE_REFRESHES = 2;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
@@ -592,8 +595,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 return std::make_pair(setup_at(u, th), th);
             };
             // The frames' state carried over to a refresh's candidates, which the frames then act on.
-            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
-                fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, u0, C->last, C->search);
+            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge, const Eigen::VectorXd& at) {
+                fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, at, C->last, C->search);
                 adopt(std::move(cs), th, hinge);
             };
             // A refresh made on the second core (threaded mode) that is done: the frames go on with it from here.
@@ -611,7 +614,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                         std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s) dropped: the surface has moved %.2f wall thicknesses since\n",
                                      fr.t, q.t, q.seconds, moved);
                 } else if (q.lin) {
-                    take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel);
+                    take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel, u0);
                     C->lin = std::move(q.lin);
                     ++P.stats.linearisations;
                     P.stats.last_candidates = static_cast<int>(C->cand.size());
@@ -655,17 +658,20 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     q->done.store(true, std::memory_order_release);
                 }));
             }
-            if (!C->lin || (due && !fr.mx)) {
+            // A linearisation made here, inline, at the patch's state `at`: the first, a refresh due, or one for a frame
+            // that went beyond the linear range of the last (below).
+            auto refresh_at = [&](const Eigen::VectorXd& at) {
                 const Stopwatch lw;
+                bool made = true;
                 try {
                     double back = 1;
                     if (C->lin && reselect) {
-                        auto [cs, th] = select(u0);
-                        std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, u0, &C->lin->u0(), cs.candidates, back);
-                        take_setup(std::move(cs), th, blades.hinge);
+                        auto [cs, th] = select(at);
+                        std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back);
+                        take_setup(std::move(cs), th, blades.hinge, at);
                         C->lin = std::move(lin);
                     } else {
-                        C->lin = linearise_patch(pm, P.X, u0, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
+                        C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
                     }
                     ++P.stats.linearisations;
                     if (P.stats.first_candidates == 0) P.stats.first_candidates = static_cast<int>(C->cand.size());
@@ -684,46 +690,67 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     // with the last linearisation (a first one that fails ends the run).
                     if (!C->lin) throw;
                     ++P.stats.linearisations_failed;
+                    made = false;
                 }
                 P.stats.linearise_s += lw.seconds();
-                c_lin = lw.seconds();
+                c_lin += lw.seconds();
                 C->since = 0;
-            }
+                return made;
+            };
+            if (!C->lin || (due && !fr.mx)) refresh_at(u0);
             fem::CompliantOptions co;
             co.blade_friction = scene.patch.blade_friction;
             co.friction_cell_mm = scene.patch.friction_cell_mm;
             co.wall_one_face = true;
             const double th0 = v0[nb];
             int repeats = 0;
-            const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
             fem::CompliantFrame f;
-            try {
-                f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
-                                        : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
-            } catch (const NumericalError& e) {
-                // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays
-                // where it was; a second in a row restarts from the last converged one with a smaller step).
-                res.converged = false;
-                res.failure = e.what();
-                loads = C->last.loads;
-                wall_min = C->last.wall_min_distance_mm;
-                touching = C->last.wall_contacts;
-                return res;
+            // A frame that takes the patch's surface beyond the linear range of its linearisation (Scene::linear_limit
+            // wall thicknesses: its forces there are off by more than 10 %) is solved again on a linearisation at the
+            // state it reached, warm from its own rows, up to RANGE_REFRESHES times: Newton's steps on the frame, each a
+            // refresh. Inline (deterministic) mode only; the threaded mode's refreshes come from the other core.
+            for (int range_again = 0;; ++range_again) {
+                const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
+                try {
+                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
+                                            : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
+                } catch (const NumericalError& e) {
+                    // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays
+                    // where it was; a second in a row restarts from the last converged one with a smaller step).
+                    res.converged = false;
+                    res.failure = e.what();
+                    loads = C->last.loads;
+                    wall_min = C->last.wall_min_distance_mm;
+                    touching = C->last.wall_contacts;
+                    return res;
+                }
+                c_rows = f.rows_s;
+                c_delassus = f.delassus_s;
+                c_lcp = f.lcp_s;
+                c_search = f.search_s;
+                c_repeats = repeats;
+                c_nrows = static_cast<int>(f.constraint.size());
+                c_pivots = f.pivots;
+                c_sweeps = f.sweeps;
+                const Stopwatch dw;
+                res.u.head(nb) = C->lin->displacement(f.candidate_forces);
+                c_disp = dw.seconds();
+                // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
+                // the patch's figures, and warned, under the lock below).
+                lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
+                if (range_again < RANGE_REFRESHES && reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit) {
+                    const double was = lag.ratio;
+                    C->last = f;  // the re-solve's warm start, carried to the new linearisation's candidates
+                    C->warm = true;
+                    if (refresh_at(res.u.head(nb))) {
+                        ++P.stats.range_refreshes;
+                        if (std::getenv("ANEU_PATCH_TRACE"))
+                            std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation: solved again on one made there\n", fr.t, was);
+                        continue;
+                    }
+                }
+                break;
             }
-            c_rows = f.rows_s;
-            c_delassus = f.delassus_s;
-            c_lcp = f.lcp_s;
-            c_search = f.search_s;
-            c_repeats = repeats;
-            c_nrows = static_cast<int>(f.constraint.size());
-            c_pivots = f.pivots;
-            c_sweeps = f.sweeps;
-            const Stopwatch dw;
-            res.u.head(nb) = C->lin->displacement(f.candidate_forces);
-            c_disp = dw.seconds();
-            // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
-            // the patch's figures, and warned, under the lock below).
-            lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
             c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
             c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);
             const Eigen::Vector3d w_dir = blades.axis.cross(blades.up);

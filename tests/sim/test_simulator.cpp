@@ -939,26 +939,30 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
         EXPECT_EQ(p.unconverged_frames, 0);
         // Relinearised after every frame that presses the tube (those closing through the air before it do not count).
         // How far the frames take the surface from their linearisation, over the wall's thickness (the linear model's
-        // measure, trusted to 0.3): relinearised every frame, at most one frame's step (this scene's frames close the
-        // blades ~1.5 deg each: 0.63 x, warned) and, held, settled on the last linearisation; never relinearised, the
-        // whole flattening (3.7 x), where it ends too. Warned once either way.
+        // measure, trusted to 0.3): relinearised every frame, a frame that goes further (this scene's close the blades
+        // ~1.5 deg each: up to 0.63 x before session 45) is solved again on a linearisation made where it got to, so
+        // none ends beyond the range (measured 0.098 x, 3 frames solved again) and none is warned; held, it settles on
+        // the last linearisation. Never relinearised, the whole flattening (3.7 x), where it ends too: warned once.
         // A refresh selects the candidates again for the jaws as they are (measured: 256 as the jaws first close on
         // the tube, 240 at the end); never relinearised, the first selection stays.
         if (refresh) {
             EXPECT_GT(p.linearisations, 10);
-            EXPECT_LT(p.linearisations, p.frames);
+            EXPECT_GT(p.range_refreshes, 0);
+            EXPECT_LT(p.linearisations - p.range_refreshes, p.frames);
             EXPECT_GT(p.first_candidates, 0);
             EXPECT_LT(p.last_candidates, p.first_candidates);
             EXPECT_GT(p.max_lag_to_thickness, 0.0);
-            EXPECT_LT(p.max_lag_to_thickness, 1.0);
+            EXPECT_LE(p.max_lag_to_thickness, 0.3);
             EXPECT_LT(p.end_lag_to_thickness, 0.01);
+            EXPECT_EQ(range_warnings, 0);
         } else {
             EXPECT_EQ(p.linearisations, 1);
+            EXPECT_EQ(p.range_refreshes, 0);
             EXPECT_EQ(p.last_candidates, p.first_candidates);
             EXPECT_GT(p.max_lag_to_thickness, 3.0);
             EXPECT_GT(p.end_lag_to_thickness, 3.0);
+            EXPECT_EQ(range_warnings, 1);
         }
-        EXPECT_EQ(range_warnings, 1);
         EXPECT_NEAR(p.max_lag_to_thickness, p.max_lag_mm / p.max_lag_thickness_mm, 1e-12);
         EXPECT_EQ(p.linearisations_failed, 0);
         // The walls brought together (as near as the reference's barrier leaves them), not through each other by more
@@ -977,8 +981,8 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
                     refresh, p.frames, p.linearisations, p.linearise_s, c.grip_force_n, f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm,
                     ref_min, p.wall_pairs_touching, worst, p.mean_solve_ms, p.max_lag_mm, p.max_lag_thickness_mm, p.max_lag_to_thickness, p.end_lag_to_thickness);
     }
-    // Measured: -1.5 % relinearised every frame; +74.5 % linear about rest (the study's linear model: +75 % at full
-    // closure on the artery).
+    // Measured: -1.46 % relinearised every frame (-1.5 % before the frames beyond the range were solved again); +74.9 %
+    // linear about rest (the study's linear model: +75 % at full closure on the artery).
     EXPECT_NEAR(grip[1], f_ref, 0.05 * f_ref);
     EXPECT_GT(grip[0], 1.5 * f_ref);
 }

@@ -155,6 +155,9 @@ struct Assessment {
         double linearise_s = 0;
         int linearisations_failed = 0;       ///< refreshes refused (an element inverted at the state reached): the frames
                                              ///< went on with the last one
+        /// Frames solved again on a linearisation made where they got to, having gone past Scene::linear_limit from
+        /// theirs (inline mode; each is one of the linearisations)
+        int range_refreshes = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
