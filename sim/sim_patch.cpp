@@ -705,22 +705,30 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             const double th0 = v0[nb];
             int repeats = 0;
             fem::CompliantFrame f;
+            // The walls' distance a frame ended at: its rows' and, whatever its rows, anything through a face (as the
+            // Newton frames' crossings count below: a vertex behind a face where the frame started has no row to push
+            // it out).
+            auto walls_at = [](const fem::CompliantFrame& g) {
+                return g.wall_crossed_mm > 0 ? std::min(g.wall_min_distance_mm, -g.wall_crossed_mm) : g.wall_min_distance_mm;
+            };
             // A frame that takes the patch's surface beyond the linear range of its linearisation (Scene::linear_limit
             // wall thicknesses: its forces there are off by more than 10 %) is solved again on a linearisation at the
             // state it reached, warm from its own rows, up to RANGE_REFRESHES times: Newton's steps on the frame, each a
             // refresh. Inline (deterministic) mode only; the threaded mode's refreshes come from the other core.
             for (int range_again = 0;; ++range_again) {
                 const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
+                int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
                 try {
-                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &repeats)
+                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &again)
                                             : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
+                    repeats += again;
                 } catch (const NumericalError& e) {
                     // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays
                     // where it was; a second in a row restarts from the last converged one with a smaller step).
                     res.converged = false;
                     res.failure = e.what();
                     loads = C->last.loads;
-                    wall_min = C->last.wall_min_distance_mm;
+                    wall_min = walls_at(C->last);
                     touching = C->last.wall_contacts;
                     return res;
                 }
@@ -770,9 +778,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             res.converged = f.complementarity_mm <= 1e-3;
             if (!res.converged) res.failure = "complementarity " + std::to_string(f.complementarity_mm) + " mm left";
             loads = f.loads;
-            // Whatever is through a face at the frame's end counts, as the Newton frames' crossings do below (a vertex
-            // behind a face where the frame started has no row to push it out).
-            wall_min = f.wall_crossed_mm > 0 ? std::min(f.wall_min_distance_mm, -f.wall_crossed_mm) : f.wall_min_distance_mm;
+            wall_min = walls_at(f);
             touching = f.wall_contacts;
             P.stats.wall_resolves += repeats;
             its += f.passes;
@@ -925,7 +931,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         P.v = r.u;
         // ANEU_WALL_TRACE: the patch's inner walls through each other after the frame, whatever the frames' rows (one ring
         // left out, as sim::lumen_crossing): how many vertices, the deepest, whether it and the face's corners are the
-        // frames' candidates, where in the jaws' frame (session 45: C0054's walls crossed over ten frames at a fold).
+        // frames' candidates, where in the jaws' frame (session 45: C0054's walls crossed over 13 frames at a fold).
         if (std::getenv("ANEU_WALL_TRACE") && P.inner.rows() > 0) {
             const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), 1, 0.5);
             const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
