@@ -25,6 +25,7 @@
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/fem/contact.hpp"
+#include "aneu/sim/assessment.hpp"
 #include "simulator_impl.hpp"
 
 namespace aneu::sim {
@@ -933,7 +934,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // left out, as sim::lumen_crossing): how many vertices, the deepest, whether it and the face's corners are the
         // frames' candidates, where in the jaws' frame (session 45: C0054's walls crossed over 13 frames at a fold).
         if (std::getenv("ANEU_WALL_TRACE") && P.inner.rows() > 0) {
-            const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), 1, 0.5);
+            const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM);
             const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
             if (deep != cr.end() && deep->depth_mm > 0.01) {
                 const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;

@@ -1242,24 +1242,25 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is
     // not a crossing; the next frame's row pushes it back.)
     constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // a pressed vertex's linearisation error, well under the 0.02 mm limit
-    double deepest = 0;  // of the last crossings() call
+    // The (vertex, face) pairs behind each other at u, sorted, and the deepest of them.
+    struct Behind {
+        std::vector<std::pair<int, int>> pairs;
+        double deepest = 0;
+    };
     auto crossings = [&](const Eigen::VectorXd& u) {
-        std::vector<std::pair<int, int>> c;
-        deepest = 0;
+        Behind c;
         for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth))
             if (q.depth_mm > CONTACT_ROUNDOFF_MM) {
-                c.emplace_back(q.v, q.f);
-                deepest = std::max(deepest, q.depth_mm);
+                c.pairs.emplace_back(q.v, q.f);
+                c.deepest = std::max(c.deepest, q.depth_mm);
             }
-        std::sort(c.begin(), c.end());
+        std::sort(c.pairs.begin(), c.pairs.end());
         return c;
     };
     Stopwatch sw;
     // What is behind a face where the frame starts stays out of the count (a crease, an earlier crossing): the last
     // frame's end, when it ended here.
-    const bool resumed = ws.ended_at.size() == u0.size() && ws.ended_at == u0;
-    const std::vector<std::pair<int, int>> before = resumed ? ws.ended_behind : crossings(u0);
-    const double before_deepest = resumed ? ws.ended_deepest : deepest;
+    const Behind before = ws.ended_at.size() == u0.size() && ws.ended_at == u0 ? Behind{ws.ended_behind, ws.ended_deepest} : crossings(u0);
     CompliantWalls walls;
     walls.faces = faces;
     if (repeats) *repeats = 0;
@@ -1284,11 +1285,10 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         acc.lcp_s += f.lcp_s;
         // Nothing moved (the blades closing through the air, no force on any candidate): what is behind a face is
         // what was (the sample's air frames: 8.7 of their 9.4 ms were this check).
-        const bool still = f.candidate_u == u0;
-        const std::vector<std::pair<int, int>> end = still ? before : crossings(f.candidate_u);
-        f.wall_crossed_mm = still ? before_deepest : deepest;
+        const Behind end = f.candidate_u == u0 ? before : crossings(f.candidate_u);
+        f.wall_crossed_mm = end.deepest;
         std::vector<std::pair<int, int>> left;
-        std::set_difference(end.begin(), end.end(), before.begin(), before.end(), std::back_inserter(left));
+        std::set_difference(end.pairs.begin(), end.pairs.end(), before.pairs.begin(), before.pairs.end(), std::back_inserter(left));
         f.wall_crossings = static_cast<int>(left.size());
         search_s += sw.lap();
         f.rows_s = acc.rows_s;
@@ -1301,8 +1301,8 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         // a face it was closely paired with, its row left out as it started behind the face's plane).
         if (round == 3 || !crossings_need_pairs(left, ws.pairs, cp.close_vertices)) {
             ws.ended_at = f.candidate_u;
-            ws.ended_behind = end;
-            ws.ended_deepest = f.wall_crossed_mm;
+            ws.ended_behind = end.pairs;
+            ws.ended_deepest = end.deepest;
             return f;
         }
         if (repeats) ++*repeats;

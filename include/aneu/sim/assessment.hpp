@@ -50,7 +50,11 @@ struct LumenCrossing {
     int vertices = 0;                              ///< lumen vertices through a face
     Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the deepest vertex, deformed
 };
-LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = 1, double depth_mm = 0.5);
+/// The measure's rules, shared with aneusim's per-frame trace of the patch's walls (ANEU_WALL_TRACE).
+constexpr int LUMEN_CROSSING_RINGS = 1;
+constexpr double LUMEN_CROSSING_DEPTH_MM = 0.5;
+LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = LUMEN_CROSSING_RINGS,
+                             double depth_mm = LUMEN_CROSSING_DEPTH_MM);
 
 /// The lumen's edge length round each face at rest: the mean, over the faces sharing a vertex with it, of their
 /// shortest edge (on a mesh of edge h, about h; across a stretched mesh, its fine direction: the resolution across
