@@ -567,8 +567,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
             const Eigen::VectorXd u0 = v0.head(nb);
             // The nodes the blades can reach as they close from opening th (within 0.1 mm of their wedge), and the inner
-            // walls they flatten (faces whose corners lie within 0.3 mm of it), the faces' corners candidates too
-            // (fem::compliant_setup, as aneu_bench_compliance's frames), the patch's nodes standing at X + u.
+            // walls they flatten (faces whose corners lie within 0.3 mm of it) or that are about to meet anywhere in the
+            // patch (within 0.3 mm of each other), the faces' corners candidates too (fem::compliant_setup, as
+            // aneu_bench_compliance's frames), the patch's nodes standing at X + u.
             auto setup_at = [&](const Eigen::VectorXd& u, double th) {
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u.segment<3>(3 * a).transpose();
@@ -578,6 +579,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             auto adopt = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
                 C->cand = std::move(cs.candidates);
                 C->faces = std::move(cs.faces);
+                C->approach_faces = cs.approach_faces;
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
                 C->theta_sel = th;
@@ -680,9 +682,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
                                      " (%.0f free DOFs, %.0f kept, nnz(L) %.3g, factor %.3g GFLOP, W %.3g GFLOP at %.1f GFLOP/s)\n",
-                                     fr.t, C->cand.size(), C->lin->tangent_s, C->lin->factorise_s,
+                                     fr.t, C->cand.size(), static_cast<long long>(C->faces.rows()), C->approach_faces, C->lin->tangent_s, C->lin->factorise_s,
                                      C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
                                      C->lin->free_step, C->lin->free_dofs, C->lin->kept_dofs, C->lin->nnz_L, C->lin->factor_flops / 1e9,
                                      C->lin->w_flops / 1e9, C->lin->w_gflops_per_s);

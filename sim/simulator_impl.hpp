@@ -176,7 +176,8 @@ struct Simulator::Impl {
             std::unique_ptr<fem::Linearisation> lin;
             Eigen::MatrixX3d Xc;              // its candidates' rest positions (patch nodes: Compliant::cand)
             std::vector<int> cand;            // the blades' candidates, then the wall faces' other corners
-            Eigen::MatrixX3i faces;           // the inner walls near the jaws, in candidate numbering
+            Eigen::MatrixX3i faces;           // the inner walls near the jaws or about to meet, in candidate numbering
+            size_t approach_faces = 0;        // of them, those taken for walls about to meet away from the jaws
             fem::CompliantWallSearch search;
             fem::CompliantFrame last;         // the warm start
             bool warm = false;

@@ -186,7 +186,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
 }
 
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner) {
+                               const Eigen::MatrixX3i& inner, double approach_mm) {
     const Eigen::Index n = x.rows();
     auto check = [&](int a) {
         if (a < 0 || a >= n) throw InputError("compliant setup: node " + std::to_string(a) + " outside the body's " + std::to_string(n));
@@ -209,6 +209,32 @@ CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eig
             in = in && blades.near_wedge(theta, x.row(inner(f, k)).transpose(), 0.3);
         }
         if (in) near.push_back(f);
+    }
+    // The walls about to meet anywhere else (squeezed out beside or past the tips, session 46: C0001's 0.5 mm crossing
+    // 2-6 mm past its 15 mm blades): a vertex within approach_mm in front of an opposite face (or a hair behind it),
+    // one ring left out as the frames' wall search does; the face and the faces round the vertex become wall faces.
+    if (approach_mm > 0 && inner.rows() > 0) {
+        const size_t wedge = near.size();
+        ContactParams cp;
+        cp.search_mm = approach_mm;
+        cp.exclude_rings = 1;
+        const std::vector<std::array<int, 2>> pairs = contact_pairs(x, inner, Eigen::VectorXd::Zero(3 * n), cp, APPROACH_BEHIND_MM);
+        std::vector<char> take(static_cast<size_t>(inner.rows()), 0), vert(static_cast<size_t>(n), 0);
+        for (Eigen::Index f : near) take[static_cast<size_t>(f)] = 1;
+        for (const auto& [v, f] : pairs) {
+            const double d = signed_vertex_face_distance(x.row(v).transpose(), x.row(inner(f, 0)).transpose(), x.row(inner(f, 1)).transpose(),
+                                                         x.row(inner(f, 2)).transpose());
+            if (d > approach_mm) continue;
+            take[static_cast<size_t>(f)] = 1;
+            vert[static_cast<size_t>(v)] = 1;
+        }
+        for (Eigen::Index f = 0; f < inner.rows(); ++f)
+            if (!take[static_cast<size_t>(f)] && (vert[static_cast<size_t>(inner(f, 0))] || vert[static_cast<size_t>(inner(f, 1))] || vert[static_cast<size_t>(inner(f, 2))]))
+                take[static_cast<size_t>(f)] = 1;
+        near.clear();
+        for (Eigen::Index f = 0; f < inner.rows(); ++f)
+            if (take[static_cast<size_t>(f)]) near.push_back(f);
+        out.approach_faces = near.size() - wedge;
     }
     out.faces.resize(static_cast<Eigen::Index>(near.size()), 3);
     for (size_t f = 0; f < near.size(); ++f)
@@ -568,6 +594,17 @@ double plane_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const 
     return l > 0 ? n.dot(p - a) / l : 0.0;
 }
 
+/// Whether a wall pair (vertex, then its face's corners, candidate numbering) whose vertex stands `start_d` from its
+/// face's plane where the frame starts is a crease, no constraint: behind that plane by more than wall_behind_mm, and
+/// behind it at rest too (walls.rest; none known: taken as behind) or behind it now by more than wall_through_mm (the
+/// far side of a fold). Otherwise the frame pushes the vertex back out.
+bool is_crease(const CompliantWalls& walls, const std::array<int, 4>& k, double start_d, const CompliantOptions& opt) {
+    if (start_d >= -opt.wall_behind_mm) return false;
+    if (walls.rest.rows() == 0 || start_d < -opt.wall_through_mm) return true;
+    auto at = [&](int a) { return Eigen::Vector3d(walls.rest.row(k[static_cast<size_t>(a)]).transpose()); };
+    return plane_distance(at(0), at(1), at(2), at(3)) < -opt.wall_behind_mm;
+}
+
 /// A wall pair's vertex p over its face abc: the face's unit normal nh ((b − a) × (c − a)), p's signed distance d from
 /// the face's plane and its projection's barycentric coordinates b. A pair is a contact where the vertex lies over
 /// the face: its projection inside it, or within a tenth of the face beyond an edge (OVER); the distance to the closed
@@ -777,7 +814,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             // tenth above) counted as in front, and its row pushed it out through the wall in one frame (C0095's basilar
             // bifurcation: 45 wall rows pressing before the blades touched anything, grips of 57 kN at 18.5 deg).
             if (d >= opt.wall_reach_mm) continue;
-            if (plane_distance(Xs.row(r.k[0]).transpose(), Xs.row(r.k[1]).transpose(), Xs.row(r.k[2]).transpose(), Xs.row(r.k[3]).transpose()) < -opt.wall_behind_mm)
+            if (is_crease(*walls, r.k, plane_distance(Xs.row(r.k[0]).transpose(), Xs.row(r.k[1]).transpose(), Xs.row(r.k[2]).transpose(), Xs.row(r.k[3]).transpose()), opt))
                 continue;
             Eigen::Matrix<double, 12, 1> g;
             g << nh, -b0 * nh, -b1 * nh, -b2 * nh;
@@ -1030,7 +1067,9 @@ double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, 
     auto at_start = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + start.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
     double out = std::numeric_limits<double>::infinity();
     for (const auto& [v, f] : walls.pairs) {
-        if (plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2))) < -opt.wall_behind_mm) continue;
+        if (is_crease(walls, {v, walls.faces(f, 0), walls.faces(f, 1), walls.faces(f, 2)},
+                      plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2))), opt))
+            continue;
         OverFace of;
         if (over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of) && of.d < out) {
             out = of.d;
@@ -1263,6 +1302,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     const Behind before = ws.ended_at.size() == u0.size() && ws.ended_at == u0 ? Behind{ws.ended_behind, ws.ended_deepest} : crossings(u0);
     CompliantWalls walls;
     walls.faces = faces;
+    walls.rest = Xc;
     if (repeats) *repeats = 0;
     double search_s = sw.lap(), frames_s = 0;
     CompliantFrame acc;
@@ -1272,7 +1312,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         // beyond its reach then could be within the rows' reach now.
         const double slack = 0.5 * (cp.search_mm - opt.wall_reach_mm);
         if (grew || ws.searched_at.size() != u0.size() || slack <= 0 || (u0 - ws.searched_at).lpNorm<Eigen::Infinity>() > slack) {
-            ws.pairs = contact_pairs(Xc, faces, u0, cp, opt.wall_behind_mm);
+            ws.pairs = contact_pairs(Xc, faces, u0, cp, std::max(opt.wall_behind_mm, opt.wall_through_mm));
             ws.searched_at = u0;
             ++ws.searches;
         }

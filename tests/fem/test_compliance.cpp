@@ -342,6 +342,57 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
                 without.f.loads.force_n[0]);
 }
 
+TEST(CompliantClip, WallsThatStartAFrameALittleThroughEachOtherArePushedBackOutNotTakenForACrease) {
+    // The tube closed without the walls' contact until its walls are 0.01-0.05 mm through each other (as C0024's crept
+    // 0.004 -> 0.022 mm, session 46), then held there with it. The walls were not through each other at rest: the frames
+    // push them back out. With the old rule (every vertex more than wall_behind_mm behind its face's plane where the
+    // frame starts is a crease) the crossing stays.
+    const BladesOnATube tube(24);
+    const fem::ClipSpring spring = test_spring();
+    auto deepest = [&](const Eigen::VectorXd& u) {
+        double d = 0;
+        for (const auto& x : fem::surface_crossings(tube.m.V, tube.F.leftCols(3), u, 1, 0.25)) d = std::max(d, x.depth_mm);
+        return d;
+    };
+    Eigen::VectorXd u0 = Eigen::VectorXd::Zero(tube.solid.dofs());
+    fem::CompliantFrame f0;
+    f0.theta = tube.theta_touch;
+    double th = tube.theta_touch;
+    for (int frame = 0; frame < 40 && deepest(u0) < 0.01; ++frame) {
+        th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * (frame + 1) / 40.0;
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u0, tube.cand);
+        const fem::CompliantFrame last = f0;
+        f0 = fem::solve_compliant_clip(lin, tube.blades, spring, th, last.theta, frame ? &last : nullptr);
+        u0 = lin.displacement(f0.candidate_forces);
+    }
+    const double through = deepest(u0);
+    ASSERT_GT(through, 0.01);
+    ASSERT_LT(through, 0.05);
+    auto hold = [&](double through_mm) {
+        fem::CompliantOptions opt;
+        opt.wall_through_mm = through_mm;
+        fem::CompliantWallSearch ws;
+        Eigen::VectorXd u = u0;
+        fem::CompliantFrame f = f0;
+        for (int frame = 0; frame < 5; ++frame) {
+            const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
+            const fem::CompliantFrame last = f;
+            f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, &last, opt);
+            u = lin.displacement(f.candidate_forces);
+        }
+        return std::make_pair(deepest(u), f);
+    };
+    const auto [out, f] = hold(fem::CompliantOptions{}.wall_through_mm);
+    EXPECT_LT(out, 1e-3) << "started " << through << " mm through";
+    EXPECT_LT(f.wall_crossed_mm, 1e-3);
+    EXPECT_GT(f.wall_contacts, 0);
+    EXPECT_LE(f.complementarity_mm, 1e-9);
+    const double kept = hold(0.0).first;
+    EXPECT_GT(kept, 0.5 * through) << "the old rule kept the crossing";
+    std::printf("tube walls %.4f mm through each other: %.5f mm after five frames with the walls' contact (%.4f mm with every start crossing a crease)\n",
+                through, out, kept);
+}
+
 TEST(CompliantClip, HeldOnOneLinearisationAVertexOverAnEdgeKeepsItsFaceAndThePassesSettle) {
     // The flattened tube of the test above with 23 nodes round (not 24): the two walls' nodes are not mirror images,
     // so pressed vertices lie over edges between faces of the opposite wall that are not coplanar. Closed to 0.5 mm
@@ -940,6 +991,43 @@ TEST(CompliantClip, TheSetupTakesTheNodesNearTheJawsAndTheWallFacesBetweenThem) 
     // Closed, the wedge is the blades' thickness: the same face is still beside the width, the node in it still in.
     EXPECT_EQ(fem::compliant_setup(b, 0.0, x, {0}, inner).candidates, (std::vector<int>{0, 4, 5, 6}));
     EXPECT_THROW(fem::compliant_setup(b, 0.4, x, {9}, inner), InputError);
+}
+
+TEST(CompliantClip, TheSetupTakesTheWallsAboutToMeetPastTheTipsToo) {
+    // Two 1 x 1 mm walls of a lumen 5 mm past the 7 mm blades' tips, facing each other across a gap g (session 46: C0001's
+    // walls crossed 0.5 mm there, on faces no frame had). Within 0.3 mm (or a hair behind) they are wall faces, their
+    // corners candidates; 0.5 mm apart, or 0.1 mm through each other (a crease), or without the approach, they are not.
+    const fem::ClipBlades b;
+    auto walls = [](double g) {
+        Eigen::MatrixX3d x(8, 3);
+        x << 12, 0, 0, 13, 0, 0, 13, 0, 1, 12, 0, 1,  // the lower wall, normal +y (into the lumen)
+            12, g, 0, 13, g, 0, 13, g, 1, 12, g, 1;   // the upper, normal -y
+        return x;
+    };
+    Eigen::MatrixX3i inner(4, 3);
+    inner << 0, 3, 1, 1, 3, 2, 4, 5, 7, 5, 6, 7;
+    const fem::CompliantSetup near = fem::compliant_setup(b, 0.4, walls(0.2), {}, inner);
+    EXPECT_EQ(near.faces.rows(), 4);
+    EXPECT_EQ(near.approach_faces, 4u);
+    EXPECT_EQ(near.candidates.size(), 8u);
+    EXPECT_EQ(near.blade_candidates, 0u);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(-0.02), {}, inner).faces.rows(), 4);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(0.5), {}, inner).faces.rows(), 0);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(-0.1), {}, inner).faces.rows(), 0);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(0.2), {}, inner, 0.0).faces.rows(), 0);
+    // Only the walls that meet: a third face of the lower wall 2 mm away joins only with its vertex's ring.
+    Eigen::MatrixX3d x = walls(0.2);
+    x.conservativeResize(10, 3);
+    x.row(8) << 15, 0, 0;
+    x.row(9) << 15, 0, 1;
+    Eigen::MatrixX3i more(6, 3);
+    more << inner, 1, 2, 8, 8, 2, 9;  // (1, 2, 8) has corners 1 and 2 of the met wall; (8, 2, 9) has corner 2
+    const fem::CompliantSetup s = fem::compliant_setup(b, 0.4, x, {}, more);
+    EXPECT_EQ(s.faces.rows(), 6);  // the two beside have a corner under the upper wall's vertices
+    x.row(1) << 13, -0.5, 0;       // node 1 bent away from the upper wall, 0.7 mm below its faces
+    x.row(2) << 13, -0.5, 1;
+    const fem::CompliantSetup bent = fem::compliant_setup(b, 0.4, x, {}, more);
+    EXPECT_EQ(bent.faces.rows(), 4) << "the faces with no corner near the upper wall stay out";
 }
 
 TEST(CompliantClip, FramesCarriedToAnotherCandidateSetKeepTheRowsOfTheNodesAndFacesStillKept) {

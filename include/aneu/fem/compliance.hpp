@@ -96,8 +96,12 @@ struct CompliantOptions {
     /// spring and tissue, each linearising the blades' rotation where the last frame left them.
     double max_closing_rad = 0.02;
     /// A wall pair whose vertex lies further than this behind its face's plane where the frame starts is not a
-    /// constraint (a crease of the wall, the far side of a fold); nearer, the frame pushes it back out.
+    /// constraint (a crease of the wall, the far side of a fold); nearer, the frame pushes it back out. With the walls'
+    /// rest shape (CompliantWalls::rest), a vertex that was not behind the plane at rest is a crossing, and pushed
+    /// back out, up to wall_through_mm behind (session 46: C0024's walls crept 0.004 -> 0.022 mm through each other
+    /// over five frames, each frame taking the last one's crossing for a crease).
     double wall_behind_mm = 0.005;
+    double wall_through_mm = 0.05;
     /// Wall pairs nearer than this where the frame starts are constraints: more than the two walls' approach in a
     /// frame (each moves as far as a blade)
     double wall_reach_mm = 0.15;
@@ -131,6 +135,9 @@ struct CompliantOptions {
 struct CompliantWalls {
     Eigen::MatrixX3i faces;                   ///< triangles, in candidate numbering, normals towards the opposite wall
     std::vector<std::array<int, 2>> pairs;    ///< (vertex, face)
+    /// the candidates' rest positions (one row each; empty: none known, every vertex behind its face's plane where the
+    /// frame starts is a crease, CompliantOptions::wall_behind_mm)
+    Eigen::MatrixX3d rest;
 };
 
 /// What the compliance frames of one clip act on: the candidates (the nodes whose compliance a Linearisation keeps)
@@ -139,15 +146,26 @@ struct CompliantSetup {
     std::vector<int> candidates;   ///< body nodes: first those the blades reach, then the walls' other corners
     size_t blade_candidates = 0;   ///< how many of them come first, within reach of the blades
     Eigen::MatrixX3i faces;        ///< the walls' faces, in candidate numbering (CompliantWalls::faces)
+    size_t approach_faces = 0;     ///< of them, the faces taken for walls about to meet away from the jaws
 };
+/// compliant_setup's default approach: inner walls nearer each other than this are wall faces wherever they are. Twice
+/// the frames' row reach (CompliantOptions::wall_reach_mm): a selection is made at most every few frames (aneusim's
+/// patch refreshes), and a wall moves at most as far as a blade in a frame.
+constexpr double COMPLIANT_WALL_APPROACH_MM = 0.3;
+/// ... and a vertex this far behind an opposite face counts as meeting it (hard contact leaves a pressed vertex a hair
+/// behind; deeper, the frames take it for a crease, CompliantOptions::wall_behind_mm, and the pair would add nothing).
+constexpr double APPROACH_BEHIND_MM = 0.05;
 /// The candidates and wall faces for a clip at opening θ, where the body's nodes stand at `x` (one row a node): of
 /// `reach` (the nodes a blade can touch: the outer surface's) those within 0.1 mm of the jaws' wedge, and of
 /// `inner` (the lumen's triangles, body nodes, normals into the lumen) those whose three corners lie within 0.3 mm
-/// of it, where the blades flatten the lumen, their corners candidates too. aneusim's patch and
-/// aneu_bench_compliance make their frames' problem so. Repeated nodes in `reach` count once.
+/// of it, where the blades flatten the lumen, their corners candidates too. With approach_mm > 0, also the inner
+/// walls about to meet anywhere (walls squeezed out beside or past the blades' tips): every face with a vertex of the
+/// opposite wall (beyond one ring, facing it) within approach_mm in front of it or APPROACH_BEHIND_MM behind, and
+/// the faces round that vertex. aneusim's patch and aneu_bench_compliance make their frames' problem so. Repeated
+/// nodes in `reach` count once.
 /// @throws InputError a node outside x
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner);
+                               const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM);
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {
