@@ -67,8 +67,9 @@ fields = [
     "patch_frames=%s unconverged=%s restarts=%s builds=%s mean_solve_s=%.1f walls_min_mm=%s solver=%s%s" % (
         p.get("frames", "-"), p.get("unconverged_frames", "-"), p.get("restarts", "-"), p.get("builds", "-"), p.get("mean_solve_ms", float("nan")) / 1000,
         "%.4f" % p["min_wall_distance_mm"] if p.get("min_wall_distance_mm") is not None else "-", p.get("solver", "newton"),
-        " linearisations=%s (%.0f s, %s refused, %s for the linear range)" % (p["linearisations"], p.get("linearise_s", 0), p.get("linearisations_failed", 0),
-                                                                        p.get("range_refreshes", "-")) if "linearisations" in p else ""),
+        " linearisations=%s (%.0f s, %s refused, %s for the linear range, %s frames kept an earlier attempt)" % (
+            p["linearisations"], p.get("linearise_s", 0), p.get("linearisations_failed", 0), p.get("range_refreshes", "-"),
+            p.get("range_earlier_kept", "-")) if "linearisations" in p else ""),
     "max_lag_to_thickness=%s" % ("%.2f" % p["max_lag_to_thickness"] if p.get("max_lag_to_thickness") is not None else "-"),
     "scene_t=%.3f run_s=%d" % (report.get("total_time_s", float("nan")), secs),
 ]

@@ -39,8 +39,8 @@ constexpr double RESELECT_MARGIN_RAD = 2.0 * DEG;
 // keeps nodes within 0.1 mm of the wedge).
 constexpr double RESELECT_HINGE_MM = 0.05;
 // A frame beyond its linearisation's linear range is solved again on one made where it got to, at most this many
-// times (each a refresh: ~7-10 s on the sample).
-constexpr int RANGE_REFRESHES = 2;
+// times (each a refresh: ~7-10 s on the sample; session 45's two left the sample's one frame at 0.31).
+constexpr int RANGE_REFRESHES = 3;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
@@ -718,6 +718,19 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // wall thicknesses: its forces there are off by more than 10 %) is solved again on a linearisation at the
             // state it reached, warm from its own rows, up to RANGE_REFRESHES times: Newton's steps on the frame, each a
             // refresh. Inline (deterministic) mode only; the threaded mode's refreshes come from the other core.
+            // Damped where they diverge: an attempt that went further from its linearisation than the one before it
+            // did is linearised again halfway there, and the frame ends with the attempt nearest its own linearisation
+            // (session 45: C0054's re-solves round its fold went 1.55 -> 3.10 and 0.91 -> 0.99 wall thicknesses, the
+            // tangent there indefinite; the sample's went 0.40 -> 0.37 -> 0.31, one warning).
+            struct Attempt {
+                PatchRun::Compliant state;  // the frames' state after it (its linearisation, candidates, wall search)
+                fem::CompliantFrame f;
+                Eigen::VectorXd u;
+                Reach lag;
+                int number = 0;
+            };
+            std::optional<Attempt> best;
+            double last_ratio = -1;
             for (int range_again = 0;; ++range_again) {
                 const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
                 int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
@@ -749,16 +762,33 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
                 // the patch's figures, and warned, under the lock below).
                 lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
-                if (range_again < RANGE_REFRESHES && reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit) {
+                const bool over = reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit;
+                if (over && (!best || lag.ratio < best->lag.ratio)) best = Attempt{*C, f, res.u.head(nb), lag, range_again};
+                if (over && range_again < RANGE_REFRESHES) {
                     const double was = lag.ratio;
+                    const bool diverging = last_ratio >= 0 && was > last_ratio;
+                    last_ratio = was;
+                    const Eigen::VectorXd at = diverging ? Eigen::VectorXd(C->lin->u0() + 0.5 * (res.u.head(nb) - C->lin->u0())) : Eigen::VectorXd(res.u.head(nb));
                     C->last = f;  // the re-solve's warm start, carried to the new linearisation's candidates
                     C->warm = true;
-                    if (refresh_at(res.u.head(nb))) {
+                    if (refresh_at(at)) {
                         ++P.stats.range_refreshes;
                         if (std::getenv("ANEU_PATCH_TRACE"))
-                            std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation: solved again on one made there\n", fr.t, was);
+                            std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation: solved again on one made %s\n", fr.t, was,
+                                         diverging ? "halfway there (further than the attempt before)" : "there");
                         continue;
                     }
+                }
+                // Ended beyond the range after re-solves: the attempt nearest its linearisation, if not this one.
+                if (over && best && best->number != range_again) {
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: the frame's attempt %d (%.2f wall thicknesses from its linearisation) kept, not the last (%.2f)\n", fr.t,
+                                     best->number, best->lag.ratio, lag.ratio);
+                    *C = std::move(best->state);
+                    f = std::move(best->f);
+                    res.u.head(nb) = best->u;
+                    lag = best->lag;
+                    ++P.stats.range_earlier_kept;
                 }
                 break;
             }

@@ -173,7 +173,9 @@ struct Simulator::Impl {
         /// PatchSpec::Solver::COMPLIANCE: the linearisation the frames solve on and what they carry between frames
         /// (made at the first frame, again every refresh_frames frames and when the patch is remade).
         struct Compliant {
-            std::unique_ptr<fem::Linearisation> lin;
+            /// (shared: a frame solved again for the linear range keeps the attempt it started from until a later one
+            /// does better, PatchRun's range re-solves)
+            std::shared_ptr<const fem::Linearisation> lin;
             Eigen::MatrixX3d Xc;              // its candidates' rest positions (patch nodes: Compliant::cand)
             std::vector<int> cand;            // the blades' candidates, then the wall faces' other corners
             Eigen::MatrixX3i faces;           // the inner walls near the jaws or about to meet, in candidate numbering

@@ -441,6 +441,14 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
         const double d = std::sqrt(pt.D);
         return d < depth ? d : 0.0;
     };
+    // Through the face only if it came from its front: in front of the face's plane in the reference shape. A vertex
+    // behind that plane there, however deep or wherever beside the face, is on the face's far side (session 46: C0001's
+    // two lumens squeezed towards each other past the tips, their vertices 0.5 mm behind each other's faces, had been
+    // more than the depth behind or beside them at rest, and were counted as through them).
+    auto in_front_at_rest = [&](int v, Eigen::Index f) {
+        const Vec3 p = pos(nullptr, v), a = pos(nullptr, faces(f, 0)), b = pos(nullptr, faces(f, 1)), c = pos(nullptr, faces(f, 2));
+        return (p - a).dot((b - a).cross(c - a)) > 0;
+    };
     std::vector<int> verts;
     for (Eigen::Index f = 0; f < faces.rows(); ++f)
         for (int k = 0; k < 3; ++k) verts.push_back(faces(f, k));
@@ -493,7 +501,7 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
         for (int f : it->second) {
             if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
             const double d = behind(&u, v, f);
-            if (d <= 0 || behind(nullptr, v, f) > 0 || neighbour(v, f)) continue;
+            if (d <= 0 || !in_front_at_rest(v, f) || neighbour(v, f)) continue;
             out.push_back({v, f, d});
         }
     }

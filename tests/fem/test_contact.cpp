@@ -148,6 +148,22 @@ TEST(WallContact, SurfaceCrossingsSeeEveryVertexThroughAFacePairedOrNot) {
     EXPECT_THROW(fem::surface_crossings(p.V, p.faces, u0.head(3), 2, 0.25), InputError);
 }
 
+TEST(WallContact, SurfacesSqueezedTowardsEachOtherFromBehindAreNotThroughEachOther) {
+    // The plates' facing surfaces with their normals turned away from the gap: two lumens with the tissue between them
+    // (session 46: C0001's two lumens squeezed together past the clip's tips). Pressed from 0.05 to 0.02 mm apart, each
+    // plate's facing vertices lie 0.02 mm behind the other's faces, but came from behind: no crossing, whatever the
+    // depth counted (0.04 mm: at rest they were deeper than that, and counted until session 46). Pushed through each
+    // other, the plates with their faces the right way round cross.
+    const Plates p;
+    Eigen::MatrixX3i away = p.faces;
+    away.col(1).swap(away.col(2));
+    EXPECT_TRUE(fem::surface_crossings(p.V, away, p.pressed(0.02), 1, 0.04).empty());
+    EXPECT_TRUE(fem::surface_crossings(p.V, away, p.pressed(0.02), 1, 0.25).empty());
+    const std::vector<fem::SurfaceCrossing> through = fem::surface_crossings(p.V, p.faces, p.pressed(-0.02), 1, 0.04);
+    ASSERT_FALSE(through.empty());
+    for (const auto& q : through) EXPECT_NEAR(q.depth_mm, 0.02, 1e-9);
+}
+
 TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated) {
     // The top plate starts lifted 0.5 mm (0.55 mm apart) and is pushed to 0.08 mm down in one solve; pairs are
     // searched 0.02 mm round each face where it starts: none at all, and the top plate sinks through the bottom

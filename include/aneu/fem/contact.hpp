@@ -122,8 +122,9 @@ double signed_vertex_face_distance(const Eigen::Vector3d& p, const Eigen::Vector
                                    Eigen::Matrix<double, 12, 1>* grad = nullptr);
 
 /// A surface vertex lying behind a face of the same surface (its closest point inside the face, on the face's
-/// back, less than `depth` deep) that did not lie behind it in the reference shape: the surface passed through
-/// itself there.
+/// back, less than `depth` deep) that lay in front of the face's plane in the reference shape: the surface passed
+/// through itself there. (One behind the plane at rest, however deep or wherever beside the face, lies on its far
+/// side: another lumen beyond the wall, squeezed nearer.)
 struct SurfaceCrossing {
     int v = -1, f = -1;
     double depth_mm = 0;  ///< how far behind the face (> 0)

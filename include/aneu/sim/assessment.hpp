@@ -41,7 +41,7 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
 
 /// The lumen passing through itself anywhere, not only on the neck line: lumen vertices lying behind a lumen face (out
 /// of the lumen, into that face's wall) by more than 1 µm and at most `depth_mm`, their projection inside the face, that
-/// did not lie behind it at rest (fem::surface_crossings); faces within `exclude_rings` edges of the vertex do not
+/// lay in front of its plane at rest (fem::surface_crossings); faces within `exclude_rings` edges of the vertex do not
 /// count. One ring, not the compliance frames' two: an over-bent fold (the lumen's surface folded back onto itself
 /// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
 /// edge with unless an element between them turned inside out.

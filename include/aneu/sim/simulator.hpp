@@ -158,6 +158,9 @@ struct Assessment {
         /// Frames solved again on a linearisation made where they got to, having gone past Scene::linear_limit from
         /// theirs (inline mode; each is one of the linearisations)
         int range_refreshes = 0;
+        /// ... of those frames, the ones that ended with an earlier attempt than their last, the last having gone further
+        /// from its linearisation (the re-solves diverging; halfway re-solves damp them)
+        int range_earlier_kept = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
