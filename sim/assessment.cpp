@@ -360,8 +360,16 @@ LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, i
     Eigen::VectorXd u(3 * y.rows());
     for (Eigen::Index v = 0; v < y.rows(); ++v) u.segment<3>(3 * v) = (y.row(v) - lumen.X.row(v)).transpose();
     constexpr double ROUNDOFF_MM = 1e-3;  // a vertex pressed onto a face, a hair behind its plane
+    // Through a face means within its wall: deeper behind it than the wall is thick (its corners' mean) lies beyond
+    // the wall, another lumen or the far side of a wall folded into the lumen (session 46: C0001's, 0.1-0.5 mm behind
+    // faces 2-6 mm past the tips, 0.4 mm walls).
+    Eigen::VectorXd wall;
+    if (lumen.wall_mm.size() == lumen.X.rows()) {
+        wall.resize(lumen.F.rows());
+        for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) wall[f] = (lumen.wall_mm[lumen.F(f, 0)] + lumen.wall_mm[lumen.F(f, 1)] + lumen.wall_mm[lumen.F(f, 2)]) / 3.0;
+    }
     std::vector<int> through;
-    for (const fem::SurfaceCrossing& c : fem::surface_crossings(lumen.X, inward, u, exclude_rings, depth_mm)) {
+    for (const fem::SurfaceCrossing& c : fem::surface_crossings(lumen.X, inward, u, exclude_rings, depth_mm, wall.size() ? &wall : nullptr)) {
         if (c.depth_mm <= ROUNDOFF_MM) continue;
         through.push_back(c.v);
         if (c.depth_mm > out.depth_mm) {

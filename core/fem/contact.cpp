@@ -424,8 +424,10 @@ bool crossings_need_pairs(const std::vector<std::pair<int, int>>& crossings, con
 }
 
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
-                                               double depth) {
+                                               double depth, const Eigen::VectorXd* face_depth) {
     if (u.size() != 3 * X.rows()) throw InputError("surface_crossings: the displacement has the wrong size");
+    if (face_depth && face_depth->size() != faces.rows())
+        throw InputError("surface_crossings: " + std::to_string(face_depth->size()) + " face depths for " + std::to_string(faces.rows()) + " faces");
     std::vector<SurfaceCrossing> out;
     if (faces.rows() == 0 || !(depth > 0)) return out;
     auto pos = [&](const Eigen::VectorXd* w, int n) {
@@ -439,7 +441,7 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
         const PointTriangle pt = point_triangle(p, a, b, c, false);
         if (!pt.inside || (p - a).dot((b - a).cross(c - a)) >= 0) return 0.0;
         const double d = std::sqrt(pt.D);
-        return d < depth ? d : 0.0;
+        return d < (face_depth ? std::min(depth, (*face_depth)[f]) : depth) ? d : 0.0;
     };
     // Through the face only if it came from its front: in front of the face's plane in the reference shape. A vertex
     // behind that plane there, however deep or wherever beside the face, is on the face's far side (session 46: C0001's

@@ -185,6 +185,15 @@ TEST(LumenCrossing, WallsPressedThroughEachOtherAreCrossedByTheirDepthABulgeIsNo
     EXPECT_LT(shallow.depth_mm, 0.05);
     EXPECT_LT(shallow.vertices, through.vertices);
     EXPECT_LT(lumen_crossing(s, pinched(s, 0.0, -0.1), 2).vertices, through.vertices);
+    // Through a face means within its wall: with the wall known 0.3 mm thick the same; 0.05 mm thick, the flat's
+    // vertices lie beyond it (another lumen, the far side of a fold) and only the shallower fold pieces count.
+    SimLumen walled = s;
+    walled.wall_mm = Eigen::VectorXd::Constant(s.X.rows(), T);
+    EXPECT_NEAR(lumen_crossing(walled, pinched(s, 0.0, -0.1)).depth_mm, through.depth_mm, 1e-12);
+    walled.wall_mm.setConstant(0.05);
+    const LumenCrossing thin = lumen_crossing(walled, pinched(s, 0.0, -0.1));
+    EXPECT_LE(thin.depth_mm, 0.05);
+    EXPECT_LT(thin.vertices, through.vertices);
     // A vertex pushed 0.2 mm out of the lumen takes its own faces with it: a bulge, not a crossing.
     Eigen::MatrixX3d bulge = s.X;
     const int v = (NZ / 2) * NT + 5;

@@ -134,8 +134,9 @@ struct SurfaceCrossing {
 /// within `exclude_rings` edges of a face's corners are its neighbours and never count; `depth` bounds how far
 /// behind a face a vertex still counts as through it (beyond lies another part of the body). A uniform grid
 /// keeps it near linear in the surface's size.
+/// `face_depth` (one per face, each ≤ depth; null: none): a face's own bound instead.
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
-                                               double depth);
+                                               double depth, const Eigen::VectorXd* face_depth = nullptr);
 
 /// After a solve from u0 to u1 left the given (vertex, face) crossings: each crossing vertex and its one ring become
 /// close vertices of cp (paired with every face within reach whatever the normals or rings), the reach being twice

@@ -40,7 +40,8 @@ struct NeckOcclusion {
 NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, double gap_tol_mm, const Eigen::VectorXd& wall_mm);
 
 /// The lumen passing through itself anywhere, not only on the neck line: lumen vertices lying behind a lumen face (out
-/// of the lumen, into that face's wall) by more than 1 µm and at most `depth_mm`, their projection inside the face, that
+/// of the lumen, into that face's wall) by more than 1 µm and at most `depth_mm` and the wall's thickness there
+/// (SimLumen::wall_mm, its corners' mean, where known: deeper lies beyond the wall), their projection inside the face, that
 /// lay in front of its plane at rest (fem::surface_crossings); faces within `exclude_rings` edges of the vertex do not
 /// count. One ring, not the compliance frames' two: an over-bent fold (the lumen's surface folded back onto itself
 /// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
