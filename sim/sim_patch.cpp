@@ -963,8 +963,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
         // ANEU_WALL_TRACE: the patch's inner walls through each other after the frame, whatever the frames' rows (one ring
-        // left out, as sim::lumen_crossing): how many vertices, the deepest, whether it and the face's corners are the
-        // frames' candidates, where in the jaws' frame (session 45: C0054's walls crossed over 13 frames at a fold).
+        // left out, 0.5 mm deep, as sim::lumen_crossing but without its wall-thickness bound): how many vertices, the
+        // deepest, whether it and the face's corners are the frames' candidates, where in the jaws' frame (session 45:
+        // C0054's walls crossed over 13 frames at a fold).
         if (std::getenv("ANEU_WALL_TRACE") && P.inner.rows() > 0) {
             const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM);
             const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
