@@ -43,7 +43,7 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
 /// of the lumen, into that face's wall) by more than 1 µm and at most `depth_mm` and the wall's thickness there
 /// (SimLumen::wall_mm, its corners' mean, where known: deeper lies beyond the wall), their projection inside the face, that
 /// lay in front of its plane at rest (fem::surface_crossings); faces within `exclude_rings` edges of the vertex do not
-/// count. One ring, not the compliance frames' two: an over-bent fold (the lumen's surface folded back onto itself
+/// count. One ring, as the compliance frames' wall search (fem::ContactBody's default is two): an over-bent fold (the lumen's surface folded back onto itself
 /// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
 /// edge with unless an element between them turned inside out.
 struct LumenCrossing {
