@@ -206,10 +206,34 @@ std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const E
     }
     std::vector<int> ring(static_cast<size_t>(X.rows()), -1);  // face index that last marked the vertex as near
     std::vector<int> frontier, next;
+    // The vertices in a uniform grid (cells of the mean edge, at least the search distance): each face looks only at
+    // those in the cells its reach covers, in the same ascending order as a scan of all of them (the pairs and their
+    // order are the scan's; session 46: compliant_setup searches a patch's whole inner surface at every selection).
+    double h = 0;
+    for (Eigen::Index f = 0; f < faces.rows(); ++f) h += (xat(faces(f, 1)) - xat(faces(f, 0))).norm();
+    h = std::max(faces.rows() > 0 ? h / static_cast<double>(faces.rows()) : 0.0, p.search_mm);
+    if (!(h > 0)) h = 1.0;
+    auto cell = [&](const Eigen::Vector3d& q) { return (q / h).array().floor().cast<std::int64_t>().eval(); };
+    auto key = [](std::int64_t i, std::int64_t j, std::int64_t k) { return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791); };
+    std::unordered_map<std::int64_t, std::vector<int>> grid;
+    for (int v : verts) {
+        const auto c = cell(xat(v));
+        grid[key(c[0], c[1], c[2])].push_back(v);
+    }
+    std::vector<int> near;
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {
         const Eigen::Vector3d a = xat(faces(f, 0)), b = xat(faces(f, 1)), c = xat(faces(f, 2));
         const Eigen::Vector3d centre = (a + b + c) / 3.0;
         const double r = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()});
+        near.clear();
+        const auto lo = cell(centre.array() - (r + p.search_mm)), hi = cell(centre.array() + (r + p.search_mm));
+        for (auto i = lo[0]; i <= hi[0]; ++i)
+            for (auto j = lo[1]; j <= hi[1]; ++j)
+                for (auto k = lo[2]; k <= hi[2]; ++k)
+                    if (const auto it = grid.find(key(i, j, k)); it != grid.end())
+                        for (int v : it->second)
+                            if (const auto cv = cell(xat(v)); cv[0] == i && cv[1] == j && cv[2] == k) near.push_back(v);  // (not a hash collision)
+        std::sort(near.begin(), near.end());
         frontier.assign({faces(f, 0), faces(f, 1), faces(f, 2)});
         for (int w : frontier) ring[static_cast<size_t>(w)] = static_cast<int>(f);
         for (int k = 0; k < p.exclude_rings; ++k) {
@@ -223,7 +247,7 @@ std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const E
             frontier.swap(next);
         }
         const Eigen::Vector3d fn = (b - a).cross(c - a);
-        for (int v : verts) {
+        for (int v : near) {
             if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
             if ((xat(v) - centre).norm() > r + p.search_mm) continue;
             if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
