@@ -69,6 +69,14 @@ using Vec3 = Eigen::Vector3d;
 using Vec12 = Eigen::Matrix<double, 12, 1>;
 using Mat12 = Eigen::Matrix<double, 12, 12>;
 
+/// A uniform grid of cells h wide, hashed (contact_pairs' vertices, surface_crossings' faces): a point's cell and a
+/// cell's key (distinct cells may share one).
+struct CellGrid {
+    double h = 1;
+    Eigen::Array<std::int64_t, 3, 1> cell(const Vec3& p) const { return (p / h).array().floor().cast<std::int64_t>(); }
+    static std::int64_t key(std::int64_t i, std::int64_t j, std::int64_t k) { return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791); }
+};
+
 /// D = the squared distance from p to the closest point of the triangle (a, b, c), its gradient and Hessian over
 /// (p, a, b, c). The closest point is r = Σ cᵢ xᵢ in parameters s (none at a corner, t along an edge, two
 /// barycentrics inside), D = |r|² minimised over s: by the envelope theorem ∇D = 2 cᵢ r, and
@@ -213,8 +221,9 @@ std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const E
     for (Eigen::Index f = 0; f < faces.rows(); ++f) h += (xat(faces(f, 1)) - xat(faces(f, 0))).norm();
     h = std::max(faces.rows() > 0 ? h / static_cast<double>(faces.rows()) : 0.0, p.search_mm);
     if (!(h > 0)) h = 1.0;
-    auto cell = [&](const Eigen::Vector3d& q) { return (q / h).array().floor().cast<std::int64_t>().eval(); };
-    auto key = [](std::int64_t i, std::int64_t j, std::int64_t k) { return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791); };
+    const CellGrid cg{h};
+    auto cell = [&](const Eigen::Vector3d& q) { return cg.cell(q); };
+    const auto key = CellGrid::key;
     std::unordered_map<std::int64_t, std::vector<int>> grid;
     for (int v : verts) {
         const auto c = cell(xat(v));
@@ -484,8 +493,9 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
     double h = 0;
     for (Eigen::Index f = 0; f < faces.rows(); ++f) h += (pos(&u, faces(f, 1)) - pos(&u, faces(f, 0))).norm();
     h = std::max(h / static_cast<double>(faces.rows()), depth);
-    auto cell = [&](const Vec3& p) { return (p / h).array().floor().cast<std::int64_t>().eval(); };
-    auto key = [](std::int64_t i, std::int64_t j, std::int64_t k) { return (i * 73856093) ^ (j * 19349663) ^ (k * 83492791); };
+    const CellGrid cg{h};
+    auto cell = [&](const Vec3& p) { return cg.cell(p); };
+    const auto key = CellGrid::key;
     std::unordered_map<std::int64_t, std::vector<int>> grid;
     for (Eigen::Index f = 0; f < faces.rows(); ++f) {
         Vec3 lo = pos(&u, faces(f, 0)), hi = lo;
