@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Measures of a clipping's result: the neck occlusion (assessment.hpp).
 #include "aneu/sim/assessment.hpp"
+#include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
 #include "aneu/fem/contact.hpp"
 #include "aneu/sim/shapes.hpp"
@@ -352,9 +353,11 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
     return out;
 }
 
-LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings, double depth_mm) {
+LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings, double depth_mm, const LumenTissue* tissue) {
     LumenCrossing out;
     if (lumen.F.rows() == 0) return out;
+    if (tissue && (tissue->patch.size() != static_cast<size_t>(lumen.X.rows()) || tissue->inside.size() != tissue->patch.size()))
+        throw InputError("lumen_crossing: tissue for " + std::to_string(tissue->patch.size()) + " vertices, the lumen has " + std::to_string(lumen.X.rows()));
     // surface_crossings counts a vertex behind a face against the face's normal: the lumen's faces turned into it.
     const Eigen::MatrixX3i inward = lumen.F(Eigen::all, std::vector<int>{0, 2, 1});
     Eigen::VectorXd u(3 * y.rows());
@@ -368,9 +371,24 @@ LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, i
         wall.resize(lumen.F.rows());
         for (Eigen::Index f = 0; f < lumen.F.rows(); ++f) wall[f] = (lumen.wall_mm[lumen.F(f, 0)] + lumen.wall_mm[lumen.F(f, 1)] + lumen.wall_mm[lumen.F(f, 2)]) / 3.0;
     }
-    std::vector<int> through;
+    // The tissue behind the face is known when the vertex and the face's corners are one patch's (away from its
+    // interface): then the vertex must lie in it.
+    auto beside = [&](const fem::SurfaceCrossing& c) {
+        if (!tissue) return false;
+        const int p = tissue->patch[static_cast<size_t>(c.v)];
+        if (p < 0 || tissue->inside[static_cast<size_t>(c.v)]) return false;
+        for (int k = 0; k < 3; ++k)
+            if (tissue->patch[static_cast<size_t>(lumen.F(c.f, k))] != p) return false;
+        return true;
+    };
+    std::vector<int> through, aside;
     for (const fem::SurfaceCrossing& c : fem::surface_crossings(lumen.X, inward, u, exclude_rings, depth_mm, wall.size() ? &wall : nullptr)) {
         if (c.depth_mm <= ROUNDOFF_MM) continue;
+        if (beside(c)) {
+            aside.push_back(c.v);
+            out.beside_mm = std::max(out.beside_mm, c.depth_mm);
+            continue;
+        }
         through.push_back(c.v);
         if (c.depth_mm > out.depth_mm) {
             out.depth_mm = c.depth_mm;
@@ -379,6 +397,10 @@ LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, i
     }
     std::sort(through.begin(), through.end());
     out.vertices = static_cast<int>(std::unique(through.begin(), through.end()) - through.begin());
+    std::sort(aside.begin(), aside.end());
+    aside.erase(std::unique(aside.begin(), aside.end()), aside.end());
+    // A vertex both through one face and beside another counts as through.
+    out.beside_vertices = static_cast<int>(std::count_if(aside.begin(), aside.end(), [&](int v) { return !std::binary_search(through.begin(), through.begin() + out.vertices, v); }));
     return out;
 }
 
@@ -701,10 +723,32 @@ Assessment Simulator::Impl::assess() {
     out.neck_length_mm = occ.length_mm;
     out.neck_min_gap_mm = std::isfinite(occ.min_gap_mm) ? occ.min_gap_mm : -1.0;
     out.neck_interpenetration_mm = occ.max_interpenetration_mm;
-    const LumenCrossing crossing = lumen_crossing(measured, ym);
+    // The tissue the patches hold round the lumen: a vertex behind a face there must lie in it to be through it.
+    LumenTissue tissue;
+    tissue.patch.assign(static_cast<size_t>(measured.X.rows()), -1);
+    tissue.inside.assign(tissue.patch.size(), 0);
+    for (size_t k = 0; k < patches.size(); ++k) {
+        const PatchRun& P = patches[k];
+        if (!P.alive || P.elements.rows() == 0) continue;
+        std::vector<int> query, vertex;
+        for (Eigen::Index l = 0; l < measured.X.rows(); ++l) {
+            const int p = P.pm->local(measured.node[l]);
+            if (p < 0 || P.pm->on_interface(p) || tissue.patch[static_cast<size_t>(l)] >= 0) continue;
+            query.push_back(p);
+            vertex.push_back(static_cast<int>(l));
+        }
+        const std::vector<int> in = fem::nodes_inside_elements(P.positions(), P.elements, query);
+        for (size_t i = 0; i < vertex.size(); ++i) {
+            tissue.patch[static_cast<size_t>(vertex[i])] = static_cast<int>(k);
+            tissue.inside[static_cast<size_t>(vertex[i])] = in[i] >= 0;
+        }
+    }
+    const LumenCrossing crossing = lumen_crossing(measured, ym, LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &tissue);
     out.lumen_crossing_mm = crossing.depth_mm;
     out.lumen_crossing_vertices = crossing.vertices;
     out.lumen_crossing_at = crossing.at;
+    out.lumen_beside_tissue_mm = crossing.beside_mm;
+    out.lumen_beside_tissue_vertices = crossing.beside_vertices;
     out.neck_line.clear();
     NeckChannel channel;
     {

@@ -525,6 +525,9 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     j["lumen_crossing_mm"] = a.lumen_crossing_mm;  // the lumen through itself anywhere (its deepest vertex behind a face)
     j["lumen_crossing_vertices"] = a.lumen_crossing_vertices;
     if (a.lumen_crossing_vertices > 0) j["lumen_crossing_at"] = {a.lumen_crossing_at.x(), a.lumen_crossing_at.y(), a.lumen_crossing_at.z()};
+    // behind a lumen face where a patch holds the tissue, but in none of it (beside or beyond the wall; not counted above)
+    j["lumen_beside_tissue_mm"] = a.lumen_beside_tissue_mm;
+    j["lumen_beside_tissue_vertices"] = a.lumen_beside_tissue_vertices;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         j["neck_in_jaws_fraction"] = a.neck_in_jaws_fraction;
@@ -709,6 +712,11 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.lumen_crossing_vertices > 0) {
         std::snprintf(buf, sizeof buf, "  lumen through itself       %.3f mm deep at (%.2f, %.2f, %.2f); %d vertices behind a face\n", a.lumen_crossing_mm,
                       a.lumen_crossing_at.x(), a.lumen_crossing_at.y(), a.lumen_crossing_at.z(), a.lumen_crossing_vertices);
+        o << buf;
+    }
+    if (a.lumen_beside_tissue_vertices > 0) {
+        std::snprintf(buf, sizeof buf, "  behind a face, not in it   %.3f mm deep; %d vertices in no tissue of the patch (not through it)\n", a.lumen_beside_tissue_mm,
+                      a.lumen_beside_tissue_vertices);
         o << buf;
     }
     if (a.skipped_inputs) o << "  pose stream lines skipped  " << a.skipped_inputs << '\n';

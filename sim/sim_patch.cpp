@@ -257,6 +257,9 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     }
     const fem::PatchModel& pm = *P.pm;
     P.tets = static_cast<int>(tets.size());
+    P.elements.resize(static_cast<Eigen::Index>(tets.size()), vol.tets.cols());
+    for (size_t e = 0; e < tets.size(); ++e)
+        for (Eigen::Index k = 0; k < vol.tets.cols(); ++k) P.elements(static_cast<Eigen::Index>(e), k) = pm.local(vol.tets(tets[e], k));
     P.map_vertex = std::move(map_vertex);
     const auto np = static_cast<Eigen::Index>(pm.nodes().size());
     P.X.resize(np, 3);
@@ -966,10 +969,29 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // left out, 0.5 mm deep, as sim::lumen_crossing but without its wall-thickness bound): how many vertices, the
         // deepest, whether it and the face's corners are the frames' candidates, where in the jaws' frame (session 45:
         // C0054's walls crossed over 13 frames at a fold).
+        // With the patch's elements: the deepest crossing whose vertex lies in the tissue (not its own) where the
+        // vertex and the face's corners are off the patch's interface (sim::lumen_crossing's rule), and how many lie
+        // behind a face but in no tissue.
         if (std::getenv("ANEU_WALL_TRACE") && P.inner.rows() > 0) {
             const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM);
             const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
             if (deep != cr.end() && deep->depth_mm > 0.01) {
+                std::vector<int> query;
+                for (const auto& c : cr) query.push_back(c.v);
+                Eigen::MatrixX3d x = P.X;
+                for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += r.u.segment<3>(3 * a).transpose();
+                const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, query);
+                double tissue_mm = 0;
+                int aside = 0;
+                for (size_t i = 0; i < cr.size(); ++i) {
+                    bool known = !pm.on_interface(cr[i].v);
+                    for (int k = 0; k < 3; ++k) known = known && !pm.on_interface(P.inner(cr[i].f, k));
+                    if (known && in[i] < 0)
+                        ++aside;
+                    else
+                        tissue_mm = std::max(tissue_mm, cr[i].depth_mm);
+                }
+                std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch\n", fr.t, tissue_mm, aside, cr.size());
                 const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;
                 const std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
                 auto cand = [&](int a) { return C && std::find(C->cand.begin(), C->cand.end(), a) != C->cand.end() ? 1 : 0; };

@@ -131,6 +131,13 @@ struct Simulator::Impl {
         /// patch nodes the blades can touch: the simulated surface's vertices (cand_vertex: their vertex), then with
         /// 10-node elements the mid-edge nodes of its edges between them
         std::vector<int> cand, cand_vertex;
+        Eigen::MatrixXi elements;             // the patch's elements (vol.tets' rows) in patch numbering
+        /// The patch's nodes where its last solve holds them (X + v).
+        Eigen::MatrixX3d positions() const {
+            Eigen::MatrixX3d x = X;
+            for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += v.segment<3>(3 * a).transpose();
+            return x;
+        }
         Eigen::MatrixX3i inner;               // lumen triangles in the patch (patch nodes; 10-node elements: split at
                                               // their mid-edge nodes), normals into the lumen
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)

@@ -544,4 +544,89 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
     return out;
 }
 
+std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query) {
+    const Eigen::Index cols = elements.cols();
+    if (elements.rows() > 0 && cols != 4 && cols != 10)
+        throw InputError("nodes_inside_elements: elements with " + std::to_string(cols) + " nodes (expected 4 or 10)");
+    for (Eigen::Index e = 0; e < elements.rows(); ++e)
+        for (Eigen::Index k = 0; k < cols; ++k)
+            if (elements(e, k) < 0 || elements(e, k) >= x.rows())
+                throw InputError("nodes_inside_elements: element " + std::to_string(e) + " has node " + std::to_string(elements(e, k)) + " of " + std::to_string(x.rows()));
+    for (int q : query)
+        if (q < 0 || q >= x.rows()) throw InputError("nodes_inside_elements: query node " + std::to_string(q) + " of " + std::to_string(x.rows()));
+    std::vector<int> out(query.size(), -1);
+    if (elements.rows() == 0 || query.empty()) return out;
+    // The straight tetrahedra, in element-local node numbers: a 10-node element's corners 0-3 and mid-edge nodes
+    // 4:(0,1) 5:(1,2) 6:(2,0) 7:(0,3) 8:(1,3) 9:(2,3); its inner octahedron split along 4-9, round which 5, 8, 7, 6 lie.
+    static const int LINEAR[1][4] = {{0, 1, 2, 3}};
+    static const int QUADRATIC[8][4] = {{0, 4, 6, 7}, {4, 1, 5, 8}, {6, 5, 2, 9}, {7, 8, 9, 3}, {4, 9, 5, 8}, {4, 9, 8, 7}, {4, 9, 7, 6}, {4, 9, 6, 5}};
+    const int per = cols == 10 ? 8 : 1;
+    const int(*sub)[4] = cols == 10 ? QUADRATIC : LINEAR;
+    auto corner = [&](Eigen::Index e, int s, int k) { return Vec3(x.row(elements(e, sub[s][k])).transpose()); };
+    double h = 0;
+    for (Eigen::Index e = 0; e < elements.rows(); ++e) h += (corner(e, 0, 1) - corner(e, 0, 0)).norm();
+    h = std::max(h / static_cast<double>(elements.rows()), 1e-9);
+    const CellGrid cg{h};
+    std::unordered_map<std::int64_t, std::vector<std::int64_t>> grid;  // cell key -> element * 8 + its tetrahedron
+    for (Eigen::Index e = 0; e < elements.rows(); ++e)
+        for (int s = 0; s < per; ++s) {
+            Vec3 lo = corner(e, s, 0), hi = lo;
+            for (int k = 1; k < 4; ++k) {
+                lo = lo.cwiseMin(corner(e, s, k));
+                hi = hi.cwiseMax(corner(e, s, k));
+            }
+            const auto a = cg.cell(lo), b = cg.cell(hi);
+            for (auto i = a[0]; i <= b[0]; ++i)
+                for (auto j = a[1]; j <= b[1]; ++j)
+                    for (auto k = a[2]; k <= b[2]; ++k) grid[CellGrid::key(i, j, k)].push_back(e * 8 + s);
+        }
+    // The tetrahedra's faces on the mesh's boundary (one tetrahedron's only): a node must lie in front of those. Across
+    // a face between two tetrahedra the tissue goes on, and a node on it (to round-off) lies inside both: a node of one
+    // plate pressed onto a diagonal of the other's cells is in its tissue.
+    std::unordered_map<std::int64_t, int> face_count;
+    auto face_key = [&](Eigen::Index e, int s, int k) {
+        std::array<std::int64_t, 3> f = {elements(e, sub[s][(k + 1) % 4]), elements(e, sub[s][(k + 2) % 4]), elements(e, sub[s][(k + 3) % 4])};
+        std::sort(f.begin(), f.end());
+        const std::int64_t n = x.rows();
+        return (f[0] * n + f[1]) * n + f[2];
+    };
+    for (Eigen::Index e = 0; e < elements.rows(); ++e)
+        for (int s = 0; s < per; ++s)
+            for (int k = 0; k < 4; ++k) ++face_count[face_key(e, s, k)];
+    // Inside: in front of each face, the faces' normals turned towards the opposite corner.
+    constexpr double ON_FACE_MM = 1e-9;
+    auto inside = [&](const Vec3& p, Eigen::Index e, int s) {
+        for (int k = 0; k < 4; ++k) {
+            const Vec3 a = corner(e, s, (k + 1) % 4), b = corner(e, s, (k + 2) % 4), c = corner(e, s, (k + 3) % 4);
+            Vec3 n = (b - a).cross(c - a);
+            const double len = n.norm();
+            if (!(len > 0)) return false;  // a flat tetrahedron holds nothing
+            n /= len;
+            const double towards = (corner(e, s, k) - a).dot(n);
+            if (std::abs(towards) < 1e-12) return false;
+            const double d = (p - a).dot(n);
+            const double m = face_count[face_key(e, s, k)] == 1 ? 0.0 : -ON_FACE_MM;
+            if (!((towards > 0 ? d : -d) > m)) return false;
+        }
+        return true;
+    };
+    for (size_t i = 0; i < query.size(); ++i) {
+        const int q = query[i];
+        const Vec3 p = x.row(q).transpose();
+        const auto c = cg.cell(p);
+        const auto it = grid.find(CellGrid::key(c[0], c[1], c[2]));
+        if (it == grid.end()) continue;
+        for (const std::int64_t es : it->second) {
+            const Eigen::Index e = es / 8;
+            const int s = static_cast<int>(es % 8);
+            bool own = false;
+            for (Eigen::Index k = 0; k < cols; ++k) own = own || elements(e, k) == q;
+            if (own || !inside(p, e, s)) continue;
+            out[i] = static_cast<int>(e);
+            break;
+        }
+    }
+    return out;
+}
+
 }  // namespace aneu::fem

@@ -164,6 +164,60 @@ TEST(WallContact, SurfacesSqueezedTowardsEachOtherFromBehindAreNotThroughEachOth
     for (const auto& q : through) EXPECT_NEAR(q.depth_mm, 0.02, 1e-9);
 }
 
+TEST(WallContact, ANodePushedIntoTheOtherPlateLiesInItsTissueAndNotBefore) {
+    // fem::nodes_inside_elements: the plates' facing nodes against both plates' tetrahedra. Apart (at rest, or
+    // pressed to 0.02 mm) none lies in the other plate; pushed 0.05 mm into each other, the inner facing nodes of each
+    // (those not on the plates' sides: 4 × 4 of the top's, 3 × 3 of the bottom's) lie in an element of the other plate
+    // that does not have them as a node; 0.0005 mm into each other, too (nodes on a diagonal of the other plate's cells
+    // included: they lie on a face between two of its tetrahedra).
+    const Plates p;
+    std::vector<int> facing;
+    for (Eigen::Index f = 0; f < p.faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) facing.push_back(p.faces(f, k));
+    std::sort(facing.begin(), facing.end());
+    facing.erase(std::unique(facing.begin(), facing.end()), facing.end());
+    auto at = [&](const Eigen::VectorXd& u) {
+        Eigen::MatrixX3d x = p.V;
+        for (Eigen::Index i = 0; i < x.rows(); ++i) x.row(i) += u.segment<3>(3 * i).transpose();
+        return x;
+    };
+    auto count = [](const std::vector<int>& in) { return std::count_if(in.begin(), in.end(), [](int e) { return e >= 0; }); };
+    const Eigen::Index bottom_nodes = fem::box_mesh(1, 1, Plates::H, 4, 4, 2).V.rows(), bottom_tets = fem::box_mesh(1, 1, Plates::H, 4, 4, 2).T.rows();
+    EXPECT_EQ(count(fem::nodes_inside_elements(p.V, p.T, facing)), 0);
+    EXPECT_EQ(count(fem::nodes_inside_elements(at(p.pressed(0.02)), p.T, facing)), 0);
+    const Eigen::MatrixX3d x = at(p.pressed(-0.05));
+    const std::vector<int> in = fem::nodes_inside_elements(x, p.T, facing);
+    int top_in = 0, bottom_in = 0;
+    for (size_t i = 0; i < facing.size(); ++i) {
+        if (in[i] < 0) continue;
+        const bool top = facing[i] >= bottom_nodes;
+        (top ? top_in : bottom_in) += 1;
+        EXPECT_EQ(top, in[i] < bottom_tets) << "node " << facing[i] << " in its own plate's element " << in[i];
+        for (int k = 0; k < 4; ++k) EXPECT_NE(p.T(in[i], k), facing[i]);
+        const double xs = x(facing[i], 0), ys = x(facing[i], 1);
+        EXPECT_TRUE(xs > 1e-9 && xs < 1 - 1e-9 && ys > 1e-9 && ys < 1 - 1e-9) << "a node on the plates' sides";
+    }
+    EXPECT_EQ(top_in, 16);
+    EXPECT_EQ(bottom_in, 9);
+    EXPECT_EQ(count(fem::nodes_inside_elements(at(p.pressed(-0.0005)), p.T, facing)), 25);
+    EXPECT_THROW(fem::nodes_inside_elements(x, p.T.leftCols(3), facing), InputError);
+    EXPECT_THROW(fem::nodes_inside_elements(x, p.T, {static_cast<int>(x.rows())}), InputError);
+}
+
+TEST(WallContact, ATenNodeElementHoldsWhatItsCurvedEdgeTakesIn) {
+    // One 10-node tetrahedron, the unit corner one, its mid-edge node on edge 1-2 pushed out from (0.5, 0.5, 0) to
+    // (0.6, 0.6, 0): the point (0.52, 0.52, 0.02) lies beyond the corners' plane x + y + z = 1 but inside the element's
+    // eight straight pieces (their volume 0.1917 against the corners' 1/6). As a 4-node element it holds nothing
+    // there; a point within (0.2, 0.2, 0.2) both; the element's own node none.
+    Eigen::MatrixX3d x(12, 3);
+    x << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.5, 0, 0, 0.6, 0.6, 0, 0, 0.5, 0, 0, 0, 0.5, 0.5, 0, 0.5, 0, 0.5, 0.5,  //
+        0.52, 0.52, 0.02, 0.2, 0.2, 0.2;
+    Eigen::MatrixXi t10(1, 10);
+    t10 << 0, 1, 2, 3, 4, 5, 6, 7, 8, 9;
+    EXPECT_EQ(fem::nodes_inside_elements(x, t10, {10, 11, 5}), (std::vector<int>{0, 0, -1}));
+    EXPECT_EQ(fem::nodes_inside_elements(x, t10.leftCols(4), {10, 11}), (std::vector<int>{-1, 0}));
+}
+
 TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated) {
     // The top plate starts lifted 0.5 mm (0.55 mm apart) and is pushed to 0.08 mm down in one solve; pairs are
     // searched 0.02 mm round each face where it starts: none at all, and the top plate sinks through the bottom

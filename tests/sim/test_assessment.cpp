@@ -199,6 +199,32 @@ TEST(LumenCrossing, WallsPressedThroughEachOtherAreCrossedByTheirDepthABulgeIsNo
     const int v = (NZ / 2) * NT + 5;
     bulge.row(v) += 0.2 * Eigen::RowVector3d(s.X(v, 0), s.X(v, 1), 0).normalized();
     EXPECT_EQ(lumen_crossing(s, bulge).vertices, 0);
+    // Where a patch holds the tissue: a vertex behind a face counts only if it lies in an element that is not its own.
+    // All in no tissue: none through, all beside, as deep; all inside: as without the tissue; the vertices off the
+    // patch (or on its interface, −1) count as before.
+    LumenTissue none{std::vector<int>(static_cast<size_t>(s.X.rows()), 0), std::vector<char>(static_cast<size_t>(s.X.rows()), 0)};
+    const LumenCrossing aside = lumen_crossing(s, pinched(s, 0.0, -0.1), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &none);
+    EXPECT_EQ(aside.vertices, 0);
+    EXPECT_EQ(aside.depth_mm, 0.0);
+    EXPECT_EQ(aside.beside_vertices, through.vertices);
+    EXPECT_DOUBLE_EQ(aside.beside_mm, through.depth_mm);
+    LumenTissue all = none;
+    std::fill(all.inside.begin(), all.inside.end(), 1);
+    const LumenCrossing in = lumen_crossing(s, pinched(s, 0.0, -0.1), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &all);
+    EXPECT_EQ(in.vertices, through.vertices);
+    EXPECT_DOUBLE_EQ(in.depth_mm, through.depth_mm);
+    EXPECT_EQ(in.beside_vertices, 0);
+    LumenTissue unknown = none;
+    std::fill(unknown.patch.begin(), unknown.patch.end(), -1);
+    EXPECT_EQ(lumen_crossing(s, pinched(s, 0.0, -0.1), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &unknown).vertices, through.vertices);
+    LumenTissue two = none;  // the faces' corners another patch's than the vertex's: not known there
+    for (Eigen::Index v = 0; v < s.X.rows(); ++v) two.patch[static_cast<size_t>(v)] = s.X(v, 1) > 0 ? 1 : 0;
+    const LumenCrossing across = lumen_crossing(s, pinched(s, 0.0, -0.1), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &two);
+    EXPECT_NEAR(across.depth_mm, 0.1, 0.005);
+    EXPECT_GT(across.vertices, 0);
+    LumenTissue short_one = none;
+    short_one.patch.pop_back();
+    EXPECT_THROW(lumen_crossing(s, s.X, LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &short_one), aneu::InputError);
 }
 
 // The channel through the neck: the widest lumen joining the sac (faces with z > 1 mm) to the parent (z < −1 mm).

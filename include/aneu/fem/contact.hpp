@@ -138,6 +138,17 @@ struct SurfaceCrossing {
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
                                                double depth, const Eigen::VectorXd* face_depth = nullptr);
 
+/// Per query node, an element of `elements` whose tissue holds it although the node is not one of its nodes (−1:
+/// none): where a surface vertex that lies behind a face of its own surface really is inside the wall behind that face,
+/// as against beside it or beyond a wall squeezed thinner than it was (session 47: C0001's vertices 0.1-0.5 mm behind
+/// lumen faces past the clip's tips). `x`: the nodes' positions as they are; `elements`: rows of 4 node indices, or of
+/// 10 (element.hpp's order), each then split at its mid-edge nodes into its eight straight tetrahedra (four at the
+/// corners, four round the mid-edge diagonal 4-9), so that a curved element is followed to its mid-edge nodes. Inside
+/// means in front of each of a tetrahedron's faces, or on one it shares with another tetrahedron (the tissue goes on
+/// across it). A uniform grid over the tetrahedra's boxes keeps it near linear in the mesh's size.
+/// @throws InputError a node index out of range, elements with neither 4 nor 10 columns
+std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query);
+
 /// After a solve from u0 to u1 left the given (vertex, face) crossings: each crossing vertex and its one ring become
 /// close vertices of cp (paired with every face within reach whatever the normals or rings), the reach being twice
 /// how far the vertex and the face moved plus the search distance. The repeat of solve_without_crossings and of the

@@ -46,16 +46,29 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
 /// count. One ring, as the compliance frames' wall search (fem::ContactBody's default is two): an over-bent fold (the lumen's surface folded back onto itself
 /// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
 /// edge with unless an element between them turned inside out.
+/// Where the tissue is known (`tissue`: a nonlinear patch's elements round the face), a vertex behind a face counts
+/// only if it lies inside the tissue, in an element that is not its own (fem::nodes_inside_elements): behind the face
+/// but in no element it lies beyond a wall squeezed thinner than the depth, or beside the wall (session 47: C0001's
+/// vertices 0.1-0.5 mm behind faces past the tips). Those are reported apart (`beside_*`), not as crossings.
 struct LumenCrossing {
     double depth_mm = 0.0;                         ///< the deepest (0: none)
     int vertices = 0;                              ///< lumen vertices through a face
     Eigen::Vector3d at = Eigen::Vector3d::Zero();  ///< the deepest vertex, deformed
+    double beside_mm = 0.0;                        ///< the deepest vertex behind a face but in no tissue there
+    int beside_vertices = 0;                       ///< such vertices (not counted in `vertices`)
+};
+/// The tissue round the lumen where a nonlinear patch holds it: per lumen vertex, the patch (−1: none; a vertex on
+/// the patch's interface with the linear exterior has tissue outside the patch too: −1) and whether the vertex lies in
+/// one of that patch's elements that is not its own.
+struct LumenTissue {
+    std::vector<int> patch;
+    std::vector<char> inside;
 };
 /// The measure's rules, shared with aneusim's per-frame trace of the patch's walls (ANEU_WALL_TRACE).
 constexpr int LUMEN_CROSSING_RINGS = 1;
 constexpr double LUMEN_CROSSING_DEPTH_MM = 0.5;
 LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = LUMEN_CROSSING_RINGS,
-                             double depth_mm = LUMEN_CROSSING_DEPTH_MM);
+                             double depth_mm = LUMEN_CROSSING_DEPTH_MM, const LumenTissue* tissue = nullptr);
 
 /// The lumen's edge length round each face at rest: the mean, over the faces sharing a vertex with it, of their
 /// shortest edge (on a mesh of edge h, about h; across a stretched mesh, its fine direction: the resolution across

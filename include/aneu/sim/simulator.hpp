@@ -85,6 +85,10 @@ struct Assessment {
     double lumen_crossing_mm = 0.0;
     int lumen_crossing_vertices = 0;
     Eigen::Vector3d lumen_crossing_at = Eigen::Vector3d::Zero();
+    /// Lumen vertices behind a lumen face where a patch holds the tissue, but in none of it: beside the wall or beyond
+    /// it, not through it (not counted above); the deepest, how many.
+    double lumen_beside_tissue_mm = 0.0;
+    int lumen_beside_tissue_vertices = 0;
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
     /// Where the neck line ended up against the clips' jaws, held or deposited, at any opening: the fraction of it (by
     /// length on the deformed lumen, as neck_closed_fraction) lying within a clip's jaws (along their length, within
