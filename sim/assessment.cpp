@@ -727,9 +727,17 @@ Assessment Simulator::Impl::assess() {
     LumenTissue tissue;
     tissue.patch.assign(static_cast<size_t>(measured.X.rows()), -1);
     tissue.inside.assign(tissue.patch.size(), 0);
+    // And whether any of a patch's nodes (off its interface: the lumen's, the outer surface's, inside the wall) lies in
+    // an element not its own: the tissue overlapping itself, wherever (a wall that passed through another whole lies
+    // beside its tissue on the lumen's side, but its nodes in the other's).
+    out.patch_nodes_in_other_tissue = 0;
     for (size_t k = 0; k < patches.size(); ++k) {
         const PatchRun& P = patches[k];
         if (!P.alive || P.elements.rows() == 0) continue;
+        std::vector<int> all;
+        for (int a = 0; a < static_cast<int>(P.X.rows()); ++a)
+            if (!P.pm->on_interface(a)) all.push_back(a);
+        for (const int e : fem::nodes_inside_elements(P.positions(), P.elements, all)) out.patch_nodes_in_other_tissue += e >= 0;
         std::vector<int> query, vertex;
         for (Eigen::Index l = 0; l < measured.X.rows(); ++l) {
             const int p = P.pm->local(measured.node[l]);

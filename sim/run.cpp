@@ -528,6 +528,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     // behind a lumen face where a patch holds the tissue, but in none of it (beside or beyond the wall; not counted above)
     j["lumen_beside_tissue_mm"] = a.lumen_beside_tissue_mm;
     j["lumen_beside_tissue_vertices"] = a.lumen_beside_tissue_vertices;
+    if (a.patch_nodes_in_other_tissue >= 0) j["patch_nodes_in_other_tissue"] = a.patch_nodes_in_other_tissue;
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         j["neck_in_jaws_fraction"] = a.neck_in_jaws_fraction;
@@ -712,6 +713,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (a.lumen_crossing_vertices > 0) {
         std::snprintf(buf, sizeof buf, "  lumen through itself       %.3f mm deep at (%.2f, %.2f, %.2f); %d vertices behind a face\n", a.lumen_crossing_mm,
                       a.lumen_crossing_at.x(), a.lumen_crossing_at.y(), a.lumen_crossing_at.z(), a.lumen_crossing_vertices);
+        o << buf;
+    }
+    if (a.patch_nodes_in_other_tissue > 0) {
+        std::snprintf(buf, sizeof buf, "  tissue through tissue      %d patch nodes inside an element not their own\n", a.patch_nodes_in_other_tissue);
         o << buf;
     }
     if (a.lumen_beside_tissue_vertices > 0) {

@@ -981,6 +981,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += r.u.segment<3>(3 * a).transpose();
                 const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, query);
+                std::vector<int> all;
+                for (int a = 0; a < static_cast<int>(x.rows()); ++a)
+                    if (!pm.on_interface(a)) all.push_back(a);
+                const std::vector<int> in_all = fem::nodes_inside_elements(x, P.elements, all);
+                const auto overlapping = std::count_if(in_all.begin(), in_all.end(), [](int e) { return e >= 0; });
                 double tissue_mm = 0;
                 int aside = 0;
                 for (size_t i = 0; i < cr.size(); ++i) {
@@ -991,7 +996,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     else
                         tissue_mm = std::max(tissue_mm, cr[i].depth_mm);
                 }
-                std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch\n", fr.t, tissue_mm, aside, cr.size());
+                std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch; %ld patch nodes in an element not their own\n",
+                             fr.t, tissue_mm, aside, cr.size(), static_cast<long>(overlapping));
                 const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;
                 const std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
                 auto cand = [&](int a) { return C && std::find(C->cand.begin(), C->cand.end(), a) != C->cand.end() ? 1 : 0; };
