@@ -61,7 +61,7 @@ fields = [
                               if report.get("lumen_crossing_mm") is not None else "-"),
     "beside_tissue_mm=%s" % ("%.4f (%d vertices)" % (report["lumen_beside_tissue_mm"], report.get("lumen_beside_tissue_vertices", 0))
                              if report.get("lumen_beside_tissue_mm") is not None else "-"),
-    "nodes_in_other_tissue=%s" % report.get("patch_nodes_in_other_tissue", "-"),
+    "nodes_in_other_tissue=%s (%s mm)" % (report.get("patch_nodes_in_other_tissue", "-"), report.get("patch_tissue_overlap_mm", "-")),
     "parent_narrowed=%s parent_mm=%s" % (
         "%.1f%%" % (100 * report["parent_narrowing"]) if report.get("parent_narrowing") is not None else "-",
         "%.2f/%.2f" % (report["parent_channel_mm"], report["parent_channel_rest_mm"]) if report.get("parent_narrowing") is not None else "-"),

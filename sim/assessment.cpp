@@ -730,14 +730,23 @@ Assessment Simulator::Impl::assess() {
     // And whether any of a patch's nodes (off its interface: the lumen's, the outer surface's, inside the wall) lies in
     // an element not its own: the tissue overlapping itself, wherever (a wall that passed through another whole lies
     // beside its tissue on the lumen's side, but its nodes in the other's).
-    out.patch_nodes_in_other_tissue = 0;
+    // Deeper than round-off (1 µm: the linear model about rest leaves the tube's nodes 1e-7 mm inside neighbours).
+    out.patch_nodes_in_other_tissue = -1;
+    out.patch_tissue_overlap_mm = 0;
     for (size_t k = 0; k < patches.size(); ++k) {
         const PatchRun& P = patches[k];
         if (!P.alive || P.elements.rows() == 0) continue;
         std::vector<int> all;
         for (int a = 0; a < static_cast<int>(P.X.rows()); ++a)
             if (!P.pm->on_interface(a)) all.push_back(a);
-        for (const int e : fem::nodes_inside_elements(P.positions(), P.elements, all)) out.patch_nodes_in_other_tissue += e >= 0;
+        std::vector<double> deep;
+        const std::vector<int> held = fem::nodes_inside_elements(P.positions(), P.elements, all, &deep);
+        out.patch_nodes_in_other_tissue = std::max(out.patch_nodes_in_other_tissue, 0);
+        for (size_t i = 0; i < held.size(); ++i)
+            if (held[i] >= 0 && deep[i] > TISSUE_ROUNDOFF_MM) {
+                ++out.patch_nodes_in_other_tissue;
+                out.patch_tissue_overlap_mm = std::max(out.patch_tissue_overlap_mm, deep[i]);
+            }
         std::vector<int> query, vertex;
         for (Eigen::Index l = 0; l < measured.X.rows(); ++l) {
             const int p = P.pm->local(measured.node[l]);
@@ -790,6 +799,32 @@ Assessment Simulator::Impl::assess() {
     // Debugging and pictures (bench/render_channel.py): the deformed lumen as a Wavefront OBJ, the neck line's points, the
     // faces' widths and the channel listed after it as comments.
     if (const char* obj = std::getenv("ANEU_LUMEN_OBJ")) write_lumen_obj(obj, measured, ym, occ, channel);
+    // ANEU_PATCH_DUMP=F: each live patch's nodes (rest, displaced, on the interface, a blade candidate, the element
+    // holding it that is not its own, how deep) and elements, for bench/patch_tissue_overlap.py.
+    if (const char* dump = std::getenv("ANEU_PATCH_DUMP"))
+        if (std::FILE* fo = std::fopen(dump, "w")) {
+            for (size_t k = 0; k < patches.size(); ++k) {
+                const PatchRun& P = patches[k];
+                if (!P.alive || P.elements.rows() == 0) continue;
+                const Eigen::MatrixX3d x = P.positions();
+                std::vector<int> all(static_cast<size_t>(x.rows()));
+                for (size_t a = 0; a < all.size(); ++a) all[a] = static_cast<int>(a);
+                std::vector<double> deep;
+                const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, all, &deep);
+                std::vector<char> cand(all.size(), 0);
+                for (int a : P.cand) cand[static_cast<size_t>(a)] = 1;
+                std::fprintf(fo, "patch %zu nodes %lld elements %lld\n", k, static_cast<long long>(x.rows()), static_cast<long long>(P.elements.rows()));
+                for (Eigen::Index a = 0; a < x.rows(); ++a)
+                    std::fprintf(fo, "n %.9f %.9f %.9f %.9f %.9f %.9f %d %d %d %.3e\n", P.X(a, 0), P.X(a, 1), P.X(a, 2), x(a, 0), x(a, 1), x(a, 2),
+                                 P.pm->on_interface(static_cast<int>(a)) ? 1 : 0, cand[static_cast<size_t>(a)], in[static_cast<size_t>(a)], deep[static_cast<size_t>(a)]);
+                for (Eigen::Index e = 0; e < P.elements.rows(); ++e) {
+                    std::fprintf(fo, "e");
+                    for (Eigen::Index c = 0; c < P.elements.cols(); ++c) std::fprintf(fo, " %d", P.elements(e, c));
+                    std::fprintf(fo, "\n");
+                }
+            }
+            std::fclose(fo);
+        }
     // The neck line (the outer surface's) lying between the jaws of a closed clip, within neck_tolerance_mm (where the
     // clip is, not what it achieved).
     {

@@ -528,7 +528,10 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     // behind a lumen face where a patch holds the tissue, but in none of it (beside or beyond the wall; not counted above)
     j["lumen_beside_tissue_mm"] = a.lumen_beside_tissue_mm;
     j["lumen_beside_tissue_vertices"] = a.lumen_beside_tissue_vertices;
-    if (a.patch_nodes_in_other_tissue >= 0) j["patch_nodes_in_other_tissue"] = a.patch_nodes_in_other_tissue;
+    if (a.patch_nodes_in_other_tissue >= 0) {
+        j["patch_nodes_in_other_tissue"] = a.patch_nodes_in_other_tissue;
+        j["patch_tissue_overlap_mm"] = a.patch_tissue_overlap_mm;
+    }
     j["neck_between_jaws_fraction"] = a.neck_between_jaws_fraction;
     if (std::isfinite(a.neck_in_jaws_fraction)) {
         j["neck_in_jaws_fraction"] = a.neck_in_jaws_fraction;
@@ -716,7 +719,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
         o << buf;
     }
     if (a.patch_nodes_in_other_tissue > 0) {
-        std::snprintf(buf, sizeof buf, "  tissue through tissue      %d patch nodes inside an element not their own\n", a.patch_nodes_in_other_tissue);
+        std::snprintf(buf, sizeof buf, "  tissue through tissue      %d patch nodes inside an element not their own, %.4f mm deep\n", a.patch_nodes_in_other_tissue,
+                      a.patch_tissue_overlap_mm);
         o << buf;
     }
     if (a.lumen_beside_tissue_vertices > 0) {

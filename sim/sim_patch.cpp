@@ -984,8 +984,15 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 std::vector<int> all;
                 for (int a = 0; a < static_cast<int>(x.rows()); ++a)
                     if (!pm.on_interface(a)) all.push_back(a);
-                const std::vector<int> in_all = fem::nodes_inside_elements(x, P.elements, all);
-                const auto overlapping = std::count_if(in_all.begin(), in_all.end(), [](int e) { return e >= 0; });
+                std::vector<double> deep_all;
+                const std::vector<int> in_all = fem::nodes_inside_elements(x, P.elements, all, &deep_all);
+                long overlapping = 0;
+                double overlap_mm = 0;
+                for (size_t i = 0; i < in_all.size(); ++i)
+                    if (in_all[i] >= 0 && deep_all[i] > TISSUE_ROUNDOFF_MM) {
+                        ++overlapping;
+                        overlap_mm = std::max(overlap_mm, deep_all[i]);
+                    }
                 double tissue_mm = 0;
                 int aside = 0;
                 for (size_t i = 0; i < cr.size(); ++i) {
@@ -996,8 +1003,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     else
                         tissue_mm = std::max(tissue_mm, cr[i].depth_mm);
                 }
-                std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch; %ld patch nodes in an element not their own\n",
-                             fr.t, tissue_mm, aside, cr.size(), static_cast<long>(overlapping));
+                std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch; %ld patch nodes in an element not their own, %.4f mm deep\n",
+                             fr.t, tissue_mm, aside, cr.size(), overlapping, overlap_mm);
                 const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;
                 const std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
                 auto cand = [&](int a) { return C && std::find(C->cand.begin(), C->cand.end(), a) != C->cand.end() ? 1 : 0; };

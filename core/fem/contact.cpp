@@ -544,7 +544,7 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
     return out;
 }
 
-std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query) {
+std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query, std::vector<double>* depth) {
     const Eigen::Index cols = elements.cols();
     if (elements.rows() > 0 && cols != 4 && cols != 10)
         throw InputError("nodes_inside_elements: elements with " + std::to_string(cols) + " nodes (expected 4 or 10)");
@@ -555,6 +555,7 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
     for (int q : query)
         if (q < 0 || q >= x.rows()) throw InputError("nodes_inside_elements: query node " + std::to_string(q) + " of " + std::to_string(x.rows()));
     std::vector<int> out(query.size(), -1);
+    if (depth) depth->assign(query.size(), 0.0);
     if (elements.rows() == 0 || query.empty()) return out;
     // The straight tetrahedra, in element-local node numbers: a 10-node element's corners 0-3 and mid-edge nodes
     // 4:(0,1) 5:(1,2) 6:(2,0) 7:(0,3) 8:(1,3) 9:(2,3); its inner octahedron split along 4-9, round which 5, 8, 7, 6 lie.
@@ -623,6 +624,26 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
             for (Eigen::Index k = 0; k < cols; ++k) own = own || elements(e, k) == q;
             if (own || !inside(p, e, s)) continue;
             out[i] = static_cast<int>(e);
+            if (depth) {
+                // How deep: the distance to the element's own faces (not those between its pieces), those on the
+                // mesh's boundary where it has any (the tissue ends there), else all of them (a lower bound).
+                std::vector<std::array<int, 2>> faces;  // (piece, face)
+                for (int s2 = 0; s2 < per; ++s2)
+                    for (int k = 0; k < 4; ++k) {
+                        int within = 0;
+                        for (int s3 = 0; s3 < per; ++s3)
+                            for (int k3 = 0; k3 < 4; ++k3) within += face_key(e, s3, k3) == face_key(e, s2, k);
+                        if (within == 1) faces.push_back({s2, k});
+                    }
+                const bool bounded = std::any_of(faces.begin(), faces.end(), [&](const auto& f) { return face_count[face_key(e, f[0], f[1])] == 1; });
+                double d = std::numeric_limits<double>::infinity();
+                for (const auto& f : faces) {
+                    if (bounded && face_count[face_key(e, f[0], f[1])] != 1) continue;
+                    const PointTriangle pt = point_triangle(p, corner(e, f[0], (f[1] + 1) % 4), corner(e, f[0], (f[1] + 2) % 4), corner(e, f[0], (f[1] + 3) % 4), false);
+                    d = std::min(d, std::sqrt(pt.D));
+                }
+                (*depth)[i] = d;
+            }
             break;
         }
     }

@@ -186,10 +186,18 @@ TEST(WallContact, ANodePushedIntoTheOtherPlateLiesInItsTissueAndNotBefore) {
     EXPECT_EQ(count(fem::nodes_inside_elements(p.V, p.T, facing)), 0);
     EXPECT_EQ(count(fem::nodes_inside_elements(at(p.pressed(0.02)), p.T, facing)), 0);
     const Eigen::MatrixX3d x = at(p.pressed(-0.05));
-    const std::vector<int> in = fem::nodes_inside_elements(x, p.T, facing);
+    std::vector<double> depth;
+    const std::vector<int> in = fem::nodes_inside_elements(x, p.T, facing, &depth);
     int top_in = 0, bottom_in = 0;
     for (size_t i = 0; i < facing.size(); ++i) {
-        if (in[i] < 0) continue;
+        if (in[i] < 0) {
+            EXPECT_EQ(depth[i], 0.0);
+            continue;
+        }
+        // 0.05 mm below the other plate's facing surface: its elements' boundary faces there (or, for an element with
+        // none, a lower bound).
+        EXPECT_LE(depth[i], 0.05 + 1e-9);
+        EXPECT_GT(depth[i], 0.0);
         const bool top = facing[i] >= bottom_nodes;
         (top ? top_in : bottom_in) += 1;
         EXPECT_EQ(top, in[i] < bottom_tets) << "node " << facing[i] << " in its own plate's element " << in[i];

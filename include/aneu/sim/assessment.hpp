@@ -67,6 +67,8 @@ struct LumenTissue {
 /// The measure's rules, shared with aneusim's per-frame trace of the patch's walls (ANEU_WALL_TRACE).
 constexpr int LUMEN_CROSSING_RINGS = 1;
 constexpr double LUMEN_CROSSING_DEPTH_MM = 0.5;
+/// A patch node counts as inside another element's tissue (Assessment::patch_nodes_in_other_tissue) deeper than this.
+constexpr double TISSUE_ROUNDOFF_MM = 1e-3;
 LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = LUMEN_CROSSING_RINGS,
                              double depth_mm = LUMEN_CROSSING_DEPTH_MM, const LumenTissue* tissue = nullptr);
 

@@ -89,9 +89,11 @@ struct Assessment {
     /// it, not through it (not counted above); the deepest, how many.
     double lumen_beside_tissue_mm = 0.0;
     int lumen_beside_tissue_vertices = 0;
-    /// Nodes of the patches (off their interfaces) lying in one of the patch's elements that is not their own: the
-    /// tissue overlapping itself anywhere in a patch (0: nowhere; −1: no patch at the end).
+    /// Nodes of the patches (off their interfaces) lying in one of the patch's elements that is not their own, deeper
+    /// than 1 µm: the tissue overlapping itself anywhere in a patch (0: nowhere; −1: no patch at the end); the deepest
+    /// (fem::nodes_inside_elements' depth: to the holding element's faces on the boundary).
     int patch_nodes_in_other_tissue = -1;
+    double patch_tissue_overlap_mm = 0.0;
     double neck_between_jaws_fraction = 0.0;  ///< fraction of the neck line (outer surface) lying between closed clip jaws
     /// Where the neck line ended up against the clips' jaws, held or deposited, at any opening: the fraction of it (by
     /// length on the deformed lumen, as neck_closed_fraction) lying within a clip's jaws (along their length, within
