@@ -5,8 +5,8 @@
     python3 bench/patch_tissue_overlap.py F [--list N]
 
 For each patch node that lies inside an element not its own (fem::nodes_inside_elements, the report's
-patch_nodes_in_other_tissue): how deep inside that element's straight piece it lies (the least distance to the piece's
-faces: at least that deep in the tissue), whether it is a blade candidate (outer surface by the jaws), whether the
+patch_nodes_in_other_tissue): how deep (aneusim's depth, to the holding element's faces on the mesh's boundary; older
+dumps: the least distance to the faces of the straight piece holding it, a lower bound), whether it is a blade candidate (outer surface by the jaws), whether the
 element holding it or one of the node's own elements has a straight piece turned inside out (its signed volume against
 the one at rest), and how far the node moved. Pure Python (no numpy).
 """
@@ -69,6 +69,7 @@ def main():
                 P["iface"].append(int(t[7]))
                 P["cand"].append(int(t[8]))
                 P["in"].append(int(t[9]))
+                P.setdefault("depth", []).append(float(t[10]) if len(t) > 10 else None)
             elif t[0] == "e":
                 patches[-1]["E"].append(tuple(map(int, t[1:])))
     if not patches:
@@ -92,7 +93,9 @@ def main():
         for n, e in enumerate(P["in"]):
             if e < 0:
                 continue
-            d = max(depth_inside(x[n], [x[E[e][i]] for i in s]) for s in pieces)
+            # aneusim's depth (to the holding element's faces on the boundary) where the dump has it, else the least
+            # distance to the faces of the straight piece holding it (a lower bound)
+            d = P["depth"][n] if P["depth"][n] is not None else max(depth_inside(x[n], [x[E[e][i]] for i in s]) for s in pieces)
             moved = math.sqrt(dot(sub(x[n], X[n]), sub(x[n], X[n])))
             rows.append((d, n, e, P["iface"][n], P["cand"][n], inverted[e], any(inverted[j] for j in own[n]), moved))
         nodes = len(X)
@@ -101,9 +104,10 @@ def main():
         if not rows:
             continue
         rows.sort(reverse=True)
-        print("  deepest %.4f mm, median %.4f mm; %d on the interface, %d blade candidates; %d in an element turned inside out, "
+        deeper = sum(1 for r in rows if r[0] > 1e-3)
+        print("  %d deeper than 1 um; deepest %.4f mm, median %.4f mm; %d on the interface, %d blade candidates; %d in an element turned inside out, "
               "%d with one of their own turned inside out"
-              % (rows[0][0], rows[len(rows) // 2][0], sum(r[3] for r in rows), sum(r[4] for r in rows), sum(r[5] for r in rows),
+              % (deeper, rows[0][0], rows[len(rows) // 2][0], sum(r[3] for r in rows), sum(r[4] for r in rows), sum(r[5] for r in rows),
                  sum(r[6] for r in rows)))
         print("  depth_mm node element interface candidate element_inverted own_inverted moved_mm")
         for r in rows[: args.list]:

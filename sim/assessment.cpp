@@ -747,17 +747,14 @@ Assessment Simulator::Impl::assess() {
                 ++out.patch_nodes_in_other_tissue;
                 out.patch_tissue_overlap_mm = std::max(out.patch_tissue_overlap_mm, deep[i]);
             }
-        std::vector<int> query, vertex;
+        // The lumen's vertices off the interface are among those nodes.
+        std::vector<char> in_tissue(static_cast<size_t>(P.X.rows()), 0);
+        for (size_t i = 0; i < all.size(); ++i) in_tissue[static_cast<size_t>(all[i])] = held[i] >= 0 && deep[i] > TISSUE_ROUNDOFF_MM;
         for (Eigen::Index l = 0; l < measured.X.rows(); ++l) {
             const int p = P.pm->local(measured.node[l]);
             if (p < 0 || P.pm->on_interface(p) || tissue.patch[static_cast<size_t>(l)] >= 0) continue;
-            query.push_back(p);
-            vertex.push_back(static_cast<int>(l));
-        }
-        const std::vector<int> in = fem::nodes_inside_elements(P.positions(), P.elements, query);
-        for (size_t i = 0; i < vertex.size(); ++i) {
-            tissue.patch[static_cast<size_t>(vertex[i])] = static_cast<int>(k);
-            tissue.inside[static_cast<size_t>(vertex[i])] = in[i] >= 0;
+            tissue.patch[static_cast<size_t>(l)] = static_cast<int>(k);
+            tissue.inside[static_cast<size_t>(l)] = in_tissue[static_cast<size_t>(p)];
         }
     }
     const LumenCrossing crossing = lumen_crossing(measured, ym, LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM, &tissue);

@@ -980,7 +980,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 for (const auto& c : cr) query.push_back(c.v);
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += r.u.segment<3>(3 * a).transpose();
-                const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, query);
+                std::vector<double> deep_in;
+                const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, query, &deep_in);
                 std::vector<int> all;
                 for (int a = 0; a < static_cast<int>(x.rows()); ++a)
                     if (!pm.on_interface(a)) all.push_back(a);
@@ -998,7 +999,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 for (size_t i = 0; i < cr.size(); ++i) {
                     bool known = !pm.on_interface(cr[i].v);
                     for (int k = 0; k < 3; ++k) known = known && !pm.on_interface(P.inner(cr[i].f, k));
-                    if (known && in[i] < 0)
+                    if (known && !(in[i] >= 0 && deep_in[i] > TISSUE_ROUNDOFF_MM))
                         ++aside;
                     else
                         tissue_mm = std::max(tissue_mm, cr[i].depth_mm);

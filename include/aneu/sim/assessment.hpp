@@ -47,7 +47,8 @@ NeckOcclusion neck_occlusion(const SimLumen& lumen, const Eigen::MatrixX3d& y, d
 /// within two rings, session 45's C0054) is a crossing too, while a vertex cannot lie behind a face it shares an
 /// edge with unless an element between them turned inside out.
 /// Where the tissue is known (`tissue`: a nonlinear patch's elements round the face), a vertex behind a face counts
-/// only if it lies inside the tissue, in an element that is not its own (fem::nodes_inside_elements): behind the face
+/// only if it lies inside the tissue, in an element that is not its own, deeper than 1 µm (fem::nodes_inside_elements;
+/// C0001's vertices up to 0.49 mm behind a face lay less than 1 µm inside an element, t = 1.232 s): behind the face
 /// but in no element it lies beyond a wall squeezed thinner than the depth, or beside the wall (session 47: C0001's
 /// vertices 0.1-0.5 mm behind faces past the tips). Those are reported apart (`beside_*`), not as crossings.
 struct LumenCrossing {
@@ -59,7 +60,7 @@ struct LumenCrossing {
 };
 /// The tissue round the lumen where a nonlinear patch holds it: per lumen vertex, the patch (−1: none; a vertex on
 /// the patch's interface with the linear exterior has tissue outside the patch too: −1) and whether the vertex lies in
-/// one of that patch's elements that is not its own.
+/// one of that patch's elements that is not its own, deeper than TISSUE_ROUNDOFF_MM.
 struct LumenTissue {
     std::vector<int> patch;
     std::vector<char> inside;
