@@ -623,8 +623,11 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
             bool own = false;
             for (Eigen::Index k = 0; k < cols; ++k) own = own || elements(e, k) == q;
             if (own || !inside(p, e, s)) continue;
-            out[i] = static_cast<int>(e);
-            if (depth) {
+            if (!depth) {
+                out[i] = static_cast<int>(e);
+                break;
+            }
+            {
                 // How deep: the distance to the element's own faces (not those between its pieces), those on the
                 // mesh's boundary where it has any (the tissue ends there), else all of them (a lower bound).
                 std::vector<std::array<int, 2>> faces;  // (piece, face)
@@ -642,9 +645,13 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
                     const PointTriangle pt = point_triangle(p, corner(e, f[0], (f[1] + 1) % 4), corner(e, f[0], (f[1] + 2) % 4), corner(e, f[0], (f[1] + 3) % 4), false);
                     d = std::min(d, std::sqrt(pt.D));
                 }
-                (*depth)[i] = d;
+                // The least over the elements holding it (one holding it on a face between two of them may have on
+                // the boundary only a face farther off than the nearest boundary: a plate's side, not its top).
+                if (out[i] < 0 || d < (*depth)[i]) {
+                    out[i] = static_cast<int>(e);
+                    (*depth)[i] = d;
+                }
             }
-            break;
         }
     }
     return out;

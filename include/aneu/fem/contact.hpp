@@ -146,9 +146,10 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
 /// corners, four round the mid-edge diagonal 4-9), so that a curved element is followed to its mid-edge nodes. Inside
 /// means in front of each of a tetrahedron's faces, or on one it shares with another tetrahedron (the tissue goes on
 /// across it). A uniform grid over the tetrahedra's boxes keeps it near linear in the mesh's size.
-/// `depth` (null: not wanted): per query node inside, how deep: its distance to the holding element's own faces on the
-/// mesh's boundary (where the tissue ends), or, for an element with none, to all its own faces (then a lower bound); 0
-/// for a node in no element.
+/// `depth` (null: not wanted): per query node inside, an estimate of how deep: over the elements holding it, the least
+/// distance to an element's own faces on the mesh's boundary (where the tissue ends), or, for an element with none, to
+/// all its own faces (a lower bound); 0 for a node in no element. (Not the exact distance to the tissue's boundary: a
+/// boundary face of an element that does not hold the node may lie nearer.) The element returned is the one giving it.
 /// @throws InputError a node index out of range, elements with neither 4 nor 10 columns
 std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query,
                                        std::vector<double>* depth = nullptr);
