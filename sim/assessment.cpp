@@ -650,6 +650,24 @@ std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vect
     return {in / len, beside};
 }
 
+Simulator::Impl::PatchRun::TissueOverlap Simulator::Impl::PatchRun::tissue_overlap() const {
+    TissueOverlap out;
+    out.inside.assign(static_cast<size_t>(X.rows()), 0);
+    if (elements.rows() == 0) return out;
+    std::vector<int> all;
+    for (int a = 0; a < static_cast<int>(X.rows()); ++a)
+        if (!pm->on_interface(a)) all.push_back(a);
+    std::vector<double> deep;
+    const std::vector<int> held = fem::nodes_inside_elements(positions(), elements, all, &deep);
+    for (size_t i = 0; i < held.size(); ++i)
+        if (held[i] >= 0 && deep[i] > TISSUE_ROUNDOFF_MM) {
+            out.inside[static_cast<size_t>(all[i])] = 1;
+            ++out.nodes;
+            out.deepest_mm = std::max(out.deepest_mm, deep[i]);
+        }
+    return out;
+}
+
 bool write_lumen_obj(const std::string& path, const SimLumen& lumen, const Eigen::MatrixX3d& y, const NeckOcclusion& occ, const NeckChannel& channel) {
     std::FILE* fo = std::fopen(path.c_str(), "w");
     if (!fo) return false;
@@ -736,20 +754,11 @@ Assessment Simulator::Impl::assess() {
     for (size_t k = 0; k < patches.size(); ++k) {
         const PatchRun& P = patches[k];
         if (!P.alive || P.elements.rows() == 0) continue;
-        std::vector<int> all;
-        for (int a = 0; a < static_cast<int>(P.X.rows()); ++a)
-            if (!P.pm->on_interface(a)) all.push_back(a);
-        std::vector<double> deep;
-        const std::vector<int> held = fem::nodes_inside_elements(P.positions(), P.elements, all, &deep);
-        out.patch_nodes_in_other_tissue = std::max(out.patch_nodes_in_other_tissue, 0);
-        for (size_t i = 0; i < held.size(); ++i)
-            if (held[i] >= 0 && deep[i] > TISSUE_ROUNDOFF_MM) {
-                ++out.patch_nodes_in_other_tissue;
-                out.patch_tissue_overlap_mm = std::max(out.patch_tissue_overlap_mm, deep[i]);
-            }
+        const PatchRun::TissueOverlap ov = P.tissue_overlap();
+        out.patch_nodes_in_other_tissue = std::max(out.patch_nodes_in_other_tissue, 0) + ov.nodes;
+        out.patch_tissue_overlap_mm = std::max(out.patch_tissue_overlap_mm, ov.deepest_mm);
         // The lumen's vertices off the interface are among those nodes.
-        std::vector<char> in_tissue(static_cast<size_t>(P.X.rows()), 0);
-        for (size_t i = 0; i < all.size(); ++i) in_tissue[static_cast<size_t>(all[i])] = held[i] >= 0 && deep[i] > TISSUE_ROUNDOFF_MM;
+        const std::vector<char>& in_tissue = ov.inside;
         for (Eigen::Index l = 0; l < measured.X.rows(); ++l) {
             const int p = P.pm->local(measured.node[l]);
             if (p < 0 || P.pm->on_interface(p) || tissue.patch[static_cast<size_t>(l)] >= 0) continue;

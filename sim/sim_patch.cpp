@@ -976,36 +976,19 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             const std::vector<fem::SurfaceCrossing> cr = fem::surface_crossings(P.X, P.inner, r.u.head(3 * P.X.rows()), LUMEN_CROSSING_RINGS, LUMEN_CROSSING_DEPTH_MM);
             const auto deep = std::max_element(cr.begin(), cr.end(), [](const auto& a, const auto& b) { return a.depth_mm < b.depth_mm; });
             if (deep != cr.end() && deep->depth_mm > 0.01) {
-                std::vector<int> query;
-                for (const auto& c : cr) query.push_back(c.v);
-                Eigen::MatrixX3d x = P.X;
-                for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += r.u.segment<3>(3 * a).transpose();
-                std::vector<double> deep_in;
-                const std::vector<int> in = fem::nodes_inside_elements(x, P.elements, query, &deep_in);
-                std::vector<int> all;
-                for (int a = 0; a < static_cast<int>(x.rows()); ++a)
-                    if (!pm.on_interface(a)) all.push_back(a);
-                std::vector<double> deep_all;
-                const std::vector<int> in_all = fem::nodes_inside_elements(x, P.elements, all, &deep_all);
-                long overlapping = 0;
-                double overlap_mm = 0;
-                for (size_t i = 0; i < in_all.size(); ++i)
-                    if (in_all[i] >= 0 && deep_all[i] > TISSUE_ROUNDOFF_MM) {
-                        ++overlapping;
-                        overlap_mm = std::max(overlap_mm, deep_all[i]);
-                    }
+                const PatchRun::TissueOverlap ov = P.tissue_overlap();  // P.v is this frame's
                 double tissue_mm = 0;
                 int aside = 0;
                 for (size_t i = 0; i < cr.size(); ++i) {
                     bool known = !pm.on_interface(cr[i].v);
                     for (int k = 0; k < 3; ++k) known = known && !pm.on_interface(P.inner(cr[i].f, k));
-                    if (known && !(in[i] >= 0 && deep_in[i] > TISSUE_ROUNDOFF_MM))
+                    if (known && !ov.inside[static_cast<size_t>(cr[i].v)])
                         ++aside;
                     else
                         tissue_mm = std::max(tissue_mm, cr[i].depth_mm);
                 }
                 std::fprintf(stderr, "walls crossed in tissue t=%.4f: deepest %.4f mm; %d of %zu crossings in no tissue of the patch; %ld patch nodes in an element not their own, %.4f mm deep\n",
-                             fr.t, tissue_mm, aside, cr.size(), overlapping, overlap_mm);
+                             fr.t, tissue_mm, aside, cr.size(), static_cast<long>(ov.nodes), ov.deepest_mm);
                 const Eigen::Vector3d rel = P.X.row(deep->v).transpose() + r.u.segment<3>(3 * deep->v) - blades.hinge;
                 const std::shared_ptr<PatchRun::Compliant>& C = P.compliant;
                 auto cand = [&](int a) { return C && std::find(C->cand.begin(), C->cand.end(), a) != C->cand.end() ? 1 : 0; };

@@ -138,6 +138,15 @@ struct Simulator::Impl {
             for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += v.segment<3>(3 * a).transpose();
             return x;
         }
+        /// The patch's tissue overlapping itself where it is now (fem::nodes_inside_elements over the nodes off the
+        /// interface): per patch node whether it lies more than TISSUE_ROUNDOFF_MM inside an element not its own, how
+        /// many do, the deepest. Shared by the assessment and ANEU_WALL_TRACE (assessment.cpp).
+        struct TissueOverlap {
+            std::vector<char> inside;
+            int nodes = 0;
+            double deepest_mm = 0;
+        };
+        TissueOverlap tissue_overlap() const;
         Eigen::MatrixX3i inner;               // lumen triangles in the patch (patch nodes; 10-node elements: split at
                                               // their mid-edge nodes), normals into the lumen
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
