@@ -317,6 +317,29 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     }
     P.inner.resize(static_cast<Eigen::Index>(tri.size()), 3);
     for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
+    // The outer surface's triangles in the patch, as they are (counter-clockwise from outside: normals out of the
+    // wall), split alike: where the outer surface, squeezed along the jaws, folds onto itself (session 48: C0001's
+    // folded 0.11 mm into its own wall), the frames' wall contact keeps it apart (compliant_setup's outer faces).
+    {
+        std::vector<int> on;
+        for (Eigen::Index f = 0; f < sf.F.rows(); ++f)
+            if (pm.local(sf.node[sf.F(f, 0)]) >= 0 && pm.local(sf.node[sf.F(f, 1)]) >= 0 && pm.local(sf.node[sf.F(f, 2)]) >= 0)
+                on.push_back(static_cast<int>(f));
+        Eigen::MatrixX3i out(static_cast<Eigen::Index>(on.size()), 3);
+        for (size_t k = 0; k < on.size(); ++k)
+            out.row(static_cast<Eigen::Index>(k)) << sf.node[sf.F(on[k], 0)], sf.node[sf.F(on[k], 1)], sf.node[sf.F(on[k], 2)];
+        if (quadratic) out = fem::quadratic_surface_triangles(*mid, out);
+        std::vector<Eigen::Vector3i> kept;
+        for (Eigen::Index f = 0; f < out.rows(); f += per) {
+            bool inside = true;
+            for (int r = 0; r < per; ++r)
+                for (int k = 0; k < 3; ++k) inside = inside && pm.local(out(f + r, k)) >= 0;
+            if (!inside) continue;
+            for (int r = 0; r < per; ++r) kept.emplace_back(pm.local(out(f + r, 0)), pm.local(out(f + r, 1)), pm.local(out(f + r, 2)));
+        }
+        P.outer.resize(static_cast<Eigen::Index>(kept.size()), 3);
+        for (size_t f = 0; f < kept.size(); ++f) P.outer.row(static_cast<Eigen::Index>(f)) = kept[f].transpose();
+    }
     P.v = Eigen::VectorXd::Zero(pm.dofs() + 1);
     P.v[pm.dofs()] = theta;
     // The handover from the linear model: the patch starts at rest, where tissue the linear model pushed aside with
@@ -576,12 +599,16 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             auto setup_at = [&](const Eigen::VectorXd& u, double th) {
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u.segment<3>(3 * a).transpose();
-                return fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i());
+                // (ANEU_NO_OUTER_CONTACT: without the outer surface's faces, to measure what they cost; not a scene option.)
+                static const bool outer = !std::getenv("ANEU_NO_OUTER_CONTACT");
+                return fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i(), fem::COMPLIANT_WALL_APPROACH_MM,
+                                            scene.patch.wall_contact && outer ? P.outer : Eigen::MatrixX3i());
             };
             // The candidates the frames act on from here, selected at opening th with the hinge there.
             auto adopt = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
                 C->cand = std::move(cs.candidates);
                 C->faces = std::move(cs.faces);
+                C->search.params.face_surface = std::move(cs.face_surface);
                 C->approach_faces = cs.approach_faces;
                 C->Xc.resize(static_cast<Eigen::Index>(C->cand.size()), 3);
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
@@ -685,9 +712,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws, %lld of them the outer surface's): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
                                      " (%.0f free DOFs, %.0f kept, nnz(L) %.3g, factor %.3g GFLOP, W %.3g GFLOP at %.1f GFLOP/s)\n",
-                                     fr.t, C->cand.size(), static_cast<long long>(C->faces.rows()), C->approach_faces, C->lin->tangent_s, C->lin->factorise_s,
+                                     fr.t, C->cand.size(), static_cast<long long>(C->faces.rows()), C->approach_faces,
+                                     static_cast<long long>(std::count(C->search.params.face_surface.begin(), C->search.params.face_surface.end(), 1)), C->lin->tangent_s, C->lin->factorise_s,
                                      C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
                                      C->lin->free_step, C->lin->free_dofs, C->lin->kept_dofs, C->lin->nnz_L, C->lin->factor_flops / 1e9,
                                      C->lin->w_flops / 1e9, C->lin->w_gflops_per_s);

@@ -149,6 +149,7 @@ struct Simulator::Impl {
         TissueOverlap tissue_overlap() const;
         Eigen::MatrixX3i inner;               // lumen triangles in the patch (patch nodes; 10-node elements: split at
                                               // their mid-edge nodes), normals into the lumen
+        Eigen::MatrixX3i outer;               // the outer surface's triangles in the patch (as inner), normals outward
         std::vector<int> map_vertex;          // vertices whose displacement the patch maps (in-region, outside it)
         Eigen::VectorXd v;                    // patch DOFs, then the opening θ [rad]
         /// The Newton solves' analysis of the patch's tangent, kept from frame to frame while its pattern stays
@@ -194,7 +195,8 @@ struct Simulator::Impl {
             std::shared_ptr<const fem::Linearisation> lin;
             Eigen::MatrixX3d Xc;              // its candidates' rest positions (patch nodes: Compliant::cand)
             std::vector<int> cand;            // the blades' candidates, then the wall faces' other corners
-            Eigen::MatrixX3i faces;           // the inner walls near the jaws or about to meet, in candidate numbering
+            Eigen::MatrixX3i faces;           // the inner walls near the jaws or about to meet, then the outer surface's
+                                              // about to meet, in candidate numbering (search.params.face_surface: which)
             size_t approach_faces = 0;        // of them, those taken for walls about to meet away from the jaws
             fem::CompliantWallSearch search;
             fem::CompliantFrame last;         // the warm start

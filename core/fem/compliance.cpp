@@ -186,7 +186,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
 }
 
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner, double approach_mm) {
+                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer) {
     const Eigen::Index n = x.rows();
     auto check = [&](int a) {
         if (a < 0 || a >= n) throw InputError("compliant setup: node " + std::to_string(a) + " outside the body's " + std::to_string(n));
@@ -201,51 +201,66 @@ CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eig
         }
     }
     out.blade_candidates = out.candidates.size();
-    std::vector<Eigen::Index> near;
-    for (Eigen::Index f = 0; f < inner.rows(); ++f) {
-        bool in = true;
-        for (int k = 0; k < 3; ++k) {
-            check(inner(f, k));
-            in = in && blades.near_wedge(theta, x.row(inner(f, k)).transpose(), 0.3);
-        }
-        if (in) near.push_back(f);
-    }
-    // The walls about to meet anywhere else (squeezed out beside or past the tips, session 46: C0001's 0.5 mm crossing
-    // 2-6 mm past its 15 mm blades): a vertex within approach_mm in front of an opposite face (or a hair behind it),
-    // one ring left out as the frames' wall search does; the face and the faces round the vertex become wall faces.
-    if (approach_mm > 0 && inner.rows() > 0) {
-        const size_t wedge = near.size();
-        ContactParams cp;
-        cp.search_mm = approach_mm;
-        cp.exclude_rings = 1;
-        const std::vector<std::array<int, 2>> pairs = contact_pairs(x, inner, Eigen::VectorXd::Zero(3 * n), cp, APPROACH_BEHIND_MM);
-        std::vector<char> take(static_cast<size_t>(inner.rows()), 0), vert(static_cast<size_t>(n), 0);
-        for (Eigen::Index f : near) take[static_cast<size_t>(f)] = 1;
-        for (const auto& [v, f] : pairs) {
-            const double d = signed_vertex_face_distance(x.row(v).transpose(), x.row(inner(f, 0)).transpose(), x.row(inner(f, 1)).transpose(),
-                                                         x.row(inner(f, 2)).transpose());
-            if (d > approach_mm) continue;
-            take[static_cast<size_t>(f)] = 1;
-            vert[static_cast<size_t>(v)] = 1;
-        }
-        for (Eigen::Index f = 0; f < inner.rows(); ++f)
-            if (!take[static_cast<size_t>(f)] && (vert[static_cast<size_t>(inner(f, 0))] || vert[static_cast<size_t>(inner(f, 1))] || vert[static_cast<size_t>(inner(f, 2))]))
-                take[static_cast<size_t>(f)] = 1;
-        near.clear();
-        for (Eigen::Index f = 0; f < inner.rows(); ++f)
-            if (take[static_cast<size_t>(f)]) near.push_back(f);
-        out.approach_faces = near.size() - wedge;
-    }
-    out.faces.resize(static_cast<Eigen::Index>(near.size()), 3);
-    for (size_t f = 0; f < near.size(); ++f)
-        for (int k = 0; k < 3; ++k) {
-            const int a = inner(near[f], k);
-            int& sl = slot[static_cast<size_t>(a)];
-            if (sl < 0) {
-                sl = static_cast<int>(out.candidates.size());
-                out.candidates.push_back(a);
+    // The faces of one surface taken for the frames: with `wedge`, those whose corners lie within 0.3 mm of the jaws'
+    // wedge (the lumen, which the blades flatten), and those about to meet (below).
+    auto take_faces = [&](const Eigen::MatrixX3i& surface, bool wedge) {
+        std::vector<Eigen::Index> near;
+        for (Eigen::Index f = 0; f < surface.rows(); ++f) {
+            bool in = wedge;
+            for (int k = 0; k < 3; ++k) {
+                check(surface(f, k));
+                in = in && blades.near_wedge(theta, x.row(surface(f, k)).transpose(), 0.3);
             }
-            out.faces(static_cast<Eigen::Index>(f), k) = sl;
+            if (in) near.push_back(f);
+        }
+        // The walls about to meet anywhere else (squeezed out beside or past the tips, session 46: C0001's 0.5 mm crossing
+        // 2-6 mm past its 15 mm blades): a vertex within approach_mm in front of an opposite face (or a hair behind it),
+        // one ring left out as the frames' wall search does; the face and the faces round the vertex become wall faces.
+        if (approach_mm > 0 && surface.rows() > 0) {
+            const size_t at_wedge = near.size();
+            ContactParams cp;
+            cp.search_mm = approach_mm;
+            cp.exclude_rings = 1;
+            const std::vector<std::array<int, 2>> pairs = contact_pairs(x, surface, Eigen::VectorXd::Zero(3 * n), cp, APPROACH_BEHIND_MM);
+            std::vector<char> take(static_cast<size_t>(surface.rows()), 0), vert(static_cast<size_t>(n), 0);
+            for (Eigen::Index f : near) take[static_cast<size_t>(f)] = 1;
+            for (const auto& [v, f] : pairs) {
+                const double d = signed_vertex_face_distance(x.row(v).transpose(), x.row(surface(f, 0)).transpose(), x.row(surface(f, 1)).transpose(),
+                                                             x.row(surface(f, 2)).transpose());
+                if (d > approach_mm) continue;
+                take[static_cast<size_t>(f)] = 1;
+                vert[static_cast<size_t>(v)] = 1;
+            }
+            for (Eigen::Index f = 0; f < surface.rows(); ++f)
+                if (!take[static_cast<size_t>(f)] &&
+                    (vert[static_cast<size_t>(surface(f, 0))] || vert[static_cast<size_t>(surface(f, 1))] || vert[static_cast<size_t>(surface(f, 2))]))
+                    take[static_cast<size_t>(f)] = 1;
+            near.clear();
+            for (Eigen::Index f = 0; f < surface.rows(); ++f)
+                if (take[static_cast<size_t>(f)]) near.push_back(f);
+            out.approach_faces += near.size() - at_wedge;
+        }
+        return near;
+    };
+    // The lumen's faces, then the outer surface's (only where it is about to meet itself: the blades press it, they
+    // do not bring two parts of it together).
+    const std::vector<Eigen::Index> from_inner = take_faces(inner, true), from_outer = take_faces(outer, false);
+    out.faces.resize(static_cast<Eigen::Index>(from_inner.size() + from_outer.size()), 3);
+    out.face_surface.assign(from_inner.size(), 0);
+    out.face_surface.resize(from_inner.size() + from_outer.size(), 1);
+    Eigen::Index row = 0;
+    for (const auto& [surface, taken] : {std::pair<const Eigen::MatrixX3i*, const std::vector<Eigen::Index>*>{&inner, &from_inner}, {&outer, &from_outer}})
+        for (Eigen::Index f : *taken) {
+            for (int k = 0; k < 3; ++k) {
+                const int a = (*surface)(f, k);
+                int& sl = slot[static_cast<size_t>(a)];
+                if (sl < 0) {
+                    sl = static_cast<int>(out.candidates.size());
+                    out.candidates.push_back(a);
+                }
+                out.faces(row, k) = sl;
+            }
+            ++row;
         }
     return out;
 }
@@ -1288,7 +1303,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     };
     auto crossings = [&](const Eigen::VectorXd& u) {
         Behind c;
-        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth))
+        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth, nullptr, &cp.face_surface))
             if (q.depth_mm > CONTACT_ROUNDOFF_MM) {
                 c.pairs.emplace_back(q.v, q.f);
                 c.deepest = std::max(c.deepest, q.depth_mm);

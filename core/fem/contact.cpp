@@ -182,12 +182,31 @@ double signed_vertex_face_distance(const Eigen::Vector3d& p, const Eigen::Vector
     return sign * d;
 }
 
+std::vector<int> vertex_surfaces(const Eigen::MatrixX3i& faces, const std::vector<int>& face_surface, Eigen::Index nodes) {
+    if (face_surface.empty()) return {};
+    if (face_surface.size() != static_cast<size_t>(faces.rows()))
+        throw InputError("contact: " + std::to_string(face_surface.size()) + " face surfaces for " + std::to_string(faces.rows()) + " faces");
+    std::vector<int> s(static_cast<size_t>(nodes), -1);
+    for (Eigen::Index f = 0; f < faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            if (faces(f, k) < 0 || faces(f, k) >= nodes) throw InputError("contact: face " + std::to_string(f) + " names a node outside the body");
+            int& v = s[static_cast<size_t>(faces(f, k))];
+            if (v < 0) v = face_surface[static_cast<size_t>(f)];
+        }
+    return s;
+}
+
 std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p,
                                               double behind_mm) {
     if (u.size() != 3 * X.rows()) throw InputError("contact: the state has " + std::to_string(u.size()) + " entries for " + std::to_string(X.rows()) + " nodes");
     for (Eigen::Index f = 0; f < faces.rows(); ++f)
         for (int k = 0; k < 3; ++k)
             if (faces(f, k) < 0 || faces(f, k) >= X.rows()) throw InputError("contact: face " + std::to_string(f) + " names a node outside the body");
+    // A vertex of another surface is never a pair (ContactParams::face_surface).
+    const std::vector<int> surface = vertex_surfaces(faces, p.face_surface, X.rows());
+    const auto other_surface = [&](int v, Eigen::Index f) {
+        return !surface.empty() && surface[static_cast<size_t>(v)] != p.face_surface[static_cast<size_t>(f)];
+    };
     const auto xat = [&](int node) -> Eigen::Vector3d { return X.row(node).transpose() + u.segment<3>(3 * node); };
     std::vector<std::array<int, 2>> pairs;
     // Candidates: a surface vertex and a face without it, apart in the reference shape (opposite walls), near in
@@ -258,6 +277,7 @@ std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const E
         const Eigen::Vector3d fn = (b - a).cross(c - a);
         for (int v : near) {
             if (ring[static_cast<size_t>(v)] == f) continue;  // the face's own corners and their neighbours
+            if (other_surface(v, f)) continue;
             if ((xat(v) - centre).norm() > r + p.search_mm) continue;
             if (vn[static_cast<size_t>(v)].dot(fn) >= 0) continue;  // not facing each other: the same wall
             // A vertex behind the face (over it) where the solve starts did not come through it — the barrier lets
@@ -276,6 +296,7 @@ std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const E
             for (int v : p.close_vertices) {
                 if (v < 0 || v >= X.rows()) throw InputError("contact: close vertex " + std::to_string(v) + " outside the body");
                 if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
+                if (other_surface(v, f)) continue;
                 if ((xat(v) - centre).norm() > r + std::max(p.close_search_mm, p.search_mm)) continue;
                 if (signed_vertex_face_distance(xat(v), xat(faces(f, 0)), xat(faces(f, 1)), xat(faces(f, 2))) <= -behind_mm) continue;
                 pairs.push_back({v, static_cast<int>(f)});
@@ -402,7 +423,7 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
     const Eigen::Index n = body.dofs();
     // What is behind a face where the solve starts stays out of the count (a crease, an earlier crossing).
     std::vector<std::pair<int, int>> before;
-    for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth)) before.emplace_back(q.v, q.f);
+    for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth, nullptr, &cp.face_surface)) before.emplace_back(q.v, q.f);
     std::sort(before.begin(), before.end());
     CrossingFreeSolve out;
     for (int round = 0;; ++round) {
@@ -412,7 +433,7 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
         out.close_vertices = cp.close_vertices;
         out.left.clear();
         out.deepest_mm = 0;
-        for (const SurfaceCrossing& q : surface_crossings(X, faces, out.result.u.head(n), cp.exclude_rings, depth)) {
+        for (const SurfaceCrossing& q : surface_crossings(X, faces, out.result.u.head(n), cp.exclude_rings, depth, nullptr, &cp.face_surface)) {
             out.deepest_mm = std::max(out.deepest_mm, q.depth_mm);
             if (!std::binary_search(before.begin(), before.end(), std::make_pair(q.v, q.f))) out.left.push_back(q);
         }
@@ -457,8 +478,9 @@ bool crossings_need_pairs(const std::vector<std::pair<int, int>>& crossings, con
 }
 
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
-                                               double depth, const Eigen::VectorXd* face_depth) {
+                                               double depth, const Eigen::VectorXd* face_depth, const std::vector<int>* face_surface) {
     if (u.size() != 3 * X.rows()) throw InputError("surface_crossings: the displacement has the wrong size");
+    const std::vector<int> surface = face_surface ? vertex_surfaces(faces, *face_surface, X.rows()) : std::vector<int>();
     if (face_depth && face_depth->size() != faces.rows())
         throw InputError("surface_crossings: " + std::to_string(face_depth->size()) + " face depths for " + std::to_string(faces.rows()) + " faces");
     std::vector<SurfaceCrossing> out;
@@ -536,6 +558,7 @@ std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const 
         if (it == grid.end()) continue;
         for (int f : it->second) {
             if (faces(f, 0) == v || faces(f, 1) == v || faces(f, 2) == v) continue;
+            if (!surface.empty() && surface[static_cast<size_t>(v)] != (*face_surface)[static_cast<size_t>(f)]) continue;
             const double d = behind(&u, v, f);
             if (d <= 0 || !in_front_at_rest(v, f) || neighbour(v, f)) continue;
             out.push_back({v, f, d});

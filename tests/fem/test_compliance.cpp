@@ -13,6 +13,8 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
+#include <vector>
 
 #include "aneu/core/common.hpp"
 #include "aneu/core/error.hpp"
@@ -1154,4 +1156,166 @@ TEST(CompliantClip, TheWallSearchPairsTheTwoWallsOfATightFoldThatTwoRingsWouldLe
     EXPECT_LT(paired_over(fem::ContactParams{}, 1), row) << "two rings leave faces out (those with a corner at the fold)";
     EXPECT_EQ(paired_over(ws.params, 3), row);
     EXPECT_EQ(paired_over(fem::ContactParams{}, 3), row);
+}
+
+namespace {
+
+/// Two plates (1 mm along x, H thick along y, 4 mm along z, held round their edges x = 0, 1 and z = 0, 4, 1 MPa, ν 0.45;
+/// free edges let two pressed plates, frictionless, slide off each other sideways) facing each other
+/// across a gap along y, between blades hinged 100 mm away (nearly parallel, 2 mm wide along z, over the plates'
+/// middle) that close from the plates' outer faces (theta_touch) until each has pushed its plate 0.1 mm (theta_end):
+/// the plates' facing faces meet after GAP / 2 each. What a fold of the outer surface is (two parts of it pressed
+/// together), on a body whose answer is plain. `facing`: the facing faces (body numbering, outward of each plate:
+/// towards the other), the first half the lower plate's; `reach`: the nodes of both plates' y faces off the held edges.
+struct PlatesBetweenBlades {
+    static constexpr double FAR = 100.0, H = 0.2, GAP = 0.05, PUSH = 0.1;
+    Eigen::MatrixX3d V;
+    Eigen::MatrixXi T;
+    std::unique_ptr<fem::NeoHookeanSolid> solid;
+    Eigen::VectorXi fixed;
+    std::vector<int> reach;
+    Eigen::MatrixX3i facing;
+    fem::ClipBlades blades;
+    double theta_touch = 0, theta_end = 0;
+    PlatesBetweenBlades() {
+        const fem::StructuredMesh p = fem::box_mesh(1.0, H, 4.0, 4, 2, 16);
+        const auto n = p.V.rows();
+        V.resize(2 * n, 3);
+        V << p.V, p.V;
+        V.topRows(n).col(1).array() -= 0.5 * GAP + H;  // the lower plate: y in [-GAP/2 - H, -GAP/2]
+        V.bottomRows(n).col(1).array() += 0.5 * GAP;    // the upper: y in [GAP/2, GAP/2 + H]
+        T.resize(2 * p.T.rows(), 4);
+        T << p.T, p.T.array() + static_cast<int>(n);
+        solid = std::make_unique<fem::NeoHookeanSolid>(V, T, Eigen::VectorXi::Zero(T.rows()), std::vector<Material>{{"wall", 1.0, 0.45}});
+        std::vector<int> fd, lower, upper;
+        for (Eigen::Index i = 0; i < V.rows(); ++i) {
+            const double y = V(i, 1), z = V(i, 2);
+            if (z < 1e-9 || z > 4.0 - 1e-9 || V(i, 0) < 1e-9 || V(i, 0) > 1.0 - 1e-9) {
+                for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+                continue;
+            }
+            if (std::abs(std::abs(y) - 0.5 * GAP) < 1e-9) (y < 0 ? lower : upper).push_back(static_cast<int>(i));
+            if (std::abs(std::abs(y) - 0.5 * GAP) < 1e-9 || std::abs(std::abs(y) - 0.5 * GAP - H) < 1e-9) reach.push_back(static_cast<int>(i));
+        }
+        fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+        const Eigen::MatrixXi lo = fem::boundary_faces_in_set(V, T, Eigen::Map<Eigen::VectorXi>(lower.data(), static_cast<Eigen::Index>(lower.size())));
+        const Eigen::MatrixXi up = fem::boundary_faces_in_set(V, T, Eigen::Map<Eigen::VectorXi>(upper.data(), static_cast<Eigen::Index>(upper.size())));
+        facing.resize(lo.rows() + up.rows(), 3);
+        facing << lo.leftCols(3), up.leftCols(3);
+        blades.hinge = Eigen::Vector3d(-FAR, 0.0, 2.0);  // along x, opening along y, 2 mm wide along z
+        blades.length_mm = FAR + 3.0;
+        blades.width_mm = 2.0;
+        const double top = 0.5 * GAP + H;
+        theta_touch = 2 * std::asin(top / FAR) + 1e-4;
+        theta_end = 2 * std::asin((top - PUSH) / (FAR + 0.5));
+    }
+};
+
+}  // namespace
+
+TEST(CompliantClip, TheOuterSurfacePressedOntoItselfIsKeptApartAndNeverMeetsTheLumen) {
+    // Session 48: C0001's outer surface, squeezed along the jaws, folded 0.11 mm into its own wall through faces no
+    // frame had. Here two parts of an outer surface (the plates' facing faces) are pressed together by the blades.
+    const PlatesBetweenBlades pl;
+    const fem::ClipSpring spring = test_spring();
+    // The setup takes the outer surface's faces about to meet (0.05 mm apart, within the 0.3 mm approach), all of
+    // them, as surface 1, after the lumen's (none here), their corners candidates; without the approach, none.
+    const fem::CompliantSetup s = fem::compliant_setup(pl.blades, pl.theta_touch, pl.V, pl.reach, Eigen::MatrixX3i(), fem::COMPLIANT_WALL_APPROACH_MM, pl.facing);
+    ASSERT_EQ(s.faces.rows(), pl.facing.rows());
+    EXPECT_EQ(s.approach_faces, static_cast<size_t>(pl.facing.rows()));
+    EXPECT_EQ(s.face_surface, std::vector<int>(static_cast<size_t>(pl.facing.rows()), 1));
+    for (Eigen::Index f = 0; f < s.faces.rows(); ++f)
+        for (int k = 0; k < 3; ++k) EXPECT_EQ(s.candidates[static_cast<size_t>(s.faces(f, k))], pl.facing(f, k));
+    EXPECT_EQ(fem::compliant_setup(pl.blades, pl.theta_touch, pl.V, pl.reach, Eigen::MatrixX3i(), 0.0, pl.facing).faces.rows(), 0);
+    // The same faces as the lumen's (the wedge rule takes them, surface 0): the outer faces then meet none of their own.
+    const fem::CompliantSetup as_lumen = fem::compliant_setup(pl.blades, pl.theta_touch, pl.V, pl.reach, pl.facing);
+    EXPECT_EQ(as_lumen.face_surface, std::vector<int>(static_cast<size_t>(pl.facing.rows()), 0));
+
+    Eigen::MatrixX3d Xc(static_cast<Eigen::Index>(s.candidates.size()), 3);
+    for (size_t k = 0; k < s.candidates.size(); ++k) Xc.row(static_cast<Eigen::Index>(k)) = pl.V.row(s.candidates[k]);
+    // Frames closing the blades to theta_end, each on a linearisation where the last ended; the plates' faces labelled
+    // `surface` (empty: no wall contact).
+    struct End {
+        fem::CompliantFrame f;
+        Eigen::VectorXd u;
+    };
+    auto run = [&](const std::vector<int>& surface) {
+        fem::CompliantWallSearch ws;
+        ws.params.face_surface = surface;
+        End e;
+        e.u = Eigen::VectorXd::Zero(pl.solid->dofs());
+        e.f.theta = pl.theta_touch;
+        for (int frame = 0; frame < 24; ++frame) {
+            const double th = pl.theta_touch + (pl.theta_end - pl.theta_touch) * std::min(1.0, (frame + 1) / 16.0);
+            const fem::Linearisation lin(*pl.solid, pl.V, pl.fixed, e.u, s.candidates);
+            const fem::CompliantFrame last = e.f;
+            e.f = surface.empty() ? fem::solve_compliant_clip(lin, pl.blades, spring, th, last.theta, frame ? &last : nullptr)
+                                  : fem::solve_compliant_clip_walls(lin, Xc, s.faces, ws, pl.blades, spring, th, last.theta, frame ? &last : nullptr);
+            e.u = lin.displacement(e.f.candidate_forces);
+        }
+        return e;
+    };
+    // The deepest vertex of one plate's facing face behind the other's (body numbering, over all of them).
+    auto deepest = [&](const Eigen::VectorXd& u) {
+        double d = 0;
+        for (const auto& x : fem::surface_crossings(pl.V, pl.facing, u, 1, 0.25)) d = std::max(d, x.depth_mm);
+        return d;
+    };
+    const End without = run({});
+    EXPECT_GT(deepest(without.u), 0.05);  // each plate pushed 0.1 mm: 0.2 mm together, less the 0.05 mm gap and the bending
+    const std::vector<int> outer = s.face_surface;
+    const End with = run(outer);
+    EXPECT_LT(deepest(with.u), 1e-3);  // touching, not through: a pressed vertex ends on its face's plane to a micrometre
+    EXPECT_EQ(with.f.wall_crossings, 0);
+    EXPECT_LT(with.f.wall_crossed_mm, 1e-3);
+    EXPECT_GT(with.f.wall_contacts, 10);
+    EXPECT_LE(with.f.complementarity_mm, 1e-9);
+    // Pressed on each other, the plates take the blades' push together: more force for the same closing.
+    EXPECT_GT(with.f.loads.force_n[0], 1.5 * without.f.loads.force_n[0]);
+    EXPECT_NEAR(with.f.loads.force_n[0], with.f.loads.force_n[1], 0.02 * with.f.loads.force_n[0]);
+    // The same faces as two surfaces (each plate's its own, as the lumen and the outer surface are): no vertex meets the
+    // other's faces, and the plates pass through each other as without any wall contact.
+    std::vector<int> two(outer.size(), 1);
+    for (Eigen::Index f = 0; f < s.faces.rows(); ++f)
+        if (pl.V(s.candidates[static_cast<size_t>(s.faces(f, 0))], 1) < 0) two[static_cast<size_t>(f)] = 0;
+    const End apart = run(two);
+    EXPECT_EQ(apart.f.wall_rows, 0);
+    EXPECT_NEAR(deepest(apart.u), deepest(without.u), 1e-9);
+    // A face_surface that does not fit the faces is refused.
+    fem::CompliantWallSearch bad;
+    bad.params.face_surface = {1};
+    const fem::Linearisation lin(*pl.solid, pl.V, pl.fixed, Eigen::VectorXd::Zero(pl.solid->dofs()), s.candidates);
+    EXPECT_THROW(fem::solve_compliant_clip_walls(lin, Xc, s.faces, bad, pl.blades, spring, pl.theta_touch, pl.theta_touch), InputError);
+    std::printf("plates: blade force %.4f N with the outer surface's contact (%d pairs pressed, %.4f N through them), %.4f N without; crossed %.4f mm without\n",
+                with.f.loads.force_n[0], with.f.wall_contacts, with.f.wall_force_n, without.f.loads.force_n[0], deepest(without.u));
+}
+
+TEST(WallContact, AVertexPairsOnlyWithTheFacesOfItsOwnSurface) {
+    // Two facing unit squares 0.05 mm apart (the lower's normal +z, the upper's −z): every vertex faces the other's
+    // faces. Labelled one surface they pair and, pushed through, cross; labelled two (the lumen and the outer surface
+    // across a wall squeezed thin), neither.
+    Eigen::MatrixX3d X(8, 3);
+    X << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 0.05, 1, 0, 0.05, 1, 1, 0.05, 0, 1, 0.05;
+    Eigen::MatrixX3i F(4, 3);
+    F << 0, 1, 2, 0, 2, 3, 4, 6, 5, 4, 7, 6;
+    fem::ContactParams one, two;
+    one.face_surface = {0, 0, 0, 0};
+    two.face_surface = {0, 0, 1, 1};
+    const Eigen::VectorXd rest = Eigen::VectorXd::Zero(24);
+    const auto all = fem::contact_pairs(X, F, rest, fem::ContactParams{});
+    EXPECT_EQ(fem::contact_pairs(X, F, rest, one), all);
+    EXPECT_FALSE(all.empty());
+    EXPECT_TRUE(fem::contact_pairs(X, F, rest, two).empty());
+    two.close_vertices = {0, 4};  // close vertices too
+    EXPECT_TRUE(fem::contact_pairs(X, F, rest, two).empty());
+    Eigen::VectorXd through = rest;
+    for (int v = 4; v < 8; ++v) through[3 * v + 2] = -0.1;  // the upper square 0.05 mm through the lower
+    EXPECT_EQ(fem::surface_crossings(X, F, through, 1, 0.25, nullptr, &one.face_surface).size(), fem::surface_crossings(X, F, through, 1, 0.25).size());
+    EXPECT_FALSE(fem::surface_crossings(X, F, through, 1, 0.25).empty());
+    EXPECT_TRUE(fem::surface_crossings(X, F, through, 1, 0.25, nullptr, &two.face_surface).empty());
+    const std::vector<int> short_list = {0, 1};
+    EXPECT_THROW(fem::surface_crossings(X, F, through, 1, 0.25, nullptr, &short_list), InputError);
+    fem::ContactParams bad;
+    bad.face_surface = short_list;
+    EXPECT_THROW(fem::contact_pairs(X, F, rest, bad), InputError);
 }

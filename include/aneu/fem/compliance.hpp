@@ -147,6 +147,9 @@ struct CompliantSetup {
     size_t blade_candidates = 0;   ///< how many of them come first, within reach of the blades
     Eigen::MatrixX3i faces;        ///< the walls' faces, in candidate numbering (CompliantWalls::faces)
     size_t approach_faces = 0;     ///< of them, the faces taken for walls about to meet away from the jaws
+    /// per face, its surface: 0 the lumen's, 1 the outer surface's (ContactParams::face_surface: a vertex meets only
+    /// its own surface's faces)
+    std::vector<int> face_surface;
 };
 /// compliant_setup's default approach: inner walls nearer each other than this are wall faces wherever they are. Twice
 /// the frames' row reach (CompliantOptions::wall_reach_mm): a selection is made at most every few frames (aneusim's
@@ -163,9 +166,14 @@ constexpr double APPROACH_BEHIND_MM = 0.05;
 /// opposite wall (beyond one ring, facing it) within approach_mm in front of it or APPROACH_BEHIND_MM behind, and
 /// the faces round that vertex. aneusim's patch and aneu_bench_compliance make their frames' problem so. Repeated
 /// nodes in `reach` count once.
+/// `outer` (the outer surface's triangles, body nodes, normals out of the wall): its faces about to meet each other by
+/// the same rule (with approach_mm > 0), after the lumen's, their corners candidates too (session 48: C0001's outer
+/// surface, squeezed along the jaws, folded 0.11 mm into its own wall, through faces no frame had). Under the blades
+/// the outer surface meets the blades, so it has no wedge rule.
 /// @throws InputError a node outside x
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM);
+                               const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM,
+                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i());
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {

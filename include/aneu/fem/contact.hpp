@@ -46,6 +46,11 @@ struct ContactParams {
     double close_search_mm = 0;
     /// Kept between the decorators of successive solves (make_pattern_cache); null: each merges its own pattern.
     std::shared_ptr<PatternCache> pattern_cache;
+    /// Which surface each face belongs to (one entry a face of the surface the pairs are searched on; empty: all one
+    /// surface). A vertex pairs only with the faces of its own surface (a vertex's surface: its faces'), close vertices
+    /// included: the lumen's vertices with the lumen's faces, the outer surface's with the outer surface's. Across the
+    /// wall a lumen vertex lies behind an outer face by the wall's thickness, facing it; a squeezed wall's less.
+    std::vector<int> face_surface;
 };
 
 namespace detail {
@@ -112,7 +117,9 @@ private:
 /// ContactBody's candidate vertex–face pairs (vertex, face) of the surface `faces` at the state u: a vertex and a face
 /// without it, beyond `exclude_rings` edges of its corners, within `search_mm` of it, facing each other (vertex and
 /// face normals more than 90° apart) and not behind it (by `behind_mm` or more: hard contact leaves a pressed vertex a
-/// hair behind its face); each of `close_vertices` with every face within reach but its own. u: 3 per node of X.
+/// hair behind its face); each of `close_vertices` with every face within reach but its own. u: 3 per node of X. With
+/// `face_surface`, a vertex and faces of its own surface only.
+/// @throws InputError a state or face_surface that does not fit, a face naming a node outside X
 std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p,
                                               double behind_mm = 0);
 
@@ -134,9 +141,15 @@ struct SurfaceCrossing {
 /// within `exclude_rings` edges of a face's corners are its neighbours and never count; `depth` bounds how far
 /// behind a face a vertex still counts as through it (beyond lies another part of the body). A uniform grid
 /// keeps it near linear in the surface's size.
-/// `face_depth` (one per face, each ≤ depth; null: none): a face's own bound instead.
+/// `face_depth` (one per face, each ≤ depth; null: none): a face's own bound instead. `face_surface` (one per face;
+/// null or empty: one surface): a vertex counts only behind the faces of its own surface (ContactParams::face_surface).
 std::vector<SurfaceCrossing> surface_crossings(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, int exclude_rings,
-                                               double depth, const Eigen::VectorXd* face_depth = nullptr);
+                                               double depth, const Eigen::VectorXd* face_depth = nullptr, const std::vector<int>* face_surface = nullptr);
+
+/// Per node of a body with `nodes` nodes, the surface its faces belong to (face_surface: one entry a face; −1: a node on
+/// no face); empty when face_surface is. A node on faces of two surfaces takes its first face's.
+/// @throws InputError a face_surface whose size is not the faces' count, a face naming a node outside the body
+std::vector<int> vertex_surfaces(const Eigen::MatrixX3i& faces, const std::vector<int>& face_surface, Eigen::Index nodes);
 
 /// Per query node, an element of `elements` whose tissue holds it although the node is not one of its nodes (−1:
 /// none): where a surface vertex that lies behind a face of its own surface really is inside the wall behind that face,
