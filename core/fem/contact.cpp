@@ -634,6 +634,26 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
         }
         return true;
     };
+    // The elements round each query node (its own tissue), and the nodes on the mesh's boundary, for the depth.
+    std::unordered_map<int, std::vector<Eigen::Index>> own_elements;
+    std::vector<char> on_boundary;
+    if (depth) {
+        on_boundary.assign(static_cast<size_t>(x.rows()), 0);
+        for (Eigen::Index e = 0; e < elements.rows(); ++e)
+            for (int s = 0; s < per; ++s)
+                for (int k = 0; k < 4; ++k)
+                    if (face_count[face_key(e, s, k)] == 1)
+                        for (int j = 1; j < 4; ++j) on_boundary[static_cast<size_t>(elements(e, sub[s][(k + j) % 4]))] = 1;
+        for (int q : query) own_elements[q];
+        for (Eigen::Index e = 0; e < elements.rows(); ++e)
+            for (Eigen::Index k = 0; k < cols; ++k)
+                if (const auto it = own_elements.find(elements(e, k)); it != own_elements.end()) it->second.push_back(e);
+    }
+    auto in_element = [&](Eigen::Index g, int node) {
+        for (Eigen::Index k = 0; k < cols; ++k)
+            if (elements(g, k) == node) return true;
+        return false;
+    };
     for (size_t i = 0; i < query.size(); ++i) {
         const int q = query[i];
         const Vec3 p = x.row(q).transpose();
@@ -651,8 +671,14 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
                 break;
             }
             {
-                // How deep: the distance to the element's own faces (not those between its pieces), those on the
-                // mesh's boundary where it has any (the tissue ends there), else all of them (a lower bound).
+                // How deep: for a node on the mesh's boundary (a surface that went into the tissue), the distance to
+                // the element's own faces (not those between its pieces) by which it leaves the other tissue: those
+                // on the mesh's boundary (the tissue ends there) and those it shares with one of the node's own
+                // elements (back into its own tissue), where it has any; else, and for a node inside the mesh, all of
+                // them (a lower bound: how far past a face of the element it lies). An inside node cannot come through
+                // a surface: it lies in a neighbour when its own elements are tangled (session 48: a mid-edge node of
+                // the sample's patch past an element it shares an edge with, 0.37 mm from that element's faces on
+                // the boundary).
                 std::vector<std::array<int, 2>> faces;  // (piece, face)
                 for (int s2 = 0; s2 < per; ++s2)
                     for (int k = 0; k < 4; ++k) {
@@ -661,12 +687,45 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
                             for (int k3 = 0; k3 < 4; ++k3) within += face_key(e, s3, k3) == face_key(e, s2, k);
                         if (within == 1) faces.push_back({s2, k});
                     }
-                const bool bounded = std::any_of(faces.begin(), faces.end(), [&](const auto& f) { return face_count[face_key(e, f[0], f[1])] == 1; });
+                auto exit = [&](const std::array<int, 2>& f) {
+                    if (!on_boundary[static_cast<size_t>(q)] && !own_elements[q].empty()) return false;  // (a node of no element: another body's)
+                    if (face_count[face_key(e, f[0], f[1])] == 1) return true;
+                    const std::vector<Eigen::Index>& mine = own_elements[q];
+                    return std::any_of(mine.begin(), mine.end(), [&](Eigen::Index g) {
+                        for (int k = 1; k < 4; ++k)
+                            if (!in_element(g, elements(e, sub[f[0]][(f[1] + k) % 4]))) return false;
+                        return true;
+                    });
+                };
+                const bool bounded = std::any_of(faces.begin(), faces.end(), exit);
                 double d = std::numeric_limits<double>::infinity();
                 for (const auto& f : faces) {
-                    if (bounded && face_count[face_key(e, f[0], f[1])] != 1) continue;
+                    if (bounded && !exit(f)) continue;
                     const PointTriangle pt = point_triangle(p, corner(e, f[0], (f[1] + 1) % 4), corner(e, f[0], (f[1] + 2) % 4), corner(e, f[0], (f[1] + 3) % 4), false);
                     d = std::min(d, std::sqrt(pt.D));
+                }
+                // A node on the boundary near where the element meets its own tissue (an edge or a corner the element
+                // shares with one of the node's own elements) leaves the other tissue there: no farther than that
+                // edge or corner (session 48: a lumen mid-edge node of the sample's patch 0.004 mm from the edge its
+                // element shares with the holding one, 0.37 mm from the holding one's faces on the boundary).
+                if (bounded) {
+                    std::vector<int> mine;
+                    for (Eigen::Index g : own_elements[q])
+                        for (Eigen::Index k = 0; k < cols; ++k) mine.push_back(elements(g, k));
+                    std::sort(mine.begin(), mine.end());
+                    auto shared = [&](int s2, int k) { return std::binary_search(mine.begin(), mine.end(), elements(e, sub[s2][k])); };
+                    for (int s2 = 0; s2 < per; ++s2)
+                        for (int k = 0; k < 4; ++k) {
+                            if (!shared(s2, k)) continue;
+                            const Vec3 a = corner(e, s2, k);
+                            d = std::min(d, (p - a).norm());
+                            for (int j = k + 1; j < 4; ++j) {
+                                if (!shared(s2, j)) continue;
+                                const Vec3 ab = corner(e, s2, j) - a;
+                                const double t = std::clamp((p - a).dot(ab) / std::max(ab.squaredNorm(), 1e-300), 0.0, 1.0);
+                                d = std::min(d, (p - a - t * ab).norm());
+                            }
+                        }
                 }
                 // The least over the elements holding it (one holding it on a face between two of them may have on
                 // the boundary only a face farther off than the nearest boundary: a plate's side, not its top).

@@ -226,6 +226,69 @@ TEST(WallContact, ATenNodeElementHoldsWhatItsCurvedEdgeTakesIn) {
     EXPECT_EQ(fem::nodes_inside_elements(x, t10.leftCols(4), {10, 11}), (std::vector<int>{-1, 0}));
 }
 
+TEST(WallContact, ANodePushedALittleIntoItsNeighbourIsThatLittleDeep) {
+    // Two tetrahedra on the face (a, b, c) in z = 0: A above it with its apex q, B below. q (on the boundary) pushed
+    // 0.005 mm through the face lies in B, 0.005 mm deep: it leaves B back into its own tissue across that face (before
+    // session 48 it was given the distance to B's faces on the boundary, 0.241 mm). A node of neither element at the
+    // same point (a surface vertex of another part) leaves B only through its faces on the boundary, 0.241 mm off.
+    Eigen::MatrixX3d x(6, 3);
+    x << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0.25, 0.25, 1, 0.25, 0.25, -1, 0.25, 0.25, -0.005;
+    Eigen::MatrixXi t(2, 4);
+    t << 0, 1, 2, 3, 0, 2, 1, 4;  // A (a, b, c, q), B (a, c, b, r)
+    std::vector<double> depth;
+    EXPECT_EQ(fem::nodes_inside_elements(x, t, {3, 5}, &depth), (std::vector<int>{-1, 1}));  // q at rest: in none
+    x.row(3) = x.row(5);
+    EXPECT_EQ(fem::nodes_inside_elements(x, t, {3, 5}, &depth), (std::vector<int>{1, 1}));
+    EXPECT_NEAR(depth[0], 0.005, 1e-12);
+    EXPECT_NEAR(depth[1], 0.25 * (1 - 0.005) / std::sqrt(1 + 0.25 * 0.25), 1e-12);  // to the face (a, b, r)
+    // Six tetrahedra round the edge a = (0, 0, 0), b = (1, 0, 0), to the points P_k at 60° steps round it 1 mm off: the
+    // node P_0 (of the first and the last) moved into the one opposite, 0.003 mm from the edge, lies in it 0.003 mm
+    // deep: it leaves the other tissue at the edge it shares with its own elements (session 48: a lumen node of the
+    // sample's patch was given 0.37 mm, the distance to its holder's faces on the boundary; the holder's faces by the
+    // edge lie between it and other elements of the fan).
+    {
+        Eigen::MatrixX3d f(8, 3);
+        f.row(0) << 0, 0, 0;
+        f.row(1) << 1, 0, 0;
+        for (int k = 0; k < 6; ++k) f.row(2 + k) << 0.5, std::cos(k * M_PI / 3), std::sin(k * M_PI / 3);
+        Eigen::MatrixXi fan(6, 4);
+        for (int k = 0; k < 6; ++k) fan.row(k) << 0, 1, 2 + k, 2 + (k + 1) % 6;
+        for (int k = 0; k < 6; ++k)  // each positive
+            if ((f.row(fan(k, 1)) - f.row(fan(k, 0))).dot((f.row(fan(k, 2)) - f.row(fan(k, 0))).cross(f.row(fan(k, 3)) - f.row(fan(k, 0)))) < 0) std::swap(fan(k, 2), fan(k, 3));
+        f.row(2) << 0.5, 0.003 * std::cos(210 * M_PI / 180), 0.003 * std::sin(210 * M_PI / 180);
+        EXPECT_EQ(fem::nodes_inside_elements(f, fan, {2}, &depth), (std::vector<int>{3}));
+        EXPECT_NEAR(depth[0], 0.003, 1e-12);
+    }
+    // A node inside a mesh came through no surface: it lies in a neighbour when its own elements are tangled, and its
+    // depth is how far past the holding element's nearest face it lies, not the distance to the mesh's boundary. A wall
+    // two cells thick (0.2 mm, 0.25 mm cells), its mid-plane node in the middle moved 0.2 mm sideways and 0.02 mm up:
+    // in an element of the upper layer not its own, 0.02 mm above the mid-plane, 0.08 mm below the wall's top (the
+    // depth before session 48).
+    const fem::StructuredMesh wall = fem::box_mesh(1, 1, 0.2, 4, 4, 2);
+    int middle = -1;
+    for (Eigen::Index i = 0; i < wall.V.rows(); ++i)
+        if ((wall.V.row(i) - Eigen::RowVector3d(0.5, 0.5, 0.1)).norm() < 1e-12) middle = static_cast<int>(i);
+    ASSERT_GE(middle, 0);
+    int held_somewhere = 0;
+    for (const double dx : {0.2, -0.2})
+        for (const double dy : {0.1, -0.1, 0.15}) {
+            Eigen::MatrixX3d y = wall.V;
+            y.row(middle) += Eigen::RowVector3d(dx, dy, 0.02);
+            const std::vector<int> held = fem::nodes_inside_elements(y, wall.T, {middle}, &depth);
+            if (held[0] < 0) continue;  // still within its own elements
+            ++held_somewhere;
+            const Eigen::Vector3d p = y.row(middle).transpose();
+            double nearest = 1e9;
+            for (int k = 0; k < 4; ++k) {
+                const Eigen::Vector3d a = y.row(wall.T(held[0], (k + 1) % 4)), b = y.row(wall.T(held[0], (k + 2) % 4)), c = y.row(wall.T(held[0], (k + 3) % 4));
+                nearest = std::min(nearest, std::abs((p - a).dot((b - a).cross(c - a).normalized())));
+            }
+            EXPECT_LE(depth[0], 0.02 + 1e-12);
+            EXPECT_NEAR(depth[0], nearest, 1e-12);
+        }
+    EXPECT_GT(held_somewhere, 0);
+}
+
 TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated) {
     // The top plate starts lifted 0.5 mm (0.55 mm apart) and is pushed to 0.08 mm down in one solve; pairs are
     // searched 0.02 mm round each face where it starts: none at all, and the top plate sinks through the bottom

@@ -159,9 +159,12 @@ std::vector<int> vertex_surfaces(const Eigen::MatrixX3i& faces, const std::vecto
 /// corners, four round the mid-edge diagonal 4-9), so that a curved element is followed to its mid-edge nodes. Inside
 /// means in front of each of a tetrahedron's faces, or on one it shares with another tetrahedron (the tissue goes on
 /// across it). A uniform grid over the tetrahedra's boxes keeps it near linear in the mesh's size.
-/// `depth` (null: not wanted): per query node inside, an estimate of how deep: over the elements holding it, the least
-/// distance to an element's own faces on the mesh's boundary (where the tissue ends), or, for an element with none, to
-/// all its own faces (a lower bound); 0 for a node in no element. (Not the exact distance to the tissue's boundary: a
+/// `depth` (null: not wanted): per query node inside, an estimate of how deep: over the elements holding it, for a
+/// node on the mesh's boundary the least distance to an element's own faces on the boundary (where the tissue ends) or
+/// shared with one of the node's own elements (back into its own tissue), and to the edges and corners it shares with
+/// those (where it meets the node's own tissue), or, for an element with no such face, and for a
+/// node inside the mesh (its elements tangled: it came through no surface), to all its own faces (a lower bound); 0
+/// for a node in no element. (Not the exact distance to the tissue's boundary: a
 /// boundary face of an element that does not hold the node may lie nearer.) The element returned is the one giving it.
 /// @throws InputError a node index out of range, elements with neither 4 nor 10 columns
 std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::MatrixXi& elements, const std::vector<int>& query,
