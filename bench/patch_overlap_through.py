@@ -17,17 +17,7 @@ import math
 import sys
 from collections import defaultdict, deque
 
-
-def sub(a, b):
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-def dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def cross(a, b):
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+from patch_tissue_overlap import cross, dot, sub  # (run from anywhere: bench/ is the script's own directory)
 
 
 def plane(p, a, b, c):

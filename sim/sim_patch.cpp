@@ -295,51 +295,36 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
                 P.cand.push_back(a);
             }
     }
-    // The lumen's triangles in the patch, turned into the lumen (towards the opposite wall), in volume nodes.
-    const SimLumen& L = sf.lumen;
-    std::vector<int> in_patch;
-    for (Eigen::Index f = 0; f < L.F.rows(); ++f)
-        if (pm.local(L.node[L.F(f, 0)]) >= 0 && pm.local(L.node[L.F(f, 1)]) >= 0 && pm.local(L.node[L.F(f, 2)]) >= 0)
-            in_patch.push_back(static_cast<int>(f));
-    Eigen::MatrixX3i walls(static_cast<Eigen::Index>(in_patch.size()), 3);
-    for (size_t k = 0; k < in_patch.size(); ++k)
-        walls.row(static_cast<Eigen::Index>(k)) << L.node[L.F(in_patch[k], 0)], L.node[L.F(in_patch[k], 2)], L.node[L.F(in_patch[k], 1)];
-    if (quadratic) walls = fem::quadratic_surface_triangles(*mid, walls);
-    // In patch numbering; a split triangle with a mid-edge node outside the patch is left out with its three siblings.
-    std::vector<Eigen::Vector3i> tri;
+    // A surface's triangles in the patch (their three corners patch nodes), in patch numbering, split at their mid-edge
+    // nodes with 10-node elements (a split triangle with a mid-edge node outside the patch is left out with its three
+    // siblings); `flip`: turned over.
     const int per = quadratic ? 4 : 1;
-    for (Eigen::Index f = 0; f < walls.rows(); f += per) {
-        bool inside = true;
-        for (int r = 0; r < per; ++r)
-            for (int k = 0; k < 3; ++k) inside = inside && pm.local(walls(f + r, k)) >= 0;
-        if (!inside) continue;
-        for (int r = 0; r < per; ++r) tri.emplace_back(pm.local(walls(f + r, 0)), pm.local(walls(f + r, 1)), pm.local(walls(f + r, 2)));
-    }
-    P.inner.resize(static_cast<Eigen::Index>(tri.size()), 3);
-    for (size_t f = 0; f < tri.size(); ++f) P.inner.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
-    // The outer surface's triangles in the patch, as they are (counter-clockwise from outside: normals out of the
-    // wall), split alike: where the outer surface, squeezed along the jaws, folds onto itself (session 48: C0001's
-    // folded 0.11 mm into its own wall), the frames' wall contact keeps it apart (compliant_setup's outer faces).
-    {
+    auto patch_triangles = [&](const Eigen::MatrixX3i& F, const Eigen::VectorXi& node, bool flip) {
         std::vector<int> on;
-        for (Eigen::Index f = 0; f < sf.F.rows(); ++f)
-            if (pm.local(sf.node[sf.F(f, 0)]) >= 0 && pm.local(sf.node[sf.F(f, 1)]) >= 0 && pm.local(sf.node[sf.F(f, 2)]) >= 0)
-                on.push_back(static_cast<int>(f));
-        Eigen::MatrixX3i out(static_cast<Eigen::Index>(on.size()), 3);
+        for (Eigen::Index f = 0; f < F.rows(); ++f)
+            if (pm.local(node[F(f, 0)]) >= 0 && pm.local(node[F(f, 1)]) >= 0 && pm.local(node[F(f, 2)]) >= 0) on.push_back(static_cast<int>(f));
+        Eigen::MatrixX3i walls(static_cast<Eigen::Index>(on.size()), 3);
         for (size_t k = 0; k < on.size(); ++k)
-            out.row(static_cast<Eigen::Index>(k)) << sf.node[sf.F(on[k], 0)], sf.node[sf.F(on[k], 1)], sf.node[sf.F(on[k], 2)];
-        if (quadratic) out = fem::quadratic_surface_triangles(*mid, out);
-        std::vector<Eigen::Vector3i> kept;
-        for (Eigen::Index f = 0; f < out.rows(); f += per) {
+            walls.row(static_cast<Eigen::Index>(k)) << node[F(on[k], 0)], node[F(on[k], flip ? 2 : 1)], node[F(on[k], flip ? 1 : 2)];
+        if (quadratic) walls = fem::quadratic_surface_triangles(*mid, walls);
+        std::vector<Eigen::Vector3i> tri;
+        for (Eigen::Index f = 0; f < walls.rows(); f += per) {
             bool inside = true;
             for (int r = 0; r < per; ++r)
-                for (int k = 0; k < 3; ++k) inside = inside && pm.local(out(f + r, k)) >= 0;
+                for (int k = 0; k < 3; ++k) inside = inside && pm.local(walls(f + r, k)) >= 0;
             if (!inside) continue;
-            for (int r = 0; r < per; ++r) kept.emplace_back(pm.local(out(f + r, 0)), pm.local(out(f + r, 1)), pm.local(out(f + r, 2)));
+            for (int r = 0; r < per; ++r) tri.emplace_back(pm.local(walls(f + r, 0)), pm.local(walls(f + r, 1)), pm.local(walls(f + r, 2)));
         }
-        P.outer.resize(static_cast<Eigen::Index>(kept.size()), 3);
-        for (size_t f = 0; f < kept.size(); ++f) P.outer.row(static_cast<Eigen::Index>(f)) = kept[f].transpose();
-    }
+        Eigen::MatrixX3i out(static_cast<Eigen::Index>(tri.size()), 3);
+        for (size_t f = 0; f < tri.size(); ++f) out.row(static_cast<Eigen::Index>(f)) = tri[f].transpose();
+        return out;
+    };
+    // The lumen's, turned into the lumen (towards the opposite wall).
+    P.inner = patch_triangles(sf.lumen.F, sf.lumen.node, true);
+    // The outer surface's, as they are (counter-clockwise from outside: normals out of the wall): where the outer
+    // surface, squeezed along the jaws, folds onto itself (session 48: C0001's folded 0.11 mm into its own wall), the
+    // frames' wall contact keeps it apart (compliant_setup's outer faces).
+    P.outer = patch_triangles(sf.F, sf.node, false);
     P.v = Eigen::VectorXd::Zero(pm.dofs() + 1);
     P.v[pm.dofs()] = theta;
     // The handover from the linear model: the patch starts at rest, where tissue the linear model pushed aside with
