@@ -676,9 +676,8 @@ std::vector<int> nodes_inside_elements(const Eigen::MatrixX3d& x, const Eigen::M
                 // on the mesh's boundary (the tissue ends there) and those it shares with one of the node's own
                 // elements (back into its own tissue), where it has any; else, and for a node inside the mesh, all of
                 // them (a lower bound: how far past a face of the element it lies). An inside node cannot come through
-                // a surface: it lies in a neighbour when its own elements are tangled (session 48: a mid-edge node of
-                // the sample's patch past an element it shares an edge with, 0.37 mm from that element's faces on
-                // the boundary).
+                // a surface: it lies in a neighbour when its own elements are tangled, and the distance to the
+                // neighbour's faces on the boundary would be the wall's thickness, not how far it went in.
                 std::vector<std::array<int, 2>> faces;  // (piece, face)
                 for (int s2 = 0; s2 < per; ++s2)
                     for (int k = 0; k < 4; ++k) {
