@@ -43,7 +43,10 @@ sp = model["spring"]
 # the clip model's closing-force range: its label force (1 mm open) to its force fully open, ±10 %
 lo, hi = 0.9 * sp["label_force_n"], 1.1 * sp["open_force_n"]
 p = (report.get("patches") or [{}])[0]
-# the clip's force: the larger blade's grip on the tissue at its peak (the haptic peak is what the hand feels)
+# the clip's force as its range is stated (ISO 9713): the tissue's moment on a blade over the label point's arm, at its
+# peak; beside it the blade's whole normal force (larger where the tissue presses nearer the fulcrum) and the haptic
+# peak (what the hand feels). Reports before session 49 have no label-point figure: nan.
+label = p.get("peak_label_force_n", report.get("peak_clip_label_force_n", float("nan")))
 blade = p.get("peak_blade_force_n", report.get("peak_vessel_force_n", float("nan")))
 fields = [
     case,
@@ -65,8 +68,8 @@ fields = [
     "parent_narrowed=%s parent_mm=%s" % (
         "%.1f%%" % (100 * report["parent_narrowing"]) if report.get("parent_narrowing") is not None else "-",
         "%.2f/%.2f" % (report["parent_channel_mm"], report["parent_channel_rest_mm"]) if report.get("parent_narrowing") is not None else "-"),
-    "peak_clip_force_n=%.3f range_n=%.2f-%.2f within=%s haptic_peak_n=%.3f" % (
-        blade, lo, hi, "yes" if lo <= blade <= hi else "no", report.get("peak_force_n", float("nan"))),
+    "peak_clip_force_at_label_n=%.3f range_n=%.2f-%.2f within=%s peak_blade_force_n=%.3f haptic_peak_n=%.3f" % (
+        label, lo, hi, "yes" if lo <= label <= hi else "no", blade, report.get("peak_force_n", float("nan"))),
     "patch_frames=%s unconverged=%s restarts=%s builds=%s mean_solve_s=%.1f walls_min_mm=%s solver=%s%s" % (
         p.get("frames", "-"), p.get("unconverged_frames", "-"), p.get("restarts", "-"), p.get("builds", "-"), p.get("mean_solve_ms", float("nan")) / 1000,
         "%.4f" % p["min_wall_distance_mm"] if p.get("min_wall_distance_mm") is not None else "-", p.get("solver", "newton"),

@@ -692,7 +692,7 @@ Assessment Simulator::Impl::assess() {
         if (c.model.empty()) continue;
         const ClipModel& cm = scene.clip_models.at(c.model);
         out.clip_ends.push_back({c.id, c.model, c.state == Clip::State::DEPOSITED, cm.spring.has_value(), cm.spring_placeholder, c.opening_deg,
-                                 c.grip_force_n, c.spring_torque_nmm, c.tissue_moment_nmm});
+                                 c.grip_force_n, c.spring_torque_nmm, c.tissue_moment_nmm, c.label_force_n});
     }
     const Eigen::MatrixX3d x = deformed();
     const SimLumen& lumen = model.surface.lumen;

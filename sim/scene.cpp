@@ -155,7 +155,7 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
     if (c.label_force_n > 0) {  // (again, when a scene overrides a clip file's blade)
         // ISO 9713: the label force is measured at 1 mm opening a third of the blade from its tip (from the fulcrum:
         // fulcrum_mm + 2/3 of the blade).
-        const double r = c.fulcrum_mm + 2.0 * c.jaw_length_mm / 3.0;
+        const double r = c.label_arm_mm();
         try {
             c.spring = fem::ClipSpring::from_forces(r, fem::opening_angle(r, 1.0, c.closed_gap_mm), c.label_force_n,
                                                    c.max_opening_deg * DEG, c.open_force_n);

@@ -243,6 +243,8 @@ void Simulator::Impl::balance_springs() {
         }
         tr.prev_theta = theta;
         c.tissue_moment_nmm = M;
+        c.label_force_n = M / cm.label_arm_mm();
+        a.peak_clip_label_force_n = std::max(a.peak_clip_label_force_n, c.label_force_n);
         c.spring_torque_nmm = cm.spring->torque(theta);
         const double R = c.spring_torque_nmm - M;
         double step = -R / (cm.spring->k_nmm_per_rad + tr.tissue_k);

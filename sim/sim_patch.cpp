@@ -1019,6 +1019,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         cl.grip_force_n = 0.5 * (loads.force_n[0] + loads.force_n[1]);
         cl.friction_n = 0.5 * (loads.friction_n[0] + loads.friction_n[1]);
         cl.tissue_moment_nmm = 0.5 * (loads.moment_nmm[0] + loads.moment_nmm[1]);
+        cl.label_force_n = cl.tissue_moment_nmm / cm.label_arm_mm();
         cl.spring_torque_nmm = cm.spring ? loads.spring_torque_nmm : 0.0;
         P.force = net;
         P.contacts = loads.contacts[0] + loads.contacts[1];
@@ -1034,6 +1035,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.mean_solve_ms = P.solve_ms_sum / static_cast<double>(st.frames);
         st.max_solve_ms = std::max(st.max_solve_ms, ms);
         st.peak_blade_force_n = std::max(st.peak_blade_force_n, cl.grip_force_n);
+        st.peak_label_force_n = std::max(st.peak_label_force_n, cl.label_force_n);
+        a.peak_clip_label_force_n = std::max(a.peak_clip_label_force_n, cl.label_force_n);
         if (compliance && !restarted) {
             st.end_lag_to_thickness = lag.ratio;
             if (!c_profile.empty()) {

@@ -558,6 +558,15 @@ TEST(Simulator, ASpringClipStopsWhereTheTissueBalancesItsSpring) {
         const sim::Clip& c = s.clips().at(0);
         EXPECT_EQ(c.state, sim::Clip::State::HELD);
         EXPECT_DOUBLE_EQ(c.forceps_deg, 0.0);
+        if (spring) {
+            // The force at the label point is the tissue's moment over its arm; held where the tissue balances the
+            // spring, it is the spring's force there at that opening (what its label range is stated for).
+            const sim::ClipModel& cm = s.scene().clip_models.at(c.model);
+            EXPECT_NEAR(c.label_force_n, c.tissue_moment_nmm / cm.label_arm_mm(), 1e-12);
+            if (c.opening_deg > 0) {
+                EXPECT_NEAR(c.label_force_n, cm.spring->force_at(cm.label_arm_mm(), c.opening_deg * aneu::DEG), 0.01 * c.label_force_n);
+            }
+        }
         return Out{c.opening_deg, c.spring_torque_nmm, c.tissue_moment_nmm, c.grip_force_n};
     };
     const Out none = run(0, false, "none.json");
@@ -1066,6 +1075,12 @@ std::pair<double, double> spring_clip_balance(const std::string& solver) {
         EXPECT_GT(a.patches[0].min_wall_distance_mm, -0.02);
         EXPECT_GT(c.spring_torque_nmm, 0);
         EXPECT_NEAR(c.tissue_moment_nmm, c.spring_torque_nmm, 1e-3 * c.spring_torque_nmm);
+        // The clip's force at its label point is the spring's force there at the opening it stopped at (the moment
+        // over the label point's arm), and the session's peak is at least that.
+        const sim::ClipModel& cm = s.scene().clip_models.at(c.model);
+        EXPECT_NEAR(c.label_force_n, cm.spring->force_at(cm.label_arm_mm(), c.opening_deg * aneu::DEG), 1e-3 * c.label_force_n);
+        EXPECT_GE(a.peak_clip_label_force_n, c.label_force_n);
+        EXPECT_DOUBLE_EQ(a.patches[0].peak_label_force_n, a.peak_clip_label_force_n);
         // Released, the blades still hold the tissue by friction (the compliance frames of a released clip had none
         // until session 34: the sample's neck then slid out from between the jaws as the spring took over).
         EXPECT_GT(c.friction_n, 0.01 * c.grip_force_n);

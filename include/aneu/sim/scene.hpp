@@ -51,6 +51,10 @@ struct ClipModel {
     double jaw_curve_radius_mm = 0.0;
     /// The jaws' length from the fulcrum: fulcrum_mm + jaw_length_mm.
     double reach_mm() const { return fulcrum_mm + jaw_length_mm; }
+    /// The ISO 9713 label point's distance from the fulcrum, a third of the blade from its tip: fulcrum_mm + 2/3
+    /// jaw_length_mm. A clip's closing force is the force there (what its label gives); a moment M about the fulcrum
+    /// is the force M / label_arm_mm() there.
+    double label_arm_mm() const { return fulcrum_mm + 2.0 * jaw_length_mm / 3.0; }
     /// Its jaws as fem::ClipBlades with the fulcrum at `at` (the simulator's contact, spring balance and patch; the
     /// arms and box behind the heel taken as blade, a curved clip's blades bent from the heel).
     fem::ClipBlades blades(const Pose& at) const {

@@ -38,6 +38,10 @@ struct Clip {
     double spring_deg = 0.0;
     double spring_torque_nmm = 0.0;  ///< τ(opening) [N·mm]
     double tissue_moment_nmm = 0.0;  ///< Σ ½ r f·n of its contact forces about the hinge, last frame [N·mm]
+    /// The clip's force as its label states it (ISO 9713): tissue_moment_nmm / ClipModel::label_arm_mm(), the force
+    /// at the label point that the tissue's moment on a blade amounts to [N]. (The blade's total normal force,
+    /// grip_force_n, is larger where the tissue presses nearer the fulcrum: F = τ / r along the blade.)
+    double label_force_n = 0.0;
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();  ///< translation since release (moves with the vessel)
     Eigen::Vector3d net_force = Eigen::Vector3d::Zero();  ///< Σ contact forces on the vessel [N]
     double grip_force_n = 0.0;      ///< ½ Σ |f_i| over its nodes [N]
@@ -74,6 +78,10 @@ struct Assessment {
     /// with that displacement and thickness [mm]: the linear model's validity (Scene::linear_limit).
     double max_displacement_to_thickness = 0.0, max_displacement_mm = 0.0, max_displacement_thickness_mm = 0.0;
     double peak_vessel_force_n = 0.0;  ///< largest ½ Σ|f| on the vessel over all frames
+    /// The largest clip force at the label point over all frames and clips (Clip::label_force_n: the figure a clip
+    /// model's closing-force range is stated for; clips whose moment is computed: held ones with a spring, and
+    /// every clip in a nonlinear patch)
+    double peak_clip_label_force_n = 0.0;
     /// Fraction of the neck line (by length on the lumen) whose opposite inner walls touch or lie within
     /// Scene::neck_gap_mm (neck_occlusion, assessment.hpp): the occlusion.
     double neck_closed_fraction = 0.0;
@@ -139,6 +147,7 @@ struct Assessment {
         std::string model;
         bool deposited = false, spring = false, placeholder = false;
         double opening_deg = 0, grip_force_n = 0, spring_torque_nmm = 0, tissue_moment_nmm = 0;
+        double label_force_n = 0;  ///< Clip::label_force_n at the end
     };
     std::vector<ClipEnd> clip_ends;
     /// Each nonlinear patch (Scene::wall_model = PATCH) over the session.
@@ -152,6 +161,7 @@ struct Assessment {
         double mean_iterations = 0;
         double mean_solve_ms = 0, max_solve_ms = 0;
         double peak_blade_force_n = 0;       ///< mean normal force on one blade, largest over the session
+        double peak_label_force_n = 0;       ///< Clip::label_force_n, largest over the session
         double min_wall_distance_mm = 0;     ///< smallest signed distance between opposite inner walls (< 0: through;
                                              ///< +inf: none came within reach)
         int wall_pairs_touching = 0;         ///< at the end
