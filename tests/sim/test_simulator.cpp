@@ -1233,6 +1233,55 @@ TEST(SimulatorPatch, FramesThatDoNotConvergeTwiceInARowRestartFromTheLastConverg
     }
 }
 
+TEST(SimulatorPatch, ARemadeCompliancePatchSettlesItsHandoverWithinTheLinearRange) {
+    // The jaws slide 3 mm along the tube as they close, out of their patch: it is remade twice. A remade patch takes
+    // nodes from the linear exterior where its linear map put them, off the neo-Hookean equilibrium, and its first
+    // compliance frame goes there from them (here 2.5 wall thicknesses from its linearisation). That frame may be
+    // solved again up to 8 times (any other: 3), and ends within the linear range; with the settling switched off
+    // (ANEU_NO_REMAKE_SETTLE, session 48's frames) it ends 0.69 x from its linearisation and is warned. (Without the
+    // walls' contact: with it, this scene's frames after the second remake, 2.9 deg of closing each, do not get
+    // within the range in 8 re-solves either; at 400 Hz physics they do in 2: the blades' step, not the handover.)
+    test::TempDir d("remadesettle");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    for (const bool settle : {false, true}) {
+        if (!settle) setenv("ANEU_NO_REMAKE_SETTLE", "1", 1);
+        json j = flattening_scene(bundle, "patch", false);
+        j["model"]["patch_solver"] = "compliance";
+        j["model"]["refresh_frames"] = 1;
+        j["model"]["wall_contact"] = false;
+        const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
+        j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 1.0};
+        j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 1.0};
+        j["instruments"][0]["keyframes"].push_back(key(0.40, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
+        sim::Simulator s = make(j, d.file(""), std::string("remade") + (settle ? "1" : "0") + ".json");
+        int warnings = 0;
+        sim::RunOptions ro;
+        ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+        const sim::Assessment a = sim::run_scene(s, ro);
+        unsetenv("ANEU_NO_REMAKE_SETTLE");
+        ASSERT_EQ(a.patches.size(), 1u);
+        const auto& p = a.patches[0];
+        EXPECT_GE(p.builds, 2) << "the sliding jaws did not leave their first patch";
+        EXPECT_EQ(p.unconverged_frames, 0);
+        EXPECT_EQ(p.linearisations_failed, 0);
+        if (settle) {
+            EXPECT_GT(p.remake_resolves, 0);  // measured 6 over the two remakes
+            EXPECT_LE(p.max_lag_to_thickness, 0.3);
+            EXPECT_EQ(warnings, 0);
+        } else {
+            EXPECT_EQ(p.remake_resolves, 0);
+            EXPECT_GT(p.max_lag_to_thickness, 0.3);
+            EXPECT_EQ(warnings, 1);
+        }
+        const sim::Clip& c = s.clips().at(0);
+        EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+        std::printf("remade patch%s: %d builds, %ld frames, %d linearisations, %d re-solves for the range (%d of remade patches' first frames, %d kept an "
+                    "earlier attempt); reach %.3f x at t = %.3f s, %d warnings; blade force %.4f N\n",
+                    settle ? " settling" : " not settling", p.builds, p.frames, p.linearisations, p.range_refreshes, p.remake_resolves, p.range_earlier_kept,
+                    p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n);
+    }
+}
+
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
     // A clip with a 0.3 N spring (at the label point) on the tube: the applier can only hold it open, so as the
     // applier closes, the clip stops where the tissue's moment about the hinge equals the spring's torque, short
