@@ -763,10 +763,18 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.settle = false;
             for (int range_again = 0;; ++range_again) {
                 const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
+                // A re-solve is warm from the attempt before it, and starts where the frame started: the patch at v0,
+                // on this linearisation's candidates (the first solve starts where the last frame ended, warm's end).
+                Eigen::VectorXd start;
+                if (range_again > 0) {
+                    start.resize(3 * static_cast<Eigen::Index>(C->cand.size()));
+                    for (size_t k = 0; k < C->cand.size(); ++k) start.segment<3>(3 * static_cast<Eigen::Index>(k)) = v0.segment<3>(3 * static_cast<Eigen::Index>(C->cand[k]));
+                }
+                const Eigen::VectorXd* start_at = range_again > 0 ? &start : nullptr;
                 int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
                 try {
-                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &again)
-                                            : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co);
+                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &again, start_at)
+                                            : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co, nullptr, start_at);
                     repeats += again;
                 } catch (const NumericalError& e) {
                     // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays

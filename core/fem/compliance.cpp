@@ -1152,10 +1152,12 @@ void trace_walls(const Linearisation& lin, const CompliantWalls& walls, const Co
 
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm,
-                                    const CompliantOptions& opt, const CompliantWalls* walls) {
+                                    const CompliantOptions& opt, const CompliantWalls* walls, const Eigen::VectorXd* start_u) {
     const Stopwatch sw;
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
-    const Eigen::VectorXd start = warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
+    if (start_u && start_u->size() != 3 * nc)
+        throw InputError("compliant clip: a start of " + std::to_string(start_u->size()) + " values for " + std::to_string(nc) + " candidates");
+    const Eigen::VectorXd start = start_u ? *start_u : warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
     // The gaps are linear in the candidates' motion only to first order (a blade's or a face's normal turns as it
     // moves): passes re-linearise them where the last pass ended, on the same compliance, until the candidates
     // move less than the sweeps' tolerance.
@@ -1287,11 +1289,13 @@ void carry_compliant_frames(const std::vector<int>& from_cand, const Eigen::Matr
 
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
-                                          const CompliantFrame* warm, const CompliantOptions& opt, int* repeats) {
+                                          const CompliantFrame* warm, const CompliantOptions& opt, int* repeats, const Eigen::VectorXd* start) {
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
     if (Xc.rows() != nc) throw InputError("compliant clip: " + std::to_string(Xc.rows()) + " candidate positions for " + std::to_string(nc) + " candidates");
+    if (start && start->size() != 3 * nc)
+        throw InputError("compliant clip: a start of " + std::to_string(start->size()) + " values for " + std::to_string(nc) + " candidates");
     ContactParams& cp = ws.params;
-    const Eigen::VectorXd u0 = warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
+    const Eigen::VectorXd u0 = start ? *start : warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
     const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
     // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is
     // not a crossing; the next frame's row pushes it back.)
@@ -1333,7 +1337,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         }
         walls.pairs = ws.pairs;
         search_s += sw.lap();
-        CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls);
+        CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls, &u0);
         frames_s += sw.lap();
         acc.rows_s += f.rows_s;
         acc.delassus_s += f.delassus_s;

@@ -1234,13 +1234,13 @@ TEST(SimulatorPatch, FramesThatDoNotConvergeTwiceInARowRestartFromTheLastConverg
 }
 
 TEST(SimulatorPatch, ARemadeCompliancePatchSettlesItsHandoverWithinTheLinearRange) {
-    // The jaws slide 3 mm along the tube as they close, out of their patch: it is remade twice. A remade patch takes
-    // nodes from the linear exterior where its linear map put them, off the neo-Hookean equilibrium, and its first
-    // compliance frame goes there from them (here 2.5 wall thicknesses from its linearisation). That frame may be
-    // solved again up to 8 times (any other: 3), and ends within the linear range; with the settling switched off
-    // (ANEU_NO_REMAKE_SETTLE, session 48's frames) it ends 0.69 x from its linearisation and is warned. (Without the
-    // walls' contact: with it, this scene's frames after the second remake, 2.9 deg of closing each, do not get
-    // within the range in 8 re-solves either; at 400 Hz physics they do in 2: the blades' step, not the handover.)
+    // The jaws slide 3 mm along the tube as they close (2.9 deg a frame), out of their patch: it is remade twice. A
+    // remade patch takes nodes from the linear exterior where its linear map put them, off the neo-Hookean
+    // equilibrium, and its first compliance frame goes there from them (here 2.3 wall thicknesses from its
+    // linearisation). That frame may be solved again up to 8 times (any other: 3), and ends within the linear range;
+    // with the settling switched off (ANEU_NO_REMAKE_SETTLE) it ends 0.36 x from its linearisation and is warned.
+    // Measured: 2.27 -> 2.33 -> 1.83 -> 0.36 -> 0.23 x. (Before the re-solves kept the frame's start, every re-solve
+    // turned the gripped tissue with the blades again, and this frame's attempts stayed at 0.6-0.8 x however many.)
     test::TempDir d("remadesettle");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     for (const bool settle : {false, true}) {
@@ -1248,7 +1248,6 @@ TEST(SimulatorPatch, ARemadeCompliancePatchSettlesItsHandoverWithinTheLinearRang
         json j = flattening_scene(bundle, "patch", false);
         j["model"]["patch_solver"] = "compliance";
         j["model"]["refresh_frames"] = 1;
-        j["model"]["wall_contact"] = false;
         const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
         j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 1.0};
         j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 1.0};
@@ -1265,7 +1264,7 @@ TEST(SimulatorPatch, ARemadeCompliancePatchSettlesItsHandoverWithinTheLinearRang
         EXPECT_EQ(p.unconverged_frames, 0);
         EXPECT_EQ(p.linearisations_failed, 0);
         if (settle) {
-            EXPECT_GT(p.remake_resolves, 0);  // measured 6 over the two remakes
+            EXPECT_GT(p.remake_resolves, 3);  // measured 5: 1 at the first remake, 4 at the second
             EXPECT_LE(p.max_lag_to_thickness, 0.3);
             EXPECT_EQ(warnings, 0);
         } else {

@@ -213,9 +213,15 @@ struct CompliantFrame {
 /// @param theta_start the last frame's opening: a candidate more than 0.02 mm behind a blade there is not pushed
 ///                    by it (tissue beside or behind a blade stays there); a released clip is linearised there
 /// @param warm        the last frame, whose forces start the sweeps where its constraints recur (may be null)
+/// @param start       the candidates' displacement where the frame starts (3|C|): what the blades' friction holds
+///                    them at (turned with the blades from theta_start), what lies behind a blade or a face there.
+///                    Null: warm's end (the last frame ended where this one starts), else the free state. A frame
+///                    solved again on a new linearisation, warm from its own last attempt, passes where it started:
+///                    with the attempt's end taken for the start, every re-solve turned the gripped tissue with the
+///                    blades once more (session 49: the re-solves' reach stayed at the blades' step a frame).
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm = nullptr,
-                                    const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr);
+                                    const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr, const Eigen::VectorXd* start = nullptr);
 
 /// What a sequence of wall frames keeps between frames: the pair rules (their close vertices grow as crossings are
 /// found), the last pair search and where it was made, the crossings where the last frame ended.
@@ -246,9 +252,12 @@ struct CompliantWallSearch {
 /// went through a face its pairs left out) the frame solved again with it and its ring paired with every face in
 /// reach, up to 3 times, as fem::solve_without_crossings does. The close vertices stay in ws for the frames after.
 /// @param repeats frames solved again (null: not counted)
+/// @param start   where the frame starts, as solve_compliant_clip's (also where its pairs are searched and what is
+///                behind a face there is not a crossing)
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
-                                          const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr);
+                                          const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr,
+                                          const Eigen::VectorXd* start = nullptr);
 
 /// A sequence of frames carried over to another candidate set (a refresh that selects the candidates again for the
 /// jaws as they are now: aneusim's patch): the last frame's constraints and their forces, and the candidates'
