@@ -45,9 +45,9 @@ constexpr int RANGE_REFRESHES = 3;
 // start where its linear map put them, off the neo-Hookean equilibrium (sessions 46-48: C0001's, C0054's and C0024's
 // remade patches' first frames went 0.69-0.98 wall thicknesses from their linearisation, the re-solves diverging).
 // That frame may be solved again up to this many times (Newton's steps, halved where they diverge, as any frame's).
-// (Tried: each linearised at most the linear range further along, a trust region. On the tube with sliding jaws the
-// remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 -> 0.85 wall thicknesses; full steps reach
-// 0.60.)
+// (Tried, before the re-solves kept the frame's start: each linearised at most the linear range further along, a trust
+// region. On the tube with sliding jaws the remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 ->
+// 0.85 wall thicknesses, full steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.)
 constexpr int REMAKE_RANGE_REFRESHES = 8;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
