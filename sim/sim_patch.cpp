@@ -39,16 +39,14 @@ constexpr double RESELECT_MARGIN_RAD = 2.0 * DEG;
 // keeps nodes within 0.1 mm of the wedge).
 constexpr double RESELECT_HINGE_MM = 0.05;
 // A frame beyond its linearisation's linear range is solved again on one made where it got to, at most this many
-// times (each a refresh: ~7-10 s on the sample; session 45's two left the sample's one frame at 0.31).
-constexpr int RANGE_REFRESHES = 3;
-// The first frame after a patch is remade settles the handover: the nodes the new patch took from the linear exterior
-// start where its linear map put them, off the neo-Hookean equilibrium (sessions 46-48: C0001's, C0054's and C0024's
-// remade patches' first frames went 0.69-0.98 wall thicknesses from their linearisation, the re-solves diverging).
-// That frame may be solved again up to this many times (Newton's steps, halved where they diverge, as any frame's).
-// (Tried, before the re-solves kept the frame's start: each linearised at most the linear range further along, a trust
-// region. On the tube with sliding jaws the remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 ->
-// 0.85 wall thicknesses, full steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.)
-constexpr int REMAKE_RANGE_REFRESHES = 8;
+// times (each a refresh: ~7-10 s on the sample, 10-15 s on the real cases). Three were enough for the sample's frames
+// (session 45); a remade patch's first frame, which starts from the linear exterior's map of the nodes the new patch
+// took over, and frames where the wall buckles need more (session 49: the tube's remade frame 2.27 -> 2.33 -> 1.83 ->
+// 0.36 -> 0.23 wall thicknesses; C0054's buckling frame 1.68 -> 1.18 -> 0.54 -> 0.72 with three). (Tried, before the
+// re-solves kept the frame's start: each linearised at most the linear range further along, a trust region. On the
+// tube with sliding jaws the remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 -> 0.85, full
+// steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.)
+constexpr int RANGE_REFRESHES = 8;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
@@ -380,7 +378,6 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
             return nv;
         };
         P.v = carry(O.v);
-        P.settle = true;
         P.kappa_wall = O.kappa_wall;
         P.kappa_blade = O.kappa_blade;
         // The grips carry over to the new patch's numbering (a node that is no longer a candidate lets go).
@@ -757,10 +754,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             };
             std::optional<Attempt> best;
             double last_ratio = -1;
-            // (ANEU_NO_REMAKE_SETTLE: session 48's remade first frames, to measure the settling; not a scene option.)
-            const bool settle_on = !std::getenv("ANEU_NO_REMAKE_SETTLE");
-            const bool settle = P.settle && settle_on;
-            P.settle = false;
             for (int range_again = 0;; ++range_again) {
                 const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
                 // A re-solve is warm from the attempt before it, and starts where the frame started: the patch at v0,
@@ -802,22 +795,22 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
                 const bool over = reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit;
                 if (over && (!best || lag.ratio < best->lag.ratio)) best = Attempt{*C, f, res.u.head(nb), lag, range_again};
-                if (over && range_again < (settle ? REMAKE_RANGE_REFRESHES : RANGE_REFRESHES)) {
+                if (over && range_again < RANGE_REFRESHES) {
                     const double was = lag.ratio;
                     const bool diverging = last_ratio >= 0 && was > last_ratio;
                     last_ratio = was;
                     // How far towards the attempt the next linearisation lies: all the way (a Newton step); halfway
-                    // where the attempts diverge; settling a remade patch, at most the linear range further along.
+                    // where the attempts diverge.
                     const double step = diverging ? 0.5 : 1.0;
                     const Eigen::VectorXd at = step < 1 ? Eigen::VectorXd(C->lin->u0() + step * (res.u.head(nb) - C->lin->u0())) : Eigen::VectorXd(res.u.head(nb));
                     C->last = f;  // the re-solve's warm start, carried to the new linearisation's candidates
                     C->warm = true;
                     if (refresh_at(at)) {
                         ++P.stats.range_refreshes;
-                        if (settle) ++P.stats.remake_resolves;
+                        P.stats.max_frame_resolves = std::max(P.stats.max_frame_resolves, range_again + 1);
                         if (std::getenv("ANEU_PATCH_TRACE"))
                             std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation (vertex %ld, %.4f mm): solved again on one made %.3g of the way there%s\n",
-                                         fr.t, was, static_cast<long>(lag.vertex), lag.mm, step, diverging ? " (further than the attempt before)" : settle ? " (the remade patch settling)" : "");
+                                         fr.t, was, static_cast<long>(lag.vertex), lag.mm, step, diverging ? " (further than the attempt before)" : "");
                         continue;
                     }
                 }

@@ -187,8 +187,6 @@ struct Simulator::Impl {
             double theta_step = std::numeric_limits<double>::infinity();
         } course;
         bool alive = true;                    // false once its clip fell away
-        /// Remade, its first compliance frame not solved yet: that frame settles the handover (solve_patches).
-        bool settle = false;
         /// PatchSpec::Solver::COMPLIANCE: the linearisation the frames solve on and what they carry between frames
         /// (made at the first frame, again every refresh_frames frames and when the patch is remade).
         struct Compliant {

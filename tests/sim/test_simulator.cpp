@@ -1233,52 +1233,46 @@ TEST(SimulatorPatch, FramesThatDoNotConvergeTwiceInARowRestartFromTheLastConverg
     }
 }
 
-TEST(SimulatorPatch, ARemadeCompliancePatchSettlesItsHandoverWithinTheLinearRange) {
+TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRange) {
     // The jaws slide 3 mm along the tube as they close (2.9 deg a frame), out of their patch: it is remade twice. A
     // remade patch takes nodes from the linear exterior where its linear map put them, off the neo-Hookean
     // equilibrium, and its first compliance frame goes there from them (here 2.3 wall thicknesses from its
-    // linearisation). That frame may be solved again up to 8 times (any other: 3), and ends within the linear range;
-    // with the settling switched off (ANEU_NO_REMAKE_SETTLE) it ends 0.36 x from its linearisation and is warned.
-    // Measured: 2.27 -> 2.33 -> 1.83 -> 0.36 -> 0.23 x. (Before the re-solves kept the frame's start, every re-solve
-    // turned the gripped tissue with the blades again, and this frame's attempts stayed at 0.6-0.8 x however many.)
-    test::TempDir d("remadesettle");
+    // linearisation). Solved again on linearisations made where it got to, it ends within the linear range:
+    // measured 2.27 -> 2.33 -> 1.83 -> 0.36 -> 0.23 x, four re-solves, where three were allowed before session 49
+    // (it then ended at 0.36 x, warned). Every other frame here needs at most one. (Before the re-solves kept the
+    // frame's start, every re-solve turned the gripped tissue with the blades again, and this frame's attempts stayed
+    // at 0.6-0.8 x however many.)
+    test::TempDir d("remade");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
-    for (const bool settle : {false, true}) {
-        if (!settle) setenv("ANEU_NO_REMAKE_SETTLE", "1", 1);
-        json j = flattening_scene(bundle, "patch", false);
-        j["model"]["patch_solver"] = "compliance";
-        j["model"]["refresh_frames"] = 1;
-        const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
-        j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 1.0};
-        j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 1.0};
-        j["instruments"][0]["keyframes"].push_back(key(0.40, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
-        sim::Simulator s = make(j, d.file(""), std::string("remade") + (settle ? "1" : "0") + ".json");
-        int warnings = 0;
-        sim::RunOptions ro;
-        ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
-        const sim::Assessment a = sim::run_scene(s, ro);
-        unsetenv("ANEU_NO_REMAKE_SETTLE");
-        ASSERT_EQ(a.patches.size(), 1u);
-        const auto& p = a.patches[0];
-        EXPECT_GE(p.builds, 2) << "the sliding jaws did not leave their first patch";
-        EXPECT_EQ(p.unconverged_frames, 0);
-        EXPECT_EQ(p.linearisations_failed, 0);
-        if (settle) {
-            EXPECT_GT(p.remake_resolves, 3);  // measured 5: 1 at the first remake, 4 at the second
-            EXPECT_LE(p.max_lag_to_thickness, 0.3);
-            EXPECT_EQ(warnings, 0);
-        } else {
-            EXPECT_EQ(p.remake_resolves, 0);
-            EXPECT_GT(p.max_lag_to_thickness, 0.3);
-            EXPECT_EQ(warnings, 1);
-        }
-        const sim::Clip& c = s.clips().at(0);
-        EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
-        std::printf("remade patch%s: %d builds, %ld frames, %d linearisations, %d re-solves for the range (%d of remade patches' first frames, %d kept an "
-                    "earlier attempt); reach %.3f x at t = %.3f s, %d warnings; blade force %.4f N\n",
-                    settle ? " settling" : " not settling", p.builds, p.frames, p.linearisations, p.range_refreshes, p.remake_resolves, p.range_earlier_kept,
-                    p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n);
-    }
+    json j = flattening_scene(bundle, "patch", false);
+    j["model"]["patch_solver"] = "compliance";
+    j["model"]["refresh_frames"] = 1;
+    const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
+    j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 1.0};
+    j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 1.0};
+    j["instruments"][0]["keyframes"].push_back(key(0.40, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
+    sim::Simulator s = make(j, d.file(""), "remade.json");
+    int warnings = 0;
+    sim::RunOptions ro;
+    ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+    const sim::Assessment a = sim::run_scene(s, ro);
+    ASSERT_EQ(a.patches.size(), 1u);
+    const auto& p = a.patches[0];
+    EXPECT_GE(p.builds, 3) << "the sliding jaws did not leave their patch twice";
+    EXPECT_EQ(p.unconverged_frames, 0);
+    EXPECT_EQ(p.linearisations_failed, 0);
+    EXPECT_GT(p.max_frame_resolves, 3);
+    EXPECT_LE(p.max_frame_resolves, 8);
+    EXPECT_EQ(p.range_earlier_kept, 0);
+    EXPECT_LE(p.max_lag_to_thickness, 0.3);
+    EXPECT_EQ(warnings, 0);
+    EXPECT_GT(p.min_wall_distance_mm, -0.02);
+    const sim::Clip& c = s.clips().at(0);
+    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+    std::printf("remade patch: %d builds, %ld frames, %d linearisations, %d re-solves for the range (at most %d in a frame, %d kept an earlier "
+                "attempt); reach %.3f x at t = %.3f s, %d warnings; blade force %.4f N, walls %.4f mm apart at the closest\n",
+                p.builds, p.frames, p.linearisations, p.range_refreshes, p.max_frame_resolves, p.range_earlier_kept, p.max_lag_to_thickness, p.max_lag_t,
+                warnings, c.grip_force_n, p.min_wall_distance_mm);
 }
 
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {

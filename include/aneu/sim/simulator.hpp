@@ -180,9 +180,8 @@ struct Assessment {
         /// ... of those frames, the ones that ended with an earlier attempt than their last, the last having gone further
         /// from its linearisation (the re-solves diverging; halfway re-solves damp them)
         int range_earlier_kept = 0;
-        /// ... of those re-solves, the ones of the first frame after a remake (the handover settled: at most 8 a
-        /// remake, where any other frame has 3)
-        int remake_resolves = 0;
+        /// The most re-solves one frame took (at most 8)
+        int max_frame_resolves = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
