@@ -1,0 +1,84 @@
+# SPDX-License-Identifier: MIT
+# How far a held spring clip is from closing the neck line it holds between its jaws, and the torque that would take:
+# from a patch run's end lumen (ANEU_LUMEN_OBJ: `# neck LOOP X Y Z GAP` lines), its scene, its report and its trace
+# (ANEU_PATCH_TRACE: the spring balance's `balance t=... k K ...` lines, K = dR/dθ of R = τ − M).
+#   python3 bench/closing_torque_needed.py LUMEN.obj SCENE.json REPORT.json TRACE.txt
+# Per neck-line point between the jaws (|across| ≤ half their width, 0 ≤ r ≤ reach; r from where the blades turn) whose
+# gap across the lumen exceeds the scene's neck gap tolerance, the jaws must close Δθ_i = (gap_i − tol) / r_i further
+# (the blades' separation at r is 2 r sin(θ/2): d/dθ = r cos(θ/2) ≈ r). The largest Δθ closes them all. The tissue's
+# moment grows by |dM/dθ| Δθ on the way, |dM/dθ| = K − k_spring at the held state: a LOWER bound on what closing needs,
+# since the squeezed tissue stiffens. The spring there gives τ(θ − Δθ). Their ratio is the factor the spring falls
+# short by (for a neo-Hookean wall the same as the factor the walls' E would have to fall by: the equilibrium is
+# unchanged when forces and moduli are scaled together). Points beside the jaws (squeezed out) are counted apart: no
+# torque closes them.
+import json, math, sys
+
+obj, scene_path, report_path, trace_path = sys.argv[1:5]
+scene = json.load(open(scene_path))
+report = json.load(open(report_path))
+app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
+keys = app["keyframes"]
+axis, up = keys[0]["axis"], keys[0]["up"]
+closing = keys[0]
+for k in keys:  # the pose where the applier asks for the smallest opening (as bench/neck_line_in_jaws.py)
+    axis, up = k.get("axis", axis), k.get("up", up)
+    if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
+        closing = dict(k, axis=axis, up=up)
+model = scene["clip_models"][keys[0]["load"]]
+if model.get("jaw_curve_radius_mm", 0.0) != 0:
+    sys.exit("closing_torque_needed.py: a straight clip only (this one has jaw_curve_radius_mm)")
+dot = lambda a, b: sum(x * y for x, y in zip(a, b))
+unit = lambda a: [x / math.sqrt(dot(a, a)) for x in a]
+ax, upv = unit(closing["axis"]), unit(closing["up"])
+w = unit([ax[1] * upv[2] - ax[2] * upv[1], ax[2] * upv[0] - ax[0] * upv[2], ax[0] * upv[1] - ax[1] * upv[0]])
+hinge = closing["position"]
+half = 0.5 * model["jaw_width_mm"]
+reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
+tol = report.get("neck_gap_mm", 0.05)
+between, beside, closed = [], [], 0
+for line in open(obj):
+    if not line.startswith("# neck "):
+        continue
+    p = line.split()
+    d = [float(p[3 + i]) - hinge[i] for i in range(3)]
+    r, a, gap = dot(d, ax), dot(d, w), float(p[6])
+    if gap <= tol:
+        closed += 1
+    elif 0 <= r <= reach and abs(a) <= half:
+        between.append((r, gap))
+    else:
+        beside.append((r, a, gap))
+# The spring as the simulator makes it (sim/scene.cpp): the label force at 1 mm opening at the label arm, the open
+# force at the largest opening, linear in θ between.
+spring = model.get("spring")
+if not spring:
+    sys.exit("closing_torque_needed.py: the clip has no spring")
+arm = model.get("fulcrum_mm", 0.0) + 2.0 * model["jaw_length_mm"] / 3.0
+th1 = 2.0 * math.asin(0.5 * (1.0 - model.get("closed_gap_mm", 0.0)) / arm)
+th2 = math.radians(model["max_opening_deg"])
+k_spring = (spring["open_force_n"] - spring["label_force_n"]) * arm / (th2 - th1)
+tau = lambda th: spring["label_force_n"] * arm + k_spring * (th - th1)
+clip = report["clips"][0]
+theta = math.radians(clip["opening_deg"])
+moment = clip.get("tissue_moment_nmm", float("nan"))
+k_balance = float("nan")
+for line in open(trace_path):
+    if line.startswith("balance t="):
+        f = line.split()
+        k_balance = float(f[f.index("k") + 1])
+slope = k_balance - k_spring  # |dM/dθ| of the tissue
+n = closed + len(between) + len(beside)
+print("neck line: %d points, %d closed (gap <= %.3g mm), %d open between the jaws, %d open beside or past them" % (n, closed, tol, len(between), len(beside)))
+print("clip held at %.3f deg; spring %.2f N mm (k %.1f N mm/rad), tissue moment %.2f N mm, balance secant %.1f N mm/rad -> tissue |dM/dtheta| %.1f N mm/rad"
+      % (math.degrees(theta), tau(theta), k_spring, moment, k_balance, slope))
+if between:
+    dth = max((g - tol) / r for r, g in between)
+    r_w, g_w = max(between, key=lambda rg: (rg[1] - tol) / rg[0])
+    need = moment + slope * dth
+    give = tau(theta - dth)
+    print("to close the open points between the jaws: %.3f deg more (the widest, gap %.3f mm at r = %.2f mm from the fulcrum)" % (math.degrees(dth), g_w, r_w))
+    print("tissue moment then >= %.1f N mm (linear in theta: a lower bound), the spring there %.1f N mm: short by a factor >= %.2f" % (need, give, need / give))
+else:
+    print("no open point between the jaws: what stays open was squeezed out beside them")
+if beside:
+    print("open beside the jaws: up to %.3f mm beyond their edge" % max(abs(a) - half for r, a, g in beside if 0 <= r <= reach) if any(0 <= r <= reach for r, a, g in beside) else "open only past the jaws' tips or heel")
