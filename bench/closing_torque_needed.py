@@ -10,7 +10,8 @@
 # since the squeezed tissue stiffens. The spring there gives τ(θ − Δθ). Their ratio is the factor the spring falls
 # short by (for a neo-Hookean wall the same as the factor the walls' E would have to fall by: the equilibrium is
 # unchanged when forces and moduli are scaled together). Points beside the jaws (squeezed out) are counted apart: no
-# torque closes them.
+# torque closes them. Points with no opposite wall within reach (gap +inf: a fold's apex, or open across) are counted
+# apart too.
 import json, math, sys
 
 obj, scene_path, report_path, trace_path = sys.argv[1:5]
@@ -35,7 +36,7 @@ hinge = closing["position"]
 half = 0.5 * model["jaw_width_mm"]
 reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
 tol = report.get("neck_gap_mm", 0.05)
-between, beside, closed = [], [], 0
+between, beside, nowall, closed = [], [], [], 0
 for line in open(obj):
     if not line.startswith("# neck "):
         continue
@@ -44,6 +45,8 @@ for line in open(obj):
     r, a, gap = dot(d, ax), dot(d, w), float(p[6])
     if gap <= tol:
         closed += 1
+    elif math.isinf(gap):
+        nowall.append((r, a))  # no opposite wall within reach: a fold's apex, or the lumen open across
     elif 0 <= r <= reach and abs(a) <= half:
         between.append((r, gap))
     else:
@@ -67,8 +70,9 @@ for line in open(trace_path):
         f = line.split()
         k_balance = float(f[f.index("k") + 1])
 slope = k_balance - k_spring  # |dM/dθ| of the tissue
-n = closed + len(between) + len(beside)
-print("neck line: %d points, %d closed (gap <= %.3g mm), %d open between the jaws, %d open beside or past them" % (n, closed, tol, len(between), len(beside)))
+n = closed + len(between) + len(beside) + len(nowall)
+print("neck line: %d points, %d closed (gap <= %.3g mm), %d open between the jaws, %d open beside or past them, %d with no opposite wall "
+      "(a fold's apex, or the lumen open across)" % (n, closed, tol, len(between), len(beside), len(nowall)))
 print("clip held at %.3f deg; spring %.2f N mm (k %.1f N mm/rad), tissue moment %.2f N mm, balance secant %.1f N mm/rad -> tissue |dM/dtheta| %.1f N mm/rad"
       % (math.degrees(theta), tau(theta), k_spring, moment, k_balance, slope))
 if between:
@@ -80,5 +84,8 @@ if between:
     print("tissue moment then >= %.1f N mm (linear in theta: a lower bound), the spring there %.1f N mm: short by a factor >= %.2f" % (need, give, need / give))
 else:
     print("no open point between the jaws: what stays open was squeezed out beside them")
+if nowall:
+    inside = sum(1 for r, a in nowall if 0 <= r <= reach and abs(a) <= half)
+    print("with no opposite wall: %d between the jaws, %d beside or past them" % (inside, len(nowall) - inside))
 if beside:
     print("open beside the jaws: up to %.3f mm beyond their edge" % max(abs(a) - half for r, a, g in beside if 0 <= r <= reach) if any(0 <= r <= reach for r, a, g in beside) else "open only past the jaws' tips or heel")
