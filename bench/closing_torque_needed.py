@@ -12,37 +12,21 @@
 # unchanged when forces and moduli are scaled together). Points beside the jaws (squeezed out) are counted apart: no
 # torque closes them. Points with no opposite wall within reach (gap +inf: a fold's apex, or open across) are counted
 # apart too.
-import json, math, sys
+import json, math, os, sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from neck_line_in_jaws import neck_line_in_jaws  # noqa: E402
 
 obj, scene_path, report_path, trace_path = sys.argv[1:5]
 scene = json.load(open(scene_path))
 report = json.load(open(report_path))
-app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
-keys = app["keyframes"]
-axis, up = keys[0]["axis"], keys[0]["up"]
-closing = keys[0]
-for k in keys:  # the pose where the applier asks for the smallest opening (as bench/neck_line_in_jaws.py)
-    axis, up = k.get("axis", axis), k.get("up", up)
-    if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
-        closing = dict(k, axis=axis, up=up)
-model = scene["clip_models"][keys[0]["load"]]
+rows, model, reach = neck_line_in_jaws(obj, scene)
 if model.get("jaw_curve_radius_mm", 0.0) != 0:
     sys.exit("closing_torque_needed.py: a straight clip only (this one has jaw_curve_radius_mm)")
-dot = lambda a, b: sum(x * y for x, y in zip(a, b))
-unit = lambda a: [x / math.sqrt(dot(a, a)) for x in a]
-ax, upv = unit(closing["axis"]), unit(closing["up"])
-w = unit([ax[1] * upv[2] - ax[2] * upv[1], ax[2] * upv[0] - ax[0] * upv[2], ax[0] * upv[1] - ax[1] * upv[0]])
-hinge = closing["position"]
 half = 0.5 * model["jaw_width_mm"]
-reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
 tol = report.get("neck_gap_mm", 0.05)
 between, beside, nowall, closed = [], [], [], 0
-for line in open(obj):
-    if not line.startswith("# neck "):
-        continue
-    p = line.split()
-    d = [float(p[3 + i]) - hinge[i] for i in range(3)]
-    r, a, gap = dot(d, ax), dot(d, w), float(p[6])
+for r, a, _, gap in rows:
     if gap <= tol:
         closed += 1
     elif math.isinf(gap):
@@ -87,5 +71,8 @@ else:
 if nowall:
     inside = sum(1 for r, a in nowall if 0 <= r <= reach and abs(a) <= half)
     print("with no opposite wall: %d between the jaws, %d beside or past them" % (inside, len(nowall) - inside))
-if beside:
-    print("open beside the jaws: up to %.3f mm beyond their edge" % max(abs(a) - half for r, a, g in beside if 0 <= r <= reach) if any(0 <= r <= reach for r, a, g in beside) else "open only past the jaws' tips or heel")
+sideways = [abs(a) - half for r, a, g in beside if 0 <= r <= reach]
+if sideways:
+    print("open beside the jaws: up to %.3f mm beyond their edge" % max(sideways))
+elif beside:
+    print("open only past the jaws' tips or heel")

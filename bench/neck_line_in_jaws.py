@@ -5,43 +5,51 @@
 # lumen there, sorted by r. Shows whether an open part
 # of the neck line lies between the jaws (the clip held open) or beside them (squeezed out sideways).
 #   python3 bench/neck_line_in_jaws.py LUMEN.obj SCENE.json > neck_line.tsv
+#   (or, from another script: `from neck_line_in_jaws import neck_line_in_jaws`)
 import json, math, sys
 
-obj, scene_path = sys.argv[1], sys.argv[2]
-scene = json.load(open(scene_path))
-app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
-keys = app["keyframes"]
-axis, up = keys[0]["axis"], keys[0]["up"]
-closing = keys[0]
-for k in keys:  # the pose where the applier asks for the smallest opening
-    axis, up = k.get("axis", axis), k.get("up", up)
-    if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
-        closing = dict(k, axis=axis, up=up)
-model = scene["clip_models"][keys[0]["load"]]
-dot = lambda a, b: sum(x * y for x, y in zip(a, b))
-unit = lambda a: [x / math.sqrt(dot(a, a)) for x in a]
-ax, upv = unit(closing["axis"]), unit(closing["up"])
-w = unit([ax[1] * upv[2] - ax[2] * upv[1], ax[2] * upv[0] - ax[0] * upv[2], ax[0] * upv[1] - ax[1] * upv[0]])
-hinge = closing["position"]
-rows = []
-for line in open(obj):
-    if line.startswith("# neck "):
-        p = line.split()
-        d = [float(p[3 + i]) - hinge[i] for i in range(3)]
-        rows.append((dot(d, ax), dot(d, w), dot(d, upv), float(p[6])))
-half = 0.5 * model["jaw_width_mm"]
-# r from where the blades turn: with a fulcrum (fulcrum_mm) the arms behind the heel close as blade, as the simulator
-# and its assessment take them (docs/scene_format.md)
-reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
-# A curved clip (jaw_curve_radius_mm, from the heel): r along its centre line and across it, as
-# fem::ClipBlades::face_coords measures them.
-R, r0 = model.get("jaw_curve_radius_mm", 0.0), model.get("fulcrum_mm", 0.0)
-if R != 0:
-    g, Rm = (1.0 if R > 0 else -1.0), abs(R)
-    bent = lambda r, a: (r, a) if r <= r0 else (r0 + Rm * math.atan2(r - r0, Rm - g * a), g * (Rm - math.hypot(r - r0, Rm - g * a)))
-    rows = [bent(r, a) + (u, gp) for r, a, u, gp in rows]
-rows.sort()
-print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
-for r, a, u, g in rows:
-    where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
-    print("%.3f\t%+.3f\t%+.3f\t%s\t%s" % (r, a, u, "inf" if math.isinf(g) else "%.4f" % g, where))
+
+def neck_line_in_jaws(obj, scene):
+    """The neck line's points of LUMEN.obj `obj` in the jaws' frame of `scene` (a parsed scene): (rows, model, reach),
+    rows (r, across, up, gap) sorted by r, `model` the scene's clip model, `reach` fulcrum_mm + jaw_length_mm."""
+    app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
+    keys = app["keyframes"]
+    axis, up = keys[0]["axis"], keys[0]["up"]
+    closing = keys[0]
+    for k in keys:  # the pose where the applier asks for the smallest opening
+        axis, up = k.get("axis", axis), k.get("up", up)
+        if k.get("opening_deg", 1e9) < closing.get("opening_deg", 1e9):
+            closing = dict(k, axis=axis, up=up)
+    model = scene["clip_models"][keys[0]["load"]]
+    dot = lambda a, b: sum(x * y for x, y in zip(a, b))
+    unit = lambda a: [x / math.sqrt(dot(a, a)) for x in a]
+    ax, upv = unit(closing["axis"]), unit(closing["up"])
+    w = unit([ax[1] * upv[2] - ax[2] * upv[1], ax[2] * upv[0] - ax[0] * upv[2], ax[0] * upv[1] - ax[1] * upv[0]])
+    hinge = closing["position"]
+    rows = []
+    for line in open(obj):
+        if line.startswith("# neck "):
+            p = line.split()
+            d = [float(p[3 + i]) - hinge[i] for i in range(3)]
+            rows.append((dot(d, ax), dot(d, w), dot(d, upv), float(p[6])))
+    # r from where the blades turn: with a fulcrum (fulcrum_mm) the arms behind the heel close as blade, as the
+    # simulator and its assessment take them (docs/scene_format.md)
+    reach = model.get("fulcrum_mm", 0.0) + model["jaw_length_mm"]
+    # A curved clip (jaw_curve_radius_mm, from the heel): r along its centre line and across it, as
+    # fem::ClipBlades::face_coords measures them.
+    R, r0 = model.get("jaw_curve_radius_mm", 0.0), model.get("fulcrum_mm", 0.0)
+    if R != 0:
+        g, Rm = (1.0 if R > 0 else -1.0), abs(R)
+        bent = lambda r, a: (r, a) if r <= r0 else (r0 + Rm * math.atan2(r - r0, Rm - g * a), g * (Rm - math.hypot(r - r0, Rm - g * a)))
+        rows = [bent(r, a) + (u, gp) for r, a, u, gp in rows]
+    rows.sort()
+    return rows, model, reach
+
+
+if __name__ == "__main__":
+    rows, model, reach = neck_line_in_jaws(sys.argv[1], json.load(open(sys.argv[2])))
+    half = 0.5 * model["jaw_width_mm"]
+    print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
+    for r, a, u, g in rows:
+        where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
+        print("%.3f\t%+.3f\t%+.3f\t%s\t%s" % (r, a, u, "inf" if math.isinf(g) else "%.4f" % g, where))
