@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -45,8 +46,14 @@ constexpr double RESELECT_HINGE_MM = 0.05;
 // 0.36 -> 0.23 wall thicknesses; C0054's buckling frame 1.68 -> 1.18 -> 0.54 -> 0.72 with three). (Tried, before the
 // re-solves kept the frame's start: each linearised at most the linear range further along, a trust region. On the
 // tube with sliding jaws the remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 -> 0.85, full
-// steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.)
-constexpr int RANGE_REFRESHES = 8;
+// steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.) The number is the scene's
+// (PatchSpec::range_resolves, 8).
+// A frame whose re-solves all end beyond the range is solved again in two halves of its opening's change, each as a
+// frame of its own (linearised where it starts, re-solved as above), and a half that ends beyond it in halves again,
+// at most this many times (a quarter of the frame's step). Session 50: C0001's frames round its fold, 0.24 deg a
+// frame, took all 8 re-solves with the reach down only ~10 % a step (0.85 -> ... -> 0.36 wall thicknesses): the
+// re-solves converge linearly there, and a smaller step starts them nearer.
+constexpr int MAX_RANGE_SPLITS = 2;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
@@ -728,7 +735,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             co.blade_friction = scene.patch.blade_friction;
             co.friction_cell_mm = scene.patch.friction_cell_mm;
             co.wall_one_face = true;
-            const double th0 = v0[nb];
             int repeats = 0;
             fem::CompliantFrame f;
             // The walls' distance a frame ended at: its rows' and, whatever its rows, anything through a face (as the
@@ -739,12 +745,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             };
             // A frame that takes the patch's surface beyond the linear range of its linearisation (Scene::linear_limit
             // wall thicknesses: its forces there are off by more than 10 %) is solved again on a linearisation at the
-            // state it reached, warm from its own rows, up to RANGE_REFRESHES times: Newton's steps on the frame, each a
-            // refresh. Inline (deterministic) mode only; the threaded mode's refreshes come from the other core.
-            // Damped where they diverge: an attempt that went further from its linearisation than the one before it
-            // did is linearised again halfway there, and the frame ends with the attempt nearest its own linearisation
-            // (session 45: C0054's re-solves round its fold went 1.55 -> 3.10 and 0.91 -> 0.99 wall thicknesses, the
-            // tangent there indefinite; the sample's went 0.40 -> 0.37 -> 0.31, one warning).
+            // state it reached, warm from its own rows, up to PatchSpec::range_resolves times: Newton's steps on the
+            // frame, each a refresh. Inline (deterministic) mode only; the threaded mode's refreshes come from the other
+            // core. Damped where they diverge: an attempt that went further from its linearisation than the one before
+            // it did is linearised again halfway there, and the frame ends with the attempt nearest its own
+            // linearisation (session 45: C0054's re-solves round its fold went 1.55 -> 3.10 and 0.91 -> 0.99 wall
+            // thicknesses, the tangent there indefinite; the sample's went 0.40 -> 0.37 -> 0.31, one warning).
             struct Attempt {
                 PatchRun::Compliant state;  // the frames' state after it (its linearisation, candidates, wall search)
                 fem::CompliantFrame f;
@@ -752,81 +758,126 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 Reach lag;
                 int number = 0;
             };
-            std::optional<Attempt> best;
-            double last_ratio = -1;
-            for (int range_again = 0;; ++range_again) {
-                const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
-                // A re-solve is warm from the attempt before it, and starts where the frame started: the patch at v0,
-                // on this linearisation's candidates (the first solve starts where the last frame ended, warm's end).
-                Eigen::VectorXd start;
-                if (range_again > 0) {
-                    start.resize(3 * static_cast<Eigen::Index>(C->cand.size()));
-                    for (size_t k = 0; k < C->cand.size(); ++k) start.segment<3>(3 * static_cast<Eigen::Index>(k)) = v0.segment<3>(3 * static_cast<Eigen::Index>(C->cand[k]));
-                }
-                const Eigen::VectorXd* start_at = range_again > 0 ? &start : nullptr;
-                int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
-                try {
-                    f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, theta_kept, th0, warm, co, &again, start_at)
-                                            : fem::solve_compliant_clip(*C->lin, blades, spring, theta_kept, th0, warm, co, nullptr, start_at);
-                    repeats += again;
-                } catch (const NumericalError& e) {
-                    // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch stays
-                    // where it was; a second in a row restarts from the last converged one with a smaller step).
-                    res.converged = false;
-                    res.failure = e.what();
-                    loads = C->last.loads;
-                    wall_min = walls_at(C->last);
-                    touching = C->last.wall_contacts;
-                    return res;
-                }
-                c_rows = f.rows_s;
-                c_delassus = f.delassus_s;
-                c_lcp = f.lcp_s;
-                c_search = f.search_s;
-                c_repeats = repeats;
-                c_nrows = static_cast<int>(f.constraint.size());
-                c_pivots = f.pivots;
-                c_sweeps = f.sweeps;
-                const Stopwatch dw;
-                res.u.head(nb) = C->lin->displacement(f.candidate_forces);
-                c_disp = dw.seconds();
-                // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded into
-                // the patch's figures, and warned, under the lock below).
-                lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
-                const bool over = reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit;
-                if (over && (!best || lag.ratio < best->lag.ratio)) best = Attempt{*C, f, res.u.head(nb), lag, range_again};
-                if (over && range_again < RANGE_REFRESHES) {
-                    const double was = lag.ratio;
-                    const bool diverging = last_ratio >= 0 && was > last_ratio;
-                    last_ratio = was;
-                    // How far towards the attempt the next linearisation lies: all the way (a Newton step); halfway
-                    // where the attempts diverge.
-                    const double step = diverging ? 0.5 : 1.0;
-                    const Eigen::VectorXd at = step < 1 ? Eigen::VectorXd(C->lin->u0() + step * (res.u.head(nb) - C->lin->u0())) : Eigen::VectorXd(res.u.head(nb));
-                    C->last = f;  // the re-solve's warm start, carried to the new linearisation's candidates
-                    C->warm = true;
-                    if (refresh_at(at)) {
-                        ++P.stats.range_refreshes;
-                        P.stats.max_frame_resolves = std::max(P.stats.max_frame_resolves, range_again + 1);
-                        if (std::getenv("ANEU_PATCH_TRACE"))
-                            std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation (vertex %ld, %.4f mm): solved again on one made %.3g of the way there%s\n",
-                                         fr.t, was, static_cast<long>(lag.vertex), lag.mm, step, diverging ? " (further than the attempt before)" : "");
-                        continue;
+            enum class Span { WITHIN, BEYOND, FAILED };
+            // One span of the frame: the opening from th_from to th_to, the patch starting at v_from (where the last
+            // frame, or the span before, ended: the first solve is warm from it, its re-solves start there). Leaves the
+            // span's end in f, res.u.head(nb) and lag.
+            auto span = [&](double th_from, double th_to, const Eigen::VectorXd& v_from) {
+                std::optional<Attempt> best;
+                double last_ratio = -1;
+                for (int range_again = 0;; ++range_again) {
+                    const fem::CompliantFrame* warm = C->warm ? &C->last : nullptr;
+                    // A re-solve is warm from the attempt before it, and starts where the span started: the patch at
+                    // v_from, on this linearisation's candidates (the first solve starts where the last ended, warm's end).
+                    Eigen::VectorXd start;
+                    if (range_again > 0) {
+                        start.resize(3 * static_cast<Eigen::Index>(C->cand.size()));
+                        for (size_t k = 0; k < C->cand.size(); ++k)
+                            start.segment<3>(3 * static_cast<Eigen::Index>(k)) = v_from.segment<3>(3 * static_cast<Eigen::Index>(C->cand[k]));
                     }
+                    const Eigen::VectorXd* start_at = range_again > 0 ? &start : nullptr;
+                    int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
+                    try {
+                        f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, th_to, th_from, warm, co, &again, start_at)
+                                                : fem::solve_compliant_clip(*C->lin, blades, spring, th_to, th_from, warm, co, nullptr, start_at);
+                        repeats += again;
+                    } catch (const NumericalError& e) {
+                        // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch
+                        // stays where it was; a second in a row restarts from the last converged one with a smaller step).
+                        res.converged = false;
+                        res.failure = e.what();
+                        return Span::FAILED;
+                    }
+                    c_rows = f.rows_s;
+                    c_delassus = f.delassus_s;
+                    c_lcp = f.lcp_s;
+                    c_search = f.search_s;
+                    c_repeats = repeats;
+                    c_nrows = static_cast<int>(f.constraint.size());
+                    c_pivots = f.pivots;
+                    c_sweeps = f.sweeps;
+                    const Stopwatch dw;
+                    res.u.head(nb) = C->lin->displacement(f.candidate_forces);
+                    c_disp = dw.seconds();
+                    // How far the frame took the surface from the linearisation's state, over the wall's thickness (folded
+                    // into the patch's figures, and warned, under the lock below).
+                    lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
+                    const bool over = reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit;
+                    if (over && (!best || lag.ratio < best->lag.ratio)) best = Attempt{*C, f, res.u.head(nb), lag, range_again};
+                    if (over && range_again < scene.patch.range_resolves) {
+                        const double was = lag.ratio;
+                        const bool diverging = last_ratio >= 0 && was > last_ratio;
+                        last_ratio = was;
+                        // How far towards the attempt the next linearisation lies: all the way (a Newton step); halfway
+                        // where the attempts diverge.
+                        const double step = diverging ? 0.5 : 1.0;
+                        const Eigen::VectorXd at = step < 1 ? Eigen::VectorXd(C->lin->u0() + step * (res.u.head(nb) - C->lin->u0())) : Eigen::VectorXd(res.u.head(nb));
+                        C->last = f;  // the re-solve's warm start, carried to the new linearisation's candidates
+                        C->warm = true;
+                        if (refresh_at(at)) {
+                            ++P.stats.range_refreshes;
+                            P.stats.max_frame_resolves = std::max(P.stats.max_frame_resolves, range_again + 1);
+                            if (std::getenv("ANEU_PATCH_TRACE"))
+                                std::fprintf(stderr, "patch t=%.4f: the frame reached %.2f wall thicknesses from its linearisation (vertex %ld, %.4f mm): solved again on one made %.3g of the way there%s\n",
+                                             fr.t, was, static_cast<long>(lag.vertex), lag.mm, step, diverging ? " (further than the attempt before)" : "");
+                            continue;
+                        }
+                    }
+                    // Ended beyond the range after re-solves: the attempt nearest its linearisation, if not this one.
+                    if (over && best && best->number != range_again) {
+                        if (std::getenv("ANEU_PATCH_TRACE"))
+                            std::fprintf(stderr, "patch t=%.4f: the frame's attempt %d (%.2f wall thicknesses from its linearisation) kept, not the last (%.2f)\n", fr.t,
+                                         best->number, best->lag.ratio, lag.ratio);
+                        *C = std::move(best->state);
+                        f = std::move(best->f);
+                        res.u.head(nb) = best->u;
+                        lag = best->lag;
+                        ++P.stats.range_earlier_kept;
+                    }
+                    return over ? Span::BEYOND : Span::WITHIN;
                 }
-                // Ended beyond the range after re-solves: the attempt nearest its linearisation, if not this one.
-                if (over && best && best->number != range_again) {
-                    if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: the frame's attempt %d (%.2f wall thicknesses from its linearisation) kept, not the last (%.2f)\n", fr.t,
-                                     best->number, best->lag.ratio, lag.ratio);
-                    *C = std::move(best->state);
-                    f = std::move(best->f);
-                    res.u.head(nb) = best->u;
-                    lag = best->lag;
-                    ++P.stats.range_earlier_kept;
+            };
+            // The frame's reach: the largest of the spans it was solved in.
+            Reach frame_lag;
+            frame_lag.ratio = -1;
+            // (Only where a span can end beyond the range, inline; the linearisation is shared, the rest is small.)
+            std::optional<PatchRun::Compliant> at_start;
+            if (reselect && !fr.mx && scene.linear_limit > 0) at_start = *C;
+            std::function<Span(double, double, const Eigen::VectorXd&, int)> solve_split = [&](double th_from, double th_to, const Eigen::VectorXd& v_from,
+                                                                                                int depth) {
+                const std::optional<PatchRun::Compliant> saved = depth > 0 && at_start ? std::optional<PatchRun::Compliant>(*C) : std::nullopt;
+                const Span got = span(th_from, th_to, v_from);
+                const bool split = got == Span::BEYOND && depth < MAX_RANGE_SPLITS && std::abs(th_to - th_from) > 1e-9;
+                if (!split) {
+                    if (got != Span::FAILED && lag.ratio > frame_lag.ratio) frame_lag = lag;
+                    return got;
                 }
-                break;
+                // Beyond the range after every re-solve: the span again in two halves, each from where it starts.
+                *C = saved ? *saved : *at_start;
+                ++P.stats.range_splits;
+                P.stats.max_frame_splits = std::max(P.stats.max_frame_splits, depth + 1);
+                const double mid = 0.5 * (th_from + th_to);
+                if (std::getenv("ANEU_PATCH_TRACE"))
+                    std::fprintf(stderr, "patch t=%.4f: the frame's span %.4f -> %.4f deg ended %.2f wall thicknesses from its linearisation after its re-solves: solved again in two halves\n",
+                                 fr.t, th_from / DEG, th_to / DEG, lag.ratio);
+                const Span first = solve_split(th_from, mid, v_from, depth + 1);
+                if (first == Span::FAILED) return first;
+                C->last = f;
+                C->warm = true;
+                Eigen::VectorXd v_mid = v_from;
+                v_mid.head(nb) = res.u.head(nb);
+                v_mid[nb] = mid;
+                refresh_at(Eigen::VectorXd(v_mid.head(nb)));  // (refused: the half goes on with the last one)
+                const Span second = solve_split(mid, th_to, v_mid, depth + 1);
+                return second == Span::WITHIN && first == Span::BEYOND ? Span::BEYOND : second;
+            };
+            if (solve_split(v0[nb], theta_kept, v0, 0) == Span::FAILED) {
+                loads = C->last.loads;
+                wall_min = walls_at(C->last);
+                touching = C->last.wall_contacts;
+                return res;
             }
+            lag = frame_lag;
             c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
             c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);
             const Eigen::Vector3d w_dir = blades.axis.cross(blades.up);

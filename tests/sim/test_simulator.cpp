@@ -1275,6 +1275,49 @@ TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRan
                 warnings, c.grip_force_n, p.min_wall_distance_mm);
 }
 
+TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIsSolvedInHalvesOfItsStep) {
+    // The tube flattened by the compliance frames relinearised every frame, as above (whose frames close the blades
+    // ~1.5 deg each and go up to 0.63 wall thicknesses from their linearisation), but with no re-solves allowed
+    // (model.range_resolves 0): a frame beyond the linear range is solved again in two halves of its opening's change,
+    // each a frame of its own linearised where it starts, and a half still beyond it in halves again (at most twice).
+    // Every frame then ends within the range, none is warned, and the blades end where the neo-Hookean reference
+    // holds them, as with the re-solves.
+    test::TempDir d("split");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
+    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
+    json j = flattening_scene(bundle, "patch", false);
+    j["model"]["patch_solver"] = "compliance";
+    j["model"]["refresh_frames"] = 1;
+    j["model"]["range_resolves"] = 0;
+    j["instruments"][0]["keyframes"].push_back(key(0.30, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));
+    sim::Simulator s = make(j, d.file(""), "split.json");
+    int warnings = 0;
+    sim::RunOptions ro;
+    ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+    const sim::Assessment a = sim::run_scene(s, ro);
+    ASSERT_EQ(a.patches.size(), 1u);
+    const auto& p = a.patches[0];
+    EXPECT_EQ(p.unconverged_frames, 0);
+    EXPECT_EQ(p.linearisations_failed, 0);
+    EXPECT_EQ(p.range_refreshes, 0);
+    EXPECT_EQ(p.max_frame_resolves, 0);
+    EXPECT_GT(p.range_splits, 0) << "no frame went beyond the range: the halving was not exercised";
+    EXPECT_GE(p.max_frame_splits, 1);
+    EXPECT_LE(p.max_frame_splits, 2);
+    EXPECT_GT(p.max_lag_to_thickness, 0.0);
+    EXPECT_LE(p.max_lag_to_thickness, 0.3);
+    EXPECT_EQ(warnings, 0);
+    EXPECT_GT(p.min_wall_distance_mm, -0.02);
+    const sim::Clip& c = s.clips().at(0);
+    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+    EXPECT_NEAR(c.grip_force_n, f_ref, 0.05 * f_ref);
+    std::printf("no re-solves, frames halved: %ld frames, %d linearisations, %d halvings (at most %d in a frame); reach %.3f x at t = %.3f s, %d warnings; "
+                "blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), walls %.4f mm apart at the closest\n",
+                p.frames, p.linearisations, p.range_splits, p.max_frame_splits, p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n, f_ref,
+                100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm);
+}
+
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
     // A clip with a 0.3 N spring (at the label point) on the tube: the applier can only hold it open, so as the
     // applier closes, the clip stops where the tissue's moment about the hinge equals the spring's torque, short

@@ -180,8 +180,12 @@ struct Assessment {
         /// ... of those frames, the ones that ended with an earlier attempt than their last, the last having gone further
         /// from its linearisation (the re-solves diverging; halfway re-solves damp them)
         int range_earlier_kept = 0;
-        /// The most re-solves one frame took (at most 8)
+        /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
+        /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
+        /// opening's change; the most halvings one frame took (at most 2)
+        int range_splits = 0;
+        int max_frame_splits = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
