@@ -48,12 +48,12 @@ constexpr double RESELECT_HINGE_MM = 0.05;
 // tube with sliding jaws the remade frame's attempts then crept 2.30 -> 1.56 -> 0.89 -> 0.73 -> 0.81 -> 0.85, full
 // steps stayed at 0.60: every re-solve turned the gripped tissue with the blades again.) The number is the scene's
 // (PatchSpec::range_resolves, 8).
-// A frame whose re-solves all end beyond the range is solved again in two halves of its opening's change, each as a
-// frame of its own (linearised where it starts, re-solved as above), and a half that ends beyond it in halves again,
-// at most this many times (a quarter of the frame's step). Session 50: C0001's frames round its fold, 0.24 deg a
-// frame, took all 8 re-solves with the reach down only ~10 % a step (0.85 -> ... -> 0.36 wall thicknesses): the
-// re-solves converge linearly there, and a smaller step starts them nearer.
-constexpr int MAX_RANGE_SPLITS = 2;
+// A frame whose re-solves all end beyond the range may be solved again in two halves of its opening's change, each as
+// a frame of its own (linearised where it starts, re-solved as above), and a half that ends beyond it in halves again,
+// at most PatchSpec::range_splits times (0 by default). It helps where a frame's reach is its step's (the tube with no
+// re-solves: every frame within the range); on C0001's fold (session 51, t = 1.200 s) the last quarter step of
+// 0.06 deg still ended 0.54 wall thicknesses out (the whole 0.24 deg step: 0.32) and the frame took 584 s (93 s), and
+// on C0024's remade patch 0.37 as before: there the re-solves do not converge at the state itself, whatever the step.
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
@@ -842,12 +842,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             frame_lag.ratio = -1;
             // (Only where a span can end beyond the range, inline; the linearisation is shared, the rest is small.)
             std::optional<PatchRun::Compliant> at_start;
-            if (reselect && !fr.mx && scene.linear_limit > 0) at_start = *C;
+            if (reselect && !fr.mx && scene.linear_limit > 0 && scene.patch.range_splits > 0) at_start = *C;
             std::function<Span(double, double, const Eigen::VectorXd&, int)> solve_split = [&](double th_from, double th_to, const Eigen::VectorXd& v_from,
                                                                                                 int depth) {
                 const std::optional<PatchRun::Compliant> saved = depth > 0 && at_start ? std::optional<PatchRun::Compliant>(*C) : std::nullopt;
                 const Span got = span(th_from, th_to, v_from);
-                const bool split = got == Span::BEYOND && depth < MAX_RANGE_SPLITS && std::abs(th_to - th_from) > 1e-9;
+                const bool split = got == Span::BEYOND && depth < scene.patch.range_splits && std::abs(th_to - th_from) > 1e-9;
                 if (!split) {
                     if (got != Span::FAILED && lag.ratio > frame_lag.ratio) frame_lag = lag;
                     return got;

@@ -1278,8 +1278,9 @@ TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRan
 TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIsSolvedInHalvesOfItsStep) {
     // The tube flattened by the compliance frames relinearised every frame, as above (whose frames close the blades
     // ~1.5 deg each and go up to 0.63 wall thicknesses from their linearisation), but with no re-solves allowed
-    // (model.range_resolves 0): a frame beyond the linear range is solved again in two halves of its opening's change,
-    // each a frame of its own linearised where it starts, and a half still beyond it in halves again (at most twice).
+    // (model.range_resolves 0) and halvings (model.range_splits 2): a frame beyond the linear range is solved again in
+    // two halves of its opening's change, each a frame of its own linearised where it starts, and a half still beyond
+    // it in halves again (at most twice). Measured: 11 halvings, reach 0.294 x, blade force -1.33 %.
     // Every frame then ends within the range, none is warned, and the blades end where the neo-Hookean reference
     // holds them, as with the re-solves.
     test::TempDir d("split");
@@ -1290,6 +1291,7 @@ TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIs
     j["model"]["patch_solver"] = "compliance";
     j["model"]["refresh_frames"] = 1;
     j["model"]["range_resolves"] = 0;
+    j["model"]["range_splits"] = 2;
     j["instruments"][0]["keyframes"].push_back(key(0.30, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));
     sim::Simulator s = make(j, d.file(""), "split.json");
     int warnings = 0;

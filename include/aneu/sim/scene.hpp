@@ -155,9 +155,12 @@ struct PatchSpec {
     int refresh_frames = 0;
     /// COMPLIANCE, refreshed (refresh_frames > 0), deterministic: a frame that takes the patch's surface beyond the
     /// linear range of its linearisation (Scene::linear_limit) is solved again on a linearisation made where it got
-    /// to, at most this many times; one still beyond it after them is solved again in two halves of its opening's
-    /// change (each a frame of its own, split again at most twice).
+    /// to, at most this many times.
     int range_resolves = 8;
+    /// ... and one still beyond it after them is solved again in two halves of its opening's change (each a frame of
+    /// its own, with its re-solves), a half still beyond it in halves again, at most this many times (0: not split;
+    /// on the real cases' worst frames quarter steps did not help, session 51).
+    int range_splits = 0;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
     /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
     /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).

@@ -183,7 +183,7 @@ struct Assessment {
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
-        /// opening's change; the most halvings one frame took (at most 2)
+        /// opening's change; the most halvings one frame took (at most PatchSpec::range_splits)
         int range_splits = 0;
         int max_frame_splits = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
