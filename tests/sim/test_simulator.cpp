@@ -794,6 +794,23 @@ json flattening_scene(const std::string& bundle, const std::string& wall, bool r
                 {"instruments", json::array({{{"name", "applier"}, {"kind", "clip_applier"}, {"keyframes", keys}}})}};
 }
 
+/// The flattening scene on the compliance frames relinearised every `refresh` frames (model.patch_solver compliance),
+/// the clip held at the end opening until `held_until` (< 0: the scene's own keyframes only).
+json compliance_flattening_scene(const std::string& bundle, int refresh, double held_until) {
+    json j = flattening_scene(bundle, "patch", false);
+    j["model"]["patch_solver"] = "compliance";
+    j["model"]["refresh_frames"] = refresh;
+    if (held_until >= 0) j["instruments"][0]["keyframes"].push_back(key(held_until, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));
+    return j;
+}
+
+/// Run options counting the simulator's warnings that the compliance frames went beyond their linear range into `n`.
+sim::RunOptions counting_range_warnings(int& n) {
+    sim::RunOptions ro;
+    ro.on_message = [&n](const std::string& m) { n += m.find("beyond the compliance frames' range") != std::string::npos; };
+    return ro;
+}
+
 }  // namespace
 
 namespace {
@@ -933,14 +950,10 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
     const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
     double grip[2] = {0, 0};
     for (const int refresh : {1, 0}) {
-        json j = flattening_scene(bundle, "patch", false);
-        j["model"]["patch_solver"] = "compliance";
-        j["model"]["refresh_frames"] = refresh;
-        j["instruments"][0]["keyframes"].push_back(key(0.30, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));  // held 15 frames
+        const json j = compliance_flattening_scene(bundle, refresh, 0.30);  // held 15 frames
         sim::Simulator s = make(j, d.file(""), "comp" + std::to_string(refresh) + ".json");
         int range_warnings = 0;
-        sim::RunOptions ro;
-        ro.on_message = [&](const std::string& m) { range_warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+        const sim::RunOptions ro = counting_range_warnings(range_warnings);
         const sim::Assessment a = sim::run_scene(s, ro);
         ASSERT_EQ(a.patches.size(), 1u);
         const auto& p = a.patches[0];
@@ -1017,10 +1030,7 @@ TEST(SimulatorPatch, InRealTimeTheComplianceFramesRefreshOnAnotherThreadAndConve
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
     const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
-    json j = flattening_scene(bundle, "patch", false);
-    j["model"]["patch_solver"] = "compliance";
-    j["model"]["refresh_frames"] = 1;
-    j["instruments"][0]["keyframes"].push_back(key(4.30, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));  // held 4 s
+    json j = compliance_flattening_scene(bundle, 1, 4.30);  // held 4 s
     j["outputs"] = {{"log", "rt_log.csv"}, {"report", "rt_report.json"}};
     sim::Simulator s = make(j, d.file(""), "comprt.json");
     sim::RunOptions opt;
@@ -1244,17 +1254,14 @@ TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRan
     // at 0.6-0.8 x however many.)
     test::TempDir d("remade");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
-    json j = flattening_scene(bundle, "patch", false);
-    j["model"]["patch_solver"] = "compliance";
-    j["model"]["refresh_frames"] = 1;
+    json j = compliance_flattening_scene(bundle, 1, -1);
     const std::array<double, 3> ax{-1, 0, 0}, up{0, 1, 0};
     j["instruments"][0]["keyframes"][0]["position"] = {FLAT_HINGE_X, 0, 1.0};
     j["instruments"][0]["keyframes"][1]["position"] = {FLAT_HINGE_X, 0, 1.0};
     j["instruments"][0]["keyframes"].push_back(key(0.40, {FLAT_HINGE_X, 0, 4.0}, ax, up, FLAT_END_DEG));
     sim::Simulator s = make(j, d.file(""), "remade.json");
     int warnings = 0;
-    sim::RunOptions ro;
-    ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+    const sim::RunOptions ro = counting_range_warnings(warnings);
     const sim::Assessment a = sim::run_scene(s, ro);
     ASSERT_EQ(a.patches.size(), 1u);
     const auto& p = a.patches[0];
@@ -1287,16 +1294,12 @@ TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIs
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
     const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
-    json j = flattening_scene(bundle, "patch", false);
-    j["model"]["patch_solver"] = "compliance";
-    j["model"]["refresh_frames"] = 1;
+    json j = compliance_flattening_scene(bundle, 1, 0.30);
     j["model"]["range_resolves"] = 0;
     j["model"]["range_splits"] = 2;
-    j["instruments"][0]["keyframes"].push_back(key(0.30, {FLAT_HINGE_X, 0, 4.0}, {-1, 0, 0}, {0, 1, 0}, FLAT_END_DEG));
     sim::Simulator s = make(j, d.file(""), "split.json");
     int warnings = 0;
-    sim::RunOptions ro;
-    ro.on_message = [&](const std::string& m) { warnings += m.find("beyond the compliance frames' range") != std::string::npos; };
+    const sim::RunOptions ro = counting_range_warnings(warnings);
     const sim::Assessment a = sim::run_scene(s, ro);
     ASSERT_EQ(a.patches.size(), 1u);
     const auto& p = a.patches[0];
