@@ -840,20 +840,19 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // The frame's reach: the largest of the spans it was solved in.
             Reach frame_lag;
             frame_lag.ratio = -1;
-            // (Only where a span can end beyond the range, inline; the linearisation is shared, the rest is small.)
-            std::optional<PatchRun::Compliant> at_start;
-            if (reselect && !fr.mx && scene.linear_limit > 0 && scene.patch.range_splits > 0) at_start = *C;
             std::function<Span(double, double, const Eigen::VectorXd&, int)> solve_split = [&](double th_from, double th_to, const Eigen::VectorXd& v_from,
                                                                                                 int depth) {
-                const std::optional<PatchRun::Compliant> saved = depth > 0 && at_start ? std::optional<PatchRun::Compliant>(*C) : std::nullopt;
+                // The frames' state where the span starts, to solve it again from there in halves (only where it may be:
+                // inline, with a split left; the linearisation is shared, the rest is small).
+                std::optional<PatchRun::Compliant> saved;
+                if (reselect && !fr.mx && scene.linear_limit > 0 && depth < scene.patch.range_splits && std::abs(th_to - th_from) > 1e-9) saved = *C;
                 const Span got = span(th_from, th_to, v_from);
-                const bool split = got == Span::BEYOND && depth < scene.patch.range_splits && std::abs(th_to - th_from) > 1e-9;
-                if (!split) {
+                if (got != Span::BEYOND || !saved) {
                     if (got != Span::FAILED && lag.ratio > frame_lag.ratio) frame_lag = lag;
                     return got;
                 }
                 // Beyond the range after every re-solve: the span again in two halves, each from where it starts.
-                *C = saved ? *saved : *at_start;
+                *C = std::move(*saved);
                 ++P.stats.range_splits;
                 P.stats.max_frame_splits = std::max(P.stats.max_frame_splits, depth + 1);
                 const double mid = 0.5 * (th_from + th_to);
