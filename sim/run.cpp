@@ -595,6 +595,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["max_frame_resolves"] = p.max_frame_resolves;
                 j["patches"][k]["range_splits"] = p.range_splits;
                 j["patches"][k]["max_frame_splits"] = p.max_frame_splits;
+                j["patches"][k]["range_newton_frames"] = p.range_newton_frames;
+                j["patches"][k]["range_newton_failed"] = p.range_newton_failed;
                 j["patches"][k]["refreshes_stale"] = p.refreshes_stale;
                 j["patches"][k]["first_candidates"] = p.first_candidates;
                 j["patches"][k]["last_candidates"] = p.last_candidates;

@@ -258,6 +258,7 @@ Scene read_scene(const std::string& path) {
         s.patch.refresh_frames = static_cast<int>(o.num("refresh_frames", s.patch.refresh_frames, 0, 1e6));
         s.patch.range_resolves = static_cast<int>(o.num("range_resolves", s.patch.range_resolves, 0, 100));
         s.patch.range_splits = static_cast<int>(o.num("range_splits", s.patch.range_splits, 0, 6));
+        s.patch.range_newton = static_cast<int>(o.num("range_newton", s.patch.range_newton, 0, 1000));
         s.patch.friction_cell_mm = o.num("friction_cell_mm", s.patch.friction_cell_mm, 0, 10);
         o.done();
     }

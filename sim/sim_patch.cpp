@@ -570,6 +570,43 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             }
             return res;
         };
+        // The Newton frame: the neo-Hookean patch with the blades' and (with wall_contact) the inner walls' barriers, from
+        // where the frame starts (v0) to the opening theta_kept, at most o.max_iterations iterations. The NEWTON solver's
+        // every frame; a COMPLIANCE frame still beyond its linear range after its re-solves (PatchSpec::range_newton).
+        auto newton_frame = [&]() {
+            if (!scene.patch.wall_contact || P.inner.rows() == 0) return solve_with(pm, nullptr);
+            fem::ContactParams cp;
+            cp.stiffness = P.kappa_wall;
+            cp.pattern_cache = P.wall_patterns;
+            // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
+            // walls between them close by up to the jaws' own motion). A vertex the solve still takes through a
+            // face its pairs left out is caught after it, and the frame solved again with it paired with every
+            // face near its path (fem::solve_without_crossings).
+            const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
+            cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
+            // Vertices an earlier frame found going through a face its ordinary pairs left out stay paired with
+            // every face within this frame's reach: else each frame would take them through again and repeat its
+            // solve (the sample's 13 mm clip held at 1.89°: two solves in every held frame, 27 s each).
+            cp.close_vertices = P.close_vertices;
+            const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v0, cp, [&](const fem::ContactBody& wall) {
+                P.kappa_wall = wall.stiffness();
+                return solve_with(wall, &wall);
+            });
+            fem::NewtonResult r = cs.result;
+            P.close_vertices = cs.close_vertices;
+            P.stats.wall_resolves += cs.rounds;
+            // Whatever is through a face at the end counts as interpenetration (a vertex behind a face where the
+            // frame started has no pair to push it out).
+            if (cs.deepest_mm > 0) wall_min = std::min(wall_min, -cs.deepest_mm);
+            if (std::getenv("ANEU_PATCH_TRACE"))
+                for (const fem::SurfaceCrossing& q : cs.left)
+                    std::fprintf(stderr, "patch crossing left: node %d %.4f mm behind face %d (%d %d %d)\n", q.v, q.depth_mm, q.f, P.inner(q.f, 0), P.inner(q.f, 1),
+                                 P.inner(q.f, 2));
+            if (cs.rounds > 0 && std::getenv("ANEU_PATCH_TRACE"))
+                std::fprintf(stderr, "patch t=%.4f: solved %d more time(s) with vertices that went through unpaired faces paired (%zu pairs)\n", fr.t, cs.rounds,
+                             cs.pairs);
+            return r;
+        };
         // PatchSpec::Solver::COMPLIANCE: the frame on the patch's linearisation (made at its first frame, again every
         // refresh_frames frames at the state reached): the blades' contact (with friction) and the inner walls' (one
         // row a vertex, on the quadratic surface with 10-node elements) hard, as a complementarity problem on the
@@ -870,13 +907,52 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 const Span second = solve_split(mid, th_to, v_mid, depth + 1);
                 return second == Span::WITHIN && first == Span::BEYOND ? Span::BEYOND : second;
             };
-            if (solve_split(v0[nb], theta_kept, v0, 0) == Span::FAILED) {
+            const Span got = solve_split(v0[nb], theta_kept, v0, 0);
+            if (got == Span::FAILED) {
                 loads = C->last.loads;
                 wall_min = walls_at(C->last);
                 touching = C->last.wall_contacts;
                 return res;
             }
             lag = frame_lag;
+            // Still beyond the range after its re-solves (and halvings): with PatchSpec::range_newton the frame is solved
+            // as a Newton frame (the nonlinear patch has no linear range), from where it started, and the frames go on
+            // from the state it reached, linearised there. Where it does not converge within those iterations the
+            // compliance frame's nearest attempt stands (and is warned, as without it).
+            if (got == Span::BEYOND && scene.patch.range_newton > 0) {
+                const Stopwatch nw;
+                o.max_iterations = o.max_total_iterations = scene.patch.range_newton;
+                o.max_halvings = 6;
+                const fem::NewtonResult nr = newton_frame();
+                o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
+                o.max_halvings = 3;
+                if (nr.converged && !cancel_frames) {
+                    ++P.stats.range_newton_frames;
+                    // The frames' next start: Newton's state on the candidates (the LCP cold: no rows carried).
+                    fem::CompliantFrame at;
+                    at.theta = nr.u[nb];
+                    at.loads = loads;
+                    at.wall_min_distance_mm = wall_min;
+                    at.wall_contacts = touching;
+                    at.candidate_u.resize(3 * static_cast<Eigen::Index>(C->cand.size()));
+                    for (size_t k = 0; k < C->cand.size(); ++k)
+                        at.candidate_u.segment<3>(3 * static_cast<Eigen::Index>(k)) = nr.u.segment<3>(3 * static_cast<Eigen::Index>(C->cand[k]));
+                    C->last = std::move(at);
+                    C->warm = true;
+                    const bool relinearised = refresh_at(Eigen::VectorXd(nr.u.head(nb)));
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation after its re-solves: solved as a Newton frame instead (%d iterations, residual %.2e, %.2f s; walls %.4f mm)%s\n",
+                                     fr.t, lag.ratio, nr.iterations, nr.residual, nw.seconds(), wall_min,
+                                     relinearised ? ", the frames linearised at its state" : "; its state could not be linearised: the frames go on with the last linearisation");
+                    lag = Reach{};  // (a Newton frame is the nonlinear patch's own: no linearisation to be away from)
+                    return nr;
+                }
+                ++P.stats.range_newton_failed;
+                if (std::getenv("ANEU_PATCH_TRACE"))
+                    std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation; as a Newton frame it did not converge in %d iterations (%s, %.2f s): the compliance frame kept\n",
+                                 fr.t, lag.ratio, nr.iterations, nr.failure.c_str(), nw.seconds());
+                grips.clear();  // (the compliance frame's loads and walls: below)
+            }
             c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
             c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);
             const Eigen::Vector3d w_dir = blades.axis.cross(blades.up);
@@ -906,43 +982,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             C->warm = true;
             return res;
         };
-        fem::NewtonResult r;
-        if (compliance) {
-            r = compliant_frame();
-        } else if (scene.patch.wall_contact && P.inner.rows() > 0) {
-            fem::ContactParams cp;
-            cp.stiffness = P.kappa_wall;
-            cp.pattern_cache = P.wall_patterns;
-            // Pairs are found where the frame starts: far enough for what the jaws can close in this frame (the
-            // walls between them close by up to the jaws' own motion). A vertex the solve still takes through a
-            // face its pairs left out is caught after it, and the frame solved again with it paired with every
-            // face near its path (fem::solve_without_crossings).
-            const double jaw_motion = std::abs(theta_kept - v0[nb]) * blades.length_mm + (blades.hinge - P.hinge_prev).norm();
-            cp.search_mm = std::max(cp.search_mm, 0.2 + 2.0 * jaw_motion);
-            // Vertices an earlier frame found going through a face its ordinary pairs left out stay paired with
-            // every face within this frame's reach: else each frame would take them through again and repeat its
-            // solve (the sample's 13 mm clip held at 1.89°: two solves in every held frame, 27 s each).
-            cp.close_vertices = P.close_vertices;
-            const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v0, cp, [&](const fem::ContactBody& wall) {
-                P.kappa_wall = wall.stiffness();
-                return solve_with(wall, &wall);
-            });
-            r = cs.result;
-            P.close_vertices = cs.close_vertices;
-            P.stats.wall_resolves += cs.rounds;
-            // Whatever is through a face at the end counts as interpenetration (a vertex behind a face where the
-            // frame started has no pair to push it out).
-            if (cs.deepest_mm > 0) wall_min = std::min(wall_min, -cs.deepest_mm);
-            if (std::getenv("ANEU_PATCH_TRACE"))
-                for (const fem::SurfaceCrossing& q : cs.left)
-                    std::fprintf(stderr, "patch crossing left: node %d %.4f mm behind face %d (%d %d %d)\n", q.v, q.depth_mm, q.f, P.inner(q.f, 0), P.inner(q.f, 1),
-                                 P.inner(q.f, 2));
-            if (cs.rounds > 0 && std::getenv("ANEU_PATCH_TRACE"))
-                std::fprintf(stderr, "patch t=%.4f: solved %d more time(s) with vertices that went through unpaired faces paired (%zu pairs)\n", fr.t, cs.rounds,
-                             cs.pairs);
-        } else {
-            r = solve_with(pm, nullptr);
-        }
+        fem::NewtonResult r = compliance ? compliant_frame() : newton_frame();
         if (cancel_frames) {  // the run ended during the solve: nothing of the frame is kept, its course included
             if (fr.mx) fr.lock.lock();
             continue;

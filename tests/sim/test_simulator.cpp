@@ -1323,6 +1323,43 @@ TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIs
                 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm);
 }
 
+TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIsSolvedAsANewtonFrame) {
+    // The tube flattened by the compliance frames relinearised every frame, with no re-solves and no halvings
+    // (model.range_resolves 0, range_splits 0) but model.range_newton 40: a frame beyond the linear range of its
+    // linearisation is solved as a Newton frame (the neo-Hookean patch with the blades' and walls' barriers, from
+    // where the frame started), and the frames go on from its state, linearised there. Every frame then either ends
+    // within the range or is the nonlinear patch's own, none is warned, and the blades end where the neo-Hookean
+    // reference holds them.
+    test::TempDir d("rnewton");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
+    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
+    json j = compliance_flattening_scene(bundle, 1, 0.30);
+    j["model"]["range_resolves"] = 0;
+    j["model"]["range_newton"] = 40;
+    sim::Simulator s = make(j, d.file(""), "rnewton.json");
+    int warnings = 0;
+    const sim::RunOptions ro = counting_range_warnings(warnings);
+    const sim::Assessment a = sim::run_scene(s, ro);
+    ASSERT_EQ(a.patches.size(), 1u);
+    const auto& p = a.patches[0];
+    EXPECT_EQ(p.unconverged_frames, 0);
+    EXPECT_EQ(p.range_refreshes, 0);
+    EXPECT_EQ(p.range_splits, 0);
+    EXPECT_GT(p.range_newton_frames, 0) << "no frame went beyond the range: the Newton frames were not exercised";
+    EXPECT_EQ(p.range_newton_failed, 0);
+    EXPECT_LE(p.max_lag_to_thickness, 0.3);
+    EXPECT_EQ(warnings, 0);
+    EXPECT_GT(p.min_wall_distance_mm, -0.02);
+    const sim::Clip& c = s.clips().at(0);
+    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+    EXPECT_NEAR(c.grip_force_n, f_ref, 0.05 * f_ref);
+    std::printf("no re-solves, Newton frames: %ld frames, %d linearisations, %d Newton frames (%d not converged); reach %.3f x at t = %.3f s, %d warnings; "
+                "blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), walls %.4f mm apart at the closest\n",
+                p.frames, p.linearisations, p.range_newton_frames, p.range_newton_failed, p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n,
+                f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm);
+}
+
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
     // A clip with a 0.3 N spring (at the label point) on the tube: the applier can only hold it open, so as the
     // applier closes, the clip stops where the tissue's moment about the hinge equals the spring's torque, short

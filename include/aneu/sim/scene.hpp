@@ -161,6 +161,10 @@ struct PatchSpec {
     /// its own, with its re-solves), a half still beyond it in halves again, at most this many times (0: not split;
     /// on the real cases' worst frames quarter steps did not help, session 51).
     int range_splits = 0;
+    /// ... and one still beyond it after them (and the halvings) is solved as a Newton frame (the NEWTON solver's: the
+    /// neo-Hookean patch with the blades' and walls' barriers, from where the frame started), with at most this many
+    /// iterations; the frames go on from its state, linearised there. 0: not (the frame ends beyond the range, warned).
+    int range_newton = 0;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
     /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
     /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).

@@ -186,6 +186,9 @@ struct Assessment {
         /// opening's change; the most halvings one frame took (at most PatchSpec::range_splits)
         int range_splits = 0;
         int max_frame_splits = 0;
+        /// Frames still beyond the range after all that, solved as Newton frames instead (PatchSpec::range_newton), and
+        /// those whose Newton solve did not converge in its iterations (their compliance frame kept, and warned)
+        int range_newton_frames = 0, range_newton_failed = 0;
         /// Threaded mode: refreshes made on another thread that the patch had left by more than the linear range by
         /// the time they were done (dropped; another begun from where the frames were)
         int refreshes_stale = 0;
