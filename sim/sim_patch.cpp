@@ -57,6 +57,11 @@ constexpr double RESELECT_HINGE_MM = 0.05;
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
+// A compliance frame solved as a Newton frame (PatchSpec::range_newton) starts from the compliance frames' state, whose
+// walls touch exactly: the barrier (d̂ = 0.01 mm) cannot start there (infinite at 0 apart; C0001's fold frame, session 52:
+// "the predictor runs into a contact" at once). Its inner walls' vertices are first set this far apart and its pressed
+// nodes this far off the blades (half d̂).
+constexpr double NEWTON_LIFT_MM = 0.005;
 
 /// How many of the nodes (at X) lie inside a blade's solid, or within `gap` in front of its face, at opening θ.
 int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX3d& X, const std::vector<int>& nodes, double gap) {
@@ -525,27 +530,37 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         std::vector<fem::BladeGrip> grips;
         double wall_min = std::numeric_limits<double>::infinity();
         int touching = 0;
+        // Where a Newton frame starts: v0, or (lift_mm > 0: a compliance frame's state, its walls exactly touching, its
+        // nodes exactly on the blades) v0 with the inner walls' vertices lift_mm apart and the pressed nodes lift_mm off
+        // the blades (fem::separate_walls, fem::ClipBody::separated), for the barriers to start from.
+        double lift_mm = 0;
+        Eigen::VectorXd v_from = v0;  // (the walls already apart, newton_frame)
         // One solve of the frame with the blades on `body` (the patch, or the patch with its inner walls' contact).
         auto solve_with = [&](const fem::ElasticBody& body, const fem::ContactBody* wall) {
             t_wall = sw.seconds();
+            Eigen::VectorXd v_start = v_from;
+            if (lift_mm > 0) {
+                const fem::ClipBody at(body, P.X, P.cand, v_start, blades, spring, bp, nullptr);
+                v_start = at.separated(v_start, lift_mm);
+            }
             // The grips of the last solve (in the blades' frame, so the clip's rigid motion carries them).
-            const fem::ClipBody cb(body, P.X, P.cand, v0, blades, spring, bp, P.gripped ? &P.grips : nullptr);
+            const fem::ClipBody cb(body, P.X, P.cand, v_start, blades, spring, bp, P.gripped ? &P.grips : nullptr);
             t_clip = sw.seconds();
             P.kappa_blade = cb.stiffness();
             const std::vector<std::pair<int, double>> held_at{{static_cast<int>(cb.theta_dof()), theta_kept}};
             // A patch at rest whose blades, at the new opening, touch nothing stays at rest: no solve (the jaws
             // closing through the air before they reach the wall).
             fem::NewtonResult res;
-            Eigen::VectorXd moved = v0;
+            Eigen::VectorXd moved = v_start;
             moved[cb.theta_dof()] = theta_kept;
             const fem::BladeLoads free_loads = cb.loads(moved);
-            at_rest = v0.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0;
+            at_rest = v_start.head(nb).isZero(0.0) && free_loads.contacts[0] + free_loads.contacts[1] == 0;
             if (at_rest) {
                 res.u = moved;
                 res.reaction = Eigen::VectorXd::Constant(1, spring.torque(theta_kept));
                 res.converged = true;
             } else {
-                res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v0, o);
+                res = fem::solve_neo_hookean(cb, pm.fixed_dofs(), held_at, v_start, o);
             }
             if (res.factorisations > 0 && !o.dump_free_tangent.empty()) {
                 tangent_dumped = true;
@@ -574,6 +589,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // where the frame starts (v0) to the opening theta_kept, at most o.max_iterations iterations. The NEWTON solver's
         // every frame; a COMPLIANCE frame still beyond its linear range after its re-solves (PatchSpec::range_newton).
         auto newton_frame = [&]() {
+            v_from = v0;
             if (!scene.patch.wall_contact || P.inner.rows() == 0) return solve_with(pm, nullptr);
             fem::ContactParams cp;
             cp.stiffness = P.kappa_wall;
@@ -588,7 +604,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // every face within this frame's reach: else each frame would take them through again and repeat its
             // solve (the sample's 13 mm clip held at 1.89°: two solves in every held frame, 27 s each).
             cp.close_vertices = P.close_vertices;
-            const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v0, cp, [&](const fem::ContactBody& wall) {
+            if (lift_mm > 0) v_from.head(nb) = fem::separate_walls(P.X, P.inner, v0.head(nb), cp, lift_mm);
+            const fem::CrossingFreeSolve cs = fem::solve_without_crossings(pm, P.X, P.inner, v_from, cp, [&](const fem::ContactBody& wall) {
                 P.kappa_wall = wall.stiffness();
                 return solve_with(wall, &wall);
             });
@@ -923,7 +940,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 const Stopwatch nw;
                 o.max_iterations = o.max_total_iterations = scene.patch.range_newton;
                 o.max_halvings = 6;
+                lift_mm = NEWTON_LIFT_MM;
                 const fem::NewtonResult nr = newton_frame();
+                lift_mm = 0;
                 o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
                 o.max_halvings = 3;
                 if (nr.converged && !cancel_frames) {

@@ -436,6 +436,34 @@ std::vector<BladeGrip> ClipBody::grips(const Eigen::VectorXd& v) const {
     return out;
 }
 
+Eigen::VectorXd ClipBody::separated(const Eigen::VectorXd& v, double delta_mm) const {
+    if (v.size() != dofs()) throw InputError("clip: the state to separate has the wrong size");
+    if (!(delta_mm > 0) || !(delta_mm < m_p.gap_mm)) throw InputError("clip: separate the nodes from the blades by more than 0 and less than the barrier's gap");
+    Eigen::VectorXd out = v;
+    for (int pass = 0; pass < 4; ++pass) {
+        auto tc = touches(out);
+        bool moved = false;
+        for (size_t k = 0; k < m_nodes.size(); ++k)
+            for (int s : {1, -1}) {
+                // (The distance itself, not the barrier's: a node that started on the face or just behind it meets the
+                // barrier as if the face were a little behind, m_offset.)
+                Touch& c = tc[s > 0 ? 0 : 1];
+                if (!m_front[k][s > 0 ? 0 : 1]) continue;
+                const int node = m_nodes[k];
+                const double D = blade_distance(m_X.row(node).transpose() + out.segment<3>(3 * node) - m_blades.hinge, c);
+                if (D >= 0.999 * delta_mm) continue;
+                // ∇D in x: the unit vector from the core's nearest point, in the blade's frame (a curved blade's: its
+                // face's normal, near enough for a move of d̂ / 2).
+                const Eigen::Vector3d dir = c.curved ? c.n : Eigen::Vector3d(c.u[0] * c.t + c.u[1] * c.w + c.u[2] * c.n);
+                if (!(dir.norm() > 0)) continue;
+                out.segment<3>(3 * node) += (delta_mm - D) * dir.normalized();
+                moved = true;
+            }
+        if (!moved) break;
+    }
+    return out;
+}
+
 double ClipBody::energy(const Eigen::VectorXd& v) const {
     double e = m_body.energy(v.head(m_body.dofs()));
     if (!std::isfinite(e)) return e;

@@ -418,6 +418,33 @@ double ContactBody::min_distance(const Eigen::VectorXd& u) const {
     return m;
 }
 
+namespace {
+// separated(): a vertex further behind its face than this is left there (a crease, the far side of a fold; the
+// compliance frames push a vertex back out from up to 0.05 mm through).
+constexpr double SEPARATE_BEHIND_MM = 0.05;
+}  // namespace
+
+Eigen::VectorXd separate_walls(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p, double delta_mm) {
+    if (!(delta_mm > 0) || !(delta_mm < p.gap_mm)) throw InputError("contact: separate the walls by more than 0 and less than the barrier's gap");
+    const std::vector<std::array<int, 2>> pairs = contact_pairs(X, faces, u, p, SEPARATE_BEHIND_MM);
+    Eigen::VectorXd v = u;
+    const auto x = [&](int a) { return Vec3(X.row(a).transpose() + v.segment<3>(3 * a)); };
+    for (int pass = 0; pass < 8; ++pass) {
+        bool moved = false;
+        for (const auto& [vert, f] : pairs) {
+            const Vec3 a = x(faces(f, 0)), b = x(faces(f, 1)), c = x(faces(f, 2));
+            const double s = signed_vertex_face_distance(x(vert), a, b, c);
+            if (s >= 0.999 * delta_mm || s < -SEPARATE_BEHIND_MM) continue;
+            const Vec3 nrm = (b - a).cross(c - a);
+            if (!(nrm.norm() > 0)) continue;
+            v.segment<3>(3 * vert) += (delta_mm - s) * nrm.normalized();
+            moved = true;
+        }
+        if (!moved) break;
+    }
+    return v;
+}
+
 CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u0,
                                           ContactParams cp, const std::function<NewtonResult(const ContactBody&)>& solve, double depth, int max_rounds) {
     const Eigen::Index n = body.dofs();

@@ -285,6 +285,32 @@ TEST(ClipBody, OnCurvedBladesForcesAndTangentAreTheEnergysDerivatives) {
     EXPECT_LT(std::abs(f3.dot(dr * t + da * w)), 1e-9 * f3.norm());  // nothing along the centre line
 }
 
+TEST(ClipBody, NodesOnOrJustBehindABladeAreSeparatedFromItToWhereTheBarrierCanStart) {
+    // A hard-contact solve leaves pressed nodes exactly on a blade's face (or a hair behind it), where the barrier is
+    // infinite: separated() moves each to delta in front of the face, along its normal, and leaves the rest (the
+    // other node, far from its blade; the opening) as they are. A clip made there starts with a finite energy.
+    const Block b;
+    const fem::ClipBlades bl;
+    for (const double p : {0.0, -0.01}) {
+        Eigen::VectorXd v = Eigen::VectorXd::Zero(13);
+        v[12] = 0.2;
+        v.segment<3>(6) = place(b, bl, 2, 0.2, 4.0, 0.1, p);
+        v.segment<3>(9) = place(b, bl, 3, 0.2, 4.0, 0.0, 0.5);
+        const fem::ClipBody clip(*b.body, b.X, {2, 3}, v, bl, test_spring());
+        const Eigen::VectorXd s = clip.separated(v, 0.005);
+        Eigen::Vector3d t, n, w;
+        bl.frame(1, 0.2, t, n, w);
+        EXPECT_LT((s.segment<3>(6) - v.segment<3>(6) - (0.005 - p) * n).norm(), 1e-12) << "on blade +1 at p = " << p;
+        EXPECT_EQ(s.segment<3>(9), v.segment<3>(9));
+        EXPECT_EQ(s[12], v[12]);
+        EXPECT_LT((s.segment<3>(6) - place(b, bl, 2, 0.2, 4.0, 0.1, 0.005)).norm(), 1e-12);
+        const fem::ClipBody from(*b.body, b.X, {2, 3}, s, bl, test_spring());
+        EXPECT_TRUE(std::isfinite(from.energy(s)));
+        EXPECT_EQ(from.separated(s, 0.005), s);  // already apart: nothing moves
+    }
+    EXPECT_THROW(fem::ClipBody(*b.body, b.X, {2, 3}, Eigen::VectorXd::Zero(13), bl, test_spring()).separated(Eigen::VectorXd::Zero(13), 0.02), InputError);
+}
+
 TEST(ClipBody, NoStepPassesThroughABlade) {
     // Node 2 0.05 mm in front of blade +1 at θ = 0.2: sent 0.2 mm through the face, the step is cut where it is a
     // tenth of its distance from it; the blades closing to θ = 0 (which would leave it 0.4 mm behind blade +1)

@@ -114,6 +114,37 @@ TEST(WallContact, TwoPlatesPressedTogetherTouchAndDoNotPassThrough) {
     EXPECT_NEAR(f, expected, 0.05 * expected);
 }
 
+TEST(WallContact, WallsLeftTouchingOrJustThroughAreSeparatedSoThatTheBarrierSolveStarts) {
+    // A hard-contact solve leaves walls exactly touching (or a hair through), where the barrier is infinite, a
+    // vertex on its face is not its pair, and a solve cannot start. separate_walls() sets every pair's vertex delta in
+    // front of its face, moving nothing by more than it had to; from there the plates pressed together solve as from
+    // apart, to the same force.
+    const Plates p;
+    const std::vector<Material> mats = {{"plate", 1.0, 0.0}};
+    const fem::NeoHookeanSolid solid(p.V, p.T, Eigen::VectorXi::Zero(p.T.rows()), mats);
+    const fem::ContactParams cp;
+    constexpr double PUSH = 0.08, DELTA = 0.005;
+    const fem::ContactBody apart(solid, p.V, p.faces, Eigen::VectorXd::Zero(solid.dofs()), cp);
+    const fem::NewtonResult ref = fem::solve_neo_hookean(apart, p.fixed, p.push(PUSH), Eigen::VectorXd::Zero(solid.dofs()));
+    for (const double at : {0.0, -0.003}) {
+        const Eigen::VectorXd u = p.pressed(at);
+        if (at == 0.0) {
+            EXPECT_FALSE(std::isfinite(apart.energy(u)));  // touching: the barrier's infinity
+        }
+        const Eigen::VectorXd s = fem::separate_walls(p.V, p.faces, u, cp, DELTA);
+        const fem::ContactBody body(solid, p.V, p.faces, s, cp);
+        EXPECT_GE(body.candidates(), apart.candidates()) << "from " << at << " mm apart";  // the touching ones' pairs found
+        EXPECT_GE(body.min_distance(s), 0.999 * DELTA) << "from " << at << " mm apart";
+        EXPECT_LE((s - u).cwiseAbs().maxCoeff(), DELTA - at + 1e-12);
+        EXPECT_TRUE(std::isfinite(body.energy(s)));
+        const fem::NewtonResult r = fem::solve_neo_hookean(body, p.fixed, p.push(PUSH), s);
+        EXPECT_LT(r.residual, 1e-9);
+        EXPECT_GT(body.min_distance(r.u), 0.0);
+        EXPECT_NEAR(pushing_force(r), pushing_force(ref), 0.01 * pushing_force(ref)) << "from " << at << " mm apart";
+    }
+    EXPECT_THROW(fem::separate_walls(p.V, p.faces, Eigen::VectorXd::Zero(solid.dofs()), cp, cp.gap_mm), InputError);
+}
+
 TEST(WallContact, SurfaceCrossingsSeeEveryVertexThroughAFacePairedOrNot) {
     // Without contact the top plate is carried rigidly 0.08 mm down: its facing vertices end 0.03 mm behind the
     // bottom plate's faces and the bottom's 0.03 mm behind the top's. A ContactBody made in that state has no pair

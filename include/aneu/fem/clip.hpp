@@ -176,6 +176,11 @@ public:
     /// own bound): continuous collision detection of the nodes' and the blades' motion.
     double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override;
     BladeLoads loads(const Eigen::VectorXd& v) const;
+    /// v with every node the blades press (nearer a blade it faces than `delta_mm`, as the barrier measures it) moved
+    /// to `delta_mm` in front of it, along the distance's gradient: a state the barrier can start from, for a start
+    /// another contact model left (hard contact: nodes exactly on the faces). Make a ClipBody at the result to solve
+    /// from it. delta_mm below gap_mm.
+    Eigen::VectorXd separated(const Eigen::VectorXd& v, double delta_mm) const;
     /// The grips after a solve that ended at v, for the next one: a grip that held stays where it was, one that
     /// slid follows its node (ε behind it); nodes that press on a blade at v without a grip take one where they
     /// are; every grip's λ is its node's normal force at v (none: let go).

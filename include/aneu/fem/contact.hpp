@@ -123,6 +123,14 @@ private:
 std::vector<std::array<int, 2>> contact_pairs(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p,
                                               double behind_mm = 0);
 
+/// u with the walls `faces` apart: every candidate pair's vertex (contact_pairs at u, with a vertex up to 0.05 mm behind
+/// its face a pair) at least `delta_mm` in front of its face, a vertex nearer or behind moved along the face's normal
+/// (a few passes: a vertex's move changes its other pairs). A state a ContactBody's barrier can start from, made where
+/// another contact model left the walls: hard contact leaves them exactly touching or a hair through, where the
+/// barrier is infinite, its pairs are not found (a vertex on or behind a face is not its pair), and a step from ~0
+/// apart is cut to ~0. Make the ContactBody at the result. 0 < delta_mm < p.gap_mm.
+Eigen::VectorXd separate_walls(const Eigen::MatrixX3d& X, const Eigen::MatrixX3i& faces, const Eigen::VectorXd& u, const ContactParams& p, double delta_mm);
+
 /// The signed distance from p to the closest point of the triangle (a, b, c) (negative when p projects into the face
 /// from behind it) and, with grad, its gradient over (p, a, b, c).
 double signed_vertex_face_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
