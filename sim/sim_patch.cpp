@@ -54,6 +54,9 @@ constexpr double RESELECT_HINGE_MM = 0.05;
 // re-solves: every frame within the range); on C0001's fold (session 51, t = 1.200 s) the last quarter step of
 // 0.06 deg still ended 0.54 wall thicknesses out (the whole 0.24 deg step: 0.32) and the frame took 584 s (93 s), and
 // on C0024's remade patch 0.37 as before: there the re-solves do not converge at the state itself, whatever the step.
+// Such a frame may instead be solved as a Newton frame (PatchSpec::range_newton iterations, 0 by default): the
+// nonlinear patch with the barriers, which has no linear range, from where the frame started (its walls and pressed
+// nodes first set NEWTON_LIFT_MM apart), and the frames go on from its state, linearised there.
 // A spring clip's balance takes its secant dR/dθ over steps of at least this much (in degrees at the heel: scaled by
 // ClipModel::turn_per_heel_turn for a clip turning about a fulcrum behind it).
 constexpr double SECANT_MIN_DEG = 0.01;
