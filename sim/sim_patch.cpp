@@ -971,8 +971,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 }
                 ++P.stats.range_newton_failed;
                 if (std::getenv("ANEU_PATCH_TRACE"))
-                    std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation; as a Newton frame it did not converge in %d iterations (%s, %.2f s): the compliance frame kept\n",
-                                 fr.t, lag.ratio, nr.iterations, nr.failure.c_str(), nw.seconds());
+                    std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation; as a Newton frame it did not converge in %d iterations (%s; %.3g of the opening's change reached, residual %.2e, %d substeps, %d iterations with the tangent projected, %.2f s): the compliance frame kept\n",
+                                 fr.t, lag.ratio, nr.iterations, nr.failure.c_str(), nr.load_fraction, nr.residual, nr.substeps, nr.shifted, nw.seconds());
                 grips.clear();  // (the compliance frame's loads and walls: below)
             }
             c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
