@@ -1282,6 +1282,47 @@ TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRan
                 warnings, c.grip_force_n, p.min_wall_distance_mm);
 }
 
+namespace {
+
+/// The tube flattened by the compliance frames relinearised every frame (held to 0.30 s) with no re-solves for the
+/// linear range (model.range_resolves 0) and the scene's `model` entries `extra` on top: the run's patch, its clip at
+/// the end, the neo-Hookean reference's blade force there and the range warnings. Checked here, what every way of
+/// solving a frame beyond the range again must give: every frame converged and within the range (or no linearisation's),
+/// none warned, the walls apart, the blades where the reference holds them (within 5 %).
+struct BeyondRange {
+    sim::Assessment::PatchEnd p;
+    sim::Clip c;
+    double f_ref = 0;
+    int warnings = 0;
+};
+BeyondRange flattened_beyond_the_range(const std::string& tag, const json& extra) {
+    test::TempDir d(tag);
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
+    BeyondRange r;
+    r.f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
+    json j = compliance_flattening_scene(bundle, 1, 0.30);
+    j["model"]["range_resolves"] = 0;
+    for (const auto& [k, v] : extra.items()) j["model"][k] = v;
+    sim::Simulator s = make(j, d.file(""), tag + ".json");
+    const sim::RunOptions ro = counting_range_warnings(r.warnings);
+    const sim::Assessment a = sim::run_scene(s, ro);
+    EXPECT_EQ(a.patches.size(), 1u);
+    if (a.patches.size() != 1) return r;
+    r.p = a.patches[0];
+    r.c = s.clips().at(0);
+    EXPECT_EQ(r.p.unconverged_frames, 0);
+    EXPECT_EQ(r.p.range_refreshes, 0);
+    EXPECT_LE(r.p.max_lag_to_thickness, 0.3);
+    EXPECT_EQ(r.warnings, 0);
+    EXPECT_GT(r.p.min_wall_distance_mm, -0.02);
+    EXPECT_NEAR(r.c.opening_deg, FLAT_END_DEG, 1e-9);
+    EXPECT_NEAR(r.c.grip_force_n, r.f_ref, 0.05 * r.f_ref);
+    return r;
+}
+
+}  // namespace
+
 TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIsSolvedInHalvesOfItsStep) {
     // The tube flattened by the compliance frames relinearised every frame, as above (whose frames close the blades
     // ~1.5 deg each and go up to 0.63 wall thicknesses from their linearisation), but with no re-solves allowed
@@ -1290,74 +1331,34 @@ TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIs
     // it in halves again (at most twice). Measured: 11 halvings, reach 0.294 x, blade force -1.33 %.
     // Every frame then ends within the range, none is warned, and the blades end where the neo-Hookean reference
     // holds them, as with the re-solves.
-    test::TempDir d("split");
-    const std::string bundle = tube_bundle(Precision::FLOAT64);
-    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
-    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
-    json j = compliance_flattening_scene(bundle, 1, 0.30);
-    j["model"]["range_resolves"] = 0;
-    j["model"]["range_splits"] = 2;
-    sim::Simulator s = make(j, d.file(""), "split.json");
-    int warnings = 0;
-    const sim::RunOptions ro = counting_range_warnings(warnings);
-    const sim::Assessment a = sim::run_scene(s, ro);
-    ASSERT_EQ(a.patches.size(), 1u);
-    const auto& p = a.patches[0];
-    EXPECT_EQ(p.unconverged_frames, 0);
+    const BeyondRange r = flattened_beyond_the_range("split", {{"range_splits", 2}});
+    const auto& p = r.p;
     EXPECT_EQ(p.linearisations_failed, 0);
-    EXPECT_EQ(p.range_refreshes, 0);
     EXPECT_EQ(p.max_frame_resolves, 0);
     EXPECT_GT(p.range_splits, 0) << "no frame went beyond the range: the halving was not exercised";
     EXPECT_GE(p.max_frame_splits, 1);
     EXPECT_LE(p.max_frame_splits, 2);
     EXPECT_GT(p.max_lag_to_thickness, 0.0);
-    EXPECT_LE(p.max_lag_to_thickness, 0.3);
-    EXPECT_EQ(warnings, 0);
-    EXPECT_GT(p.min_wall_distance_mm, -0.02);
-    const sim::Clip& c = s.clips().at(0);
-    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
-    EXPECT_NEAR(c.grip_force_n, f_ref, 0.05 * f_ref);
     std::printf("no re-solves, frames halved: %ld frames, %d linearisations, %d halvings (at most %d in a frame); reach %.3f x at t = %.3f s, %d warnings; "
                 "blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), walls %.4f mm apart at the closest\n",
-                p.frames, p.linearisations, p.range_splits, p.max_frame_splits, p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n, f_ref,
-                100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm);
+                p.frames, p.linearisations, p.range_splits, p.max_frame_splits, p.max_lag_to_thickness, p.max_lag_t, r.warnings, r.c.grip_force_n, r.f_ref,
+                100 * (r.c.grip_force_n / r.f_ref - 1), p.min_wall_distance_mm);
 }
 
 TEST(SimulatorPatch, AComplianceFrameStillBeyondTheLinearRangeAfterItsReSolvesIsSolvedAsANewtonFrame) {
-    // The tube flattened by the compliance frames relinearised every frame, with no re-solves and no halvings
-    // (model.range_resolves 0, range_splits 0) but model.range_newton 40: a frame beyond the linear range of its
-    // linearisation is solved as a Newton frame (the neo-Hookean patch with the blades' and walls' barriers, from
-    // where the frame started), and the frames go on from its state, linearised there. Every frame then either ends
-    // within the range or is the nonlinear patch's own, none is warned, and the blades end where the neo-Hookean
-    // reference holds them.
-    test::TempDir d("rnewton");
-    const std::string bundle = tube_bundle(Precision::FLOAT64);
-    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
-    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
-    json j = compliance_flattening_scene(bundle, 1, 0.30);
-    j["model"]["range_resolves"] = 0;
-    j["model"]["range_newton"] = 40;
-    sim::Simulator s = make(j, d.file(""), "rnewton.json");
-    int warnings = 0;
-    const sim::RunOptions ro = counting_range_warnings(warnings);
-    const sim::Assessment a = sim::run_scene(s, ro);
-    ASSERT_EQ(a.patches.size(), 1u);
-    const auto& p = a.patches[0];
-    EXPECT_EQ(p.unconverged_frames, 0);
-    EXPECT_EQ(p.range_refreshes, 0);
+    // The same with no halvings but model.range_newton 40: a frame beyond the linear range of its linearisation is
+    // solved as a Newton frame (the neo-Hookean patch with the blades' and walls' barriers, from where the frame
+    // started, its walls and pressed nodes first set 0.005 mm apart), and the frames go on from its state, linearised
+    // there. Measured: 7 of 28 frames Newton's, none failed, reach 0.098 x, blade force -3.90 %.
+    const BeyondRange r = flattened_beyond_the_range("rnewton", {{"range_newton", 40}});
+    const auto& p = r.p;
     EXPECT_EQ(p.range_splits, 0);
     EXPECT_GT(p.range_newton_frames, 0) << "no frame went beyond the range: the Newton frames were not exercised";
     EXPECT_EQ(p.range_newton_failed, 0);
-    EXPECT_LE(p.max_lag_to_thickness, 0.3);
-    EXPECT_EQ(warnings, 0);
-    EXPECT_GT(p.min_wall_distance_mm, -0.02);
-    const sim::Clip& c = s.clips().at(0);
-    EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
-    EXPECT_NEAR(c.grip_force_n, f_ref, 0.05 * f_ref);
     std::printf("no re-solves, Newton frames: %ld frames, %d linearisations, %d Newton frames (%d not converged); reach %.3f x at t = %.3f s, %d warnings; "
                 "blade force %.4f N vs neo-Hookean %.4f N (%+.2f %%), walls %.4f mm apart at the closest\n",
-                p.frames, p.linearisations, p.range_newton_frames, p.range_newton_failed, p.max_lag_to_thickness, p.max_lag_t, warnings, c.grip_force_n,
-                f_ref, 100 * (c.grip_force_n / f_ref - 1), p.min_wall_distance_mm);
+                p.frames, p.linearisations, p.range_newton_frames, p.range_newton_failed, p.max_lag_to_thickness, p.max_lag_t, r.warnings, r.c.grip_force_n,
+                r.f_ref, 100 * (r.c.grip_force_n / r.f_ref - 1), p.min_wall_distance_mm);
 }
 
 TEST(SimulatorPatch, ASpringClipStopsWhereTheTissueBalancesItsSpringAndLogsRepeatBitForBit) {
