@@ -941,13 +941,14 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // compliance frame's nearest attempt stands (and is warned, as without it).
             if (got == Span::BEYOND && scene.patch.range_newton > 0) {
                 const Stopwatch nw;
+                const int frame_halvings = o.max_halvings;  // (the frame's own budget, given back after)
                 o.max_iterations = o.max_total_iterations = scene.patch.range_newton;
                 o.max_halvings = 6;
                 lift_mm = NEWTON_LIFT_MM;
                 const fem::NewtonResult nr = newton_frame();
                 lift_mm = 0;
                 o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
-                o.max_halvings = 3;
+                o.max_halvings = frame_halvings;
                 if (nr.converged && !cancel_frames) {
                     ++P.stats.range_newton_frames;
                     // The frames' next start: Newton's state on the candidates (the LCP cold: no rows carried).

@@ -419,7 +419,7 @@ double ContactBody::min_distance(const Eigen::VectorXd& u) const {
 }
 
 namespace {
-// separated(): a vertex further behind its face than this is left there (a crease, the far side of a fold; the
+// separate_walls(): a vertex further behind its face than this is left there (a crease, the far side of a fold; the
 // compliance frames push a vertex back out from up to 0.05 mm through).
 constexpr double SEPARATE_BEHIND_MM = 0.05;
 }  // namespace

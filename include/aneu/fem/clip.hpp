@@ -176,7 +176,8 @@ public:
     /// own bound): continuous collision detection of the nodes' and the blades' motion.
     double max_step(const Eigen::VectorXd& v, const Eigen::VectorXd& dv) const override;
     BladeLoads loads(const Eigen::VectorXd& v) const;
-    /// v with every node the blades press (nearer a blade it faces than `delta_mm`, as the barrier measures it) moved
+    /// v with every node the blades press (nearer a blade it faces than `delta_mm`: its distance from the face itself,
+    /// not the barrier's, which sees the face a little behind a node that started on it or just behind it) moved
     /// to `delta_mm` in front of it, along the distance's gradient: a state the barrier can start from, for a start
     /// another contact model left (hard contact: nodes exactly on the faces). Make a ClipBody at the result to solve
     /// from it. delta_mm below gap_mm.
