@@ -187,6 +187,20 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
 
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
                                const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer) {
+    CompliantClip one;
+    one.blades = blades;
+    one.theta = theta;
+    return compliant_setup(std::vector<CompliantClip>{one}, x, reach, inner, approach_mm, outer);
+}
+
+CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
+                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer) {
+    if (clips.empty()) throw InputError("compliant setup: no clip");
+    auto near_any = [&](const Eigen::Vector3d& p, double margin) {
+        for (const CompliantClip& c : clips)
+            if (c.blades.near_wedge(c.theta, p, margin)) return true;
+        return false;
+    };
     const Eigen::Index n = x.rows();
     auto check = [&](int a) {
         if (a < 0 || a >= n) throw InputError("compliant setup: node " + std::to_string(a) + " outside the body's " + std::to_string(n));
@@ -195,7 +209,7 @@ CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eig
     std::vector<int> slot(static_cast<size_t>(n), -1);
     for (int a : reach) {
         check(a);
-        if (slot[static_cast<size_t>(a)] < 0 && blades.near_wedge(theta, x.row(a).transpose(), 0.1)) {
+        if (slot[static_cast<size_t>(a)] < 0 && near_any(x.row(a).transpose(), 0.1)) {
             slot[static_cast<size_t>(a)] = static_cast<int>(out.candidates.size());
             out.candidates.push_back(a);
         }
@@ -209,7 +223,7 @@ CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eig
             bool in = wedge;
             for (int k = 0; k < 3; ++k) {
                 check(surface(f, k));
-                in = in && blades.near_wedge(theta, x.row(surface(f, k)).transpose(), 0.3);
+                in = in && near_any(x.row(surface(f, k)).transpose(), 0.3);
             }
             if (in) near.push_back(f);
         }
@@ -650,7 +664,7 @@ bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::
 /// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
 CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
                           double theta_start, const CompliantFrame* warm, const CompliantOptions& opt, const CompliantWalls* walls,
-                          const Eigen::VectorXd& start) {
+                          const Eigen::VectorXd& start, const std::vector<CompliantClip>* more) {
     const Stopwatch sw;
     if (!(spring.k_nmm_per_rad > 0) || !(spring.preload_rad >= 0)) throw InputError("compliant clip: the spring needs k > 0 and a preload >= 0");
     if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
@@ -668,7 +682,8 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     struct Row {
         int n = 1;                         // candidates in the row
         std::array<int, 4> k{0, 0, 0, 0};  // which (a friction cell's: its first; all of them in kx)
-        int s = 1;                         // ±1: blade; 2 + face: a wall pair of vertex k[0] and that face; −2 − (2 side + dir): friction
+        int s = 1;                         // its kind (compliant_row_kind): a blade's, a wall pair's (2 + face), a friction row's
+        int clip = 0;                      // a blade or friction row's clip (0: the first; its θ may be free)
         double d = 0, b = 0;
         std::array<Eigen::Vector3d, 4> g;
         double lo = 0, hi = std::numeric_limits<double>::infinity();  // its force's bounds (friction rows: ±μ λ_n)
@@ -683,6 +698,19 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // A released clip closes at most max_closing_rad in one frame (θ ≥ θ_lo): the frames approach the balance
     // of spring and tissue, each linearising the blades where the last one left them.
     const double theta_lo = free_theta ? std::max(0.0, theta_ref - opt.max_closing_rad) : theta_ref;
+    // The clips: the first (θ free or held) and the further ones (CompliantClip), held; each blade of clip c is slot
+    // 2c + side (side 0: blade +1, 1: blade −1).
+    struct ClipAt {
+        const ClipBlades* b = nullptr;
+        double theta = 0, start = 0;  // this frame's opening, the last frame's
+    };
+    std::vector<ClipAt> clip_at{ClipAt{&blades, theta_ref, std::max(theta_start, 0.0)}};
+    if (more)
+        for (const CompliantClip& c : *more) {
+            if (!(c.theta >= 0)) throw InputError("compliant clip: a further clip's opening must be >= 0 rad");
+            clip_at.push_back(ClipAt{&c.blades, c.theta, std::max(c.theta_start, 0.0)});
+        }
+    const size_t ncl = clip_at.size();
     // The gaps are linearised where the candidates are: where the last frame left them (on this linearisation or
     // an older one), else at the free state. A candidate's position for forces f is free + W f, so a gap is
     // d(x_last) + Σ g · (free + W f − x_last).
@@ -706,64 +734,70 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     std::map<std::pair<int, int>, double> pressed;
     if (opt.blade_friction > 0 && warm)
         for (size_t i = 0; i < warm->constraint.size() && i < warm->lambda.size(); ++i)
-            if ((warm->constraint[i].second == 1 || warm->constraint[i].second == -1) && warm->lambda[i] > 0) pressed[warm->constraint[i]] = warm->lambda[i];
+            if (compliant_row_kind(warm->constraint[i].second).blade && warm->lambda[i] > 0) pressed[warm->constraint[i]] = warm->lambda[i];
     struct Cell {
-        int side = 0;                       // 0: blade +1, 1: blade −1
+        int slot = 0;                       // 2 clip + side (side 0: blade +1, 1: blade −1)
         std::vector<int> nodes;
         std::vector<double> lambda;
         std::vector<Eigen::Vector3d> stick;
     };
     std::vector<Cell> cells;
     std::map<std::array<long long, 3>, size_t> cell_of;
-    // Per blade (side 0: +1, 1: −1) its directions along, normal to and across it where the frame started (0) and now.
-    std::array<Eigen::Vector3d, 2> ft0, fn0, fw0, ft, fn, fw;
-    for (int side = 0; side < 2; ++side) {
-        const int s = side == 0 ? 1 : -1;
-        const size_t i = static_cast<size_t>(side);
-        blades.frame(s, std::max(theta_start, 0.0), ft0[i], fn0[i], fw0[i]);
-        blades.frame(s, theta_ref, ft[i], fn[i], fw[i]);
-    }
+    // Per blade slot its directions along, normal to and across it where the frame started (0) and now.
+    std::vector<Eigen::Vector3d> ft0(2 * ncl), fn0(2 * ncl), fw0(2 * ncl), ft(2 * ncl), fn(2 * ncl), fw(2 * ncl);
+    for (size_t c = 0; c < ncl; ++c)
+        for (int side = 0; side < 2; ++side) {
+            const int s = side == 0 ? 1 : -1;
+            const size_t i = 2 * c + static_cast<size_t>(side);
+            clip_at[c].b->frame(s, clip_at[c].start, ft0[i], fn0[i], fw0[i]);
+            clip_at[c].b->frame(s, clip_at[c].theta, ft[i], fn[i], fw[i]);
+        }
     for (Eigen::Index k = 0; k < nc; ++k) {
         const Eigen::Vector3d x = Xl.row(k).transpose();
-        for (int s : {1, -1}) {
-            if (blade_distance(blades, s, std::max(theta_start, 0.0), Xs.row(k).transpose()) < -BEHIND) continue;  // behind where the blade was
-            Row r;
-            const double d = blade_distance_d(blades, s, theta_ref, x, &r.g[0], &r.b);
-            const double d_lo = free_theta ? d - r.b * (theta_ref - theta_lo) : d;
-            if (std::min(d, d_lo) >= opt.reach_mm) continue;
-            if (r.g[0].squaredNorm() < 0.25) continue;  // no direction to push (a point on the core's edge line)
-            r.k[0] = static_cast<int>(k);
-            r.s = s;
-            r.d = d + r.g[0].dot(Xf.row(k).transpose() - x);
-            rows.push_back(r);
-            if (const auto it = pressed.find({static_cast<int>(k), s}); it != pressed.end()) {
-                const int side = s > 0 ? 0 : 1;
-                const size_t i = static_cast<size_t>(side);
-                const Eigen::Vector3d& t0 = ft0[i];
-                const Eigen::Vector3d& w0 = fw0[i];
-                const Eigen::Vector3d rel = Xs.row(k).transpose() - blades.hinge;
-                const Eigen::Vector3d stick = blades.hinge + rel.dot(t0) * ft[i] + rel.dot(w0) * fw[i] + rel.dot(fn0[i]) * fn[i];
-                const double h = opt.friction_cell_mm;
-                const std::array<long long, 3> key = h > 0 ? std::array<long long, 3>{side, static_cast<long long>(std::floor(rel.dot(t0) / h)), static_cast<long long>(std::floor(rel.dot(w0) / h))}
-                                                           : std::array<long long, 3>{side, static_cast<long long>(k), 0};
-                auto [pos, fresh] = cell_of.try_emplace(key, cells.size());
-                if (fresh) cells.push_back(Cell{side, {}, {}, {}});
-                Cell& c = cells[pos->second];
-                c.nodes.push_back(static_cast<int>(k));
-                c.lambda.push_back(it->second);
-                c.stick.push_back(stick);
+        for (size_t c = 0; c < ncl; ++c)
+            for (int side = 0; side < 2; ++side) {
+                const ClipAt& ca = clip_at[c];
+                const int sg = side == 0 ? 1 : -1;  // the blade, geometrically
+                if (blade_distance(*ca.b, sg, ca.start, Xs.row(k).transpose()) < -BEHIND) continue;  // behind where the blade was
+                Row r;
+                const double d = blade_distance_d(*ca.b, sg, ca.theta, x, &r.g[0], &r.b);
+                const double d_lo = free_theta && c == 0 ? d - r.b * (theta_ref - theta_lo) : d;
+                if (std::min(d, d_lo) >= opt.reach_mm) continue;
+                if (r.g[0].squaredNorm() < 0.25) continue;  // no direction to push (a point on the core's edge line)
+                r.k[0] = static_cast<int>(k);
+                r.s = compliant_blade_row(static_cast<int>(c), side);
+                r.clip = static_cast<int>(c);
+                r.d = d + r.g[0].dot(Xf.row(k).transpose() - x);
+                rows.push_back(r);
+                if (const auto it = pressed.find({static_cast<int>(k), r.s}); it != pressed.end()) {
+                    const int slot = 2 * static_cast<int>(c) + side;
+                    const size_t i = static_cast<size_t>(slot);
+                    const Eigen::Vector3d& t0 = ft0[i];
+                    const Eigen::Vector3d& w0 = fw0[i];
+                    const Eigen::Vector3d rel = Xs.row(k).transpose() - ca.b->hinge;
+                    const Eigen::Vector3d stick = ca.b->hinge + rel.dot(t0) * ft[i] + rel.dot(w0) * fw[i] + rel.dot(fn0[i]) * fn[i];
+                    const double h = opt.friction_cell_mm;
+                    const std::array<long long, 3> key = h > 0 ? std::array<long long, 3>{slot, static_cast<long long>(std::floor(rel.dot(t0) / h)), static_cast<long long>(std::floor(rel.dot(w0) / h))}
+                                                               : std::array<long long, 3>{slot, static_cast<long long>(k), 0};
+                    auto [pos, fresh] = cell_of.try_emplace(key, cells.size());
+                    if (fresh) cells.push_back(Cell{slot, {}, {}, {}});
+                    Cell& cl = cells[pos->second];
+                    cl.nodes.push_back(static_cast<int>(k));
+                    cl.lambda.push_back(it->second);
+                    cl.stick.push_back(stick);
+                }
             }
-        }
     }
     for (const Cell& c : cells) {
         double total = 0;
         for (double l : c.lambda) total += l;
         for (int dir = 0; dir < 2; ++dir) {
-            const Eigen::Vector3d& e = dir == 0 ? ft[static_cast<size_t>(c.side)] : fw[static_cast<size_t>(c.side)];
+            const Eigen::Vector3d& e = dir == 0 ? ft[static_cast<size_t>(c.slot)] : fw[static_cast<size_t>(c.slot)];
             Row fr;
             fr.n = static_cast<int>(c.nodes.size());
             fr.k[0] = c.nodes[0];
-            fr.s = -2 - (2 * c.side + dir);
+            fr.clip = c.slot / 2;
+            fr.s = compliant_friction_row(c.slot / 2, c.slot % 2, dir);
             fr.kx = c.nodes;
             fr.d = 0;
             for (size_t a = 0; a < c.nodes.size(); ++a) {
@@ -888,6 +922,9 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     const double t_rows = sw.seconds();
     const Eigen::Index m = static_cast<Eigen::Index>(rows.size()), mz = m + (free_theta ? 1 : 0);
     const double k = spring.k_nmm_per_rad, th0 = spring.preload_rad;
+    // Per row its gap's rate on the first clip's θ (a further clip's rows do not move with it; friction rows: 0).
+    std::vector<double> bth(rows.size(), 0.0);
+    for (size_t i = 0; i < rows.size(); ++i) bth[i] = rows[i].clip == 0 ? rows[i].b : 0.0;
     // Delassus matrix and constant term: w = q + A z ≥ 0, z ≥ 0, zᵀ w = 0; z = (λ, μ_stop).
     Eigen::Map<Eigen::MatrixXd> A = scratch_square(delassus_scratch(), mz);
     Eigen::VectorXd q(mz);
@@ -960,12 +997,12 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             }
         if (free_theta)  // θ's own give, b bᵀ / k, column by column
             for (Eigen::Index j = 0; j < m; ++j) {
-                const double bj = rows[static_cast<size_t>(j)].b / k;
-                for (Eigen::Index i = 0; i < m; ++i) A(i, j) += rows[static_cast<size_t>(i)].b * bj;
+                const double bj = bth[static_cast<size_t>(j)] / k;
+                for (Eigen::Index i = 0; i < m; ++i) A(i, j) += bth[static_cast<size_t>(i)] * bj;
             }
         for (Eigen::Index i = 0; i < m; ++i) {
             const Row& ri = rows[static_cast<size_t>(i)];
-            q[i] = free_theta ? ri.d - ri.b * (th0 + theta_ref) : ri.d;
+            q[i] = free_theta ? ri.d - bth[static_cast<size_t>(i)] * (th0 + theta_ref) : ri.d;
         }
     }
     const double t_delassus = sw.seconds();
@@ -976,10 +1013,10 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // make the pivoting on the sample's pressed walls converge any better, and cost the analytic tests 10⁻⁶.)
     constexpr double CFM = 1e-9;
     double amax = 0;
-    for (Eigen::Index i = 0; i < m; ++i) amax = std::max(amax, A(i, i) - (free_theta ? rows[static_cast<size_t>(i)].b * rows[static_cast<size_t>(i)].b / k : 0.0));
+    for (Eigen::Index i = 0; i < m; ++i) amax = std::max(amax, A(i, i) - (free_theta ? bth[static_cast<size_t>(i)] * bth[static_cast<size_t>(i)] / k : 0.0));
     for (Eigen::Index i = 0; i < m; ++i) A(i, i) += CFM * amax + 1e-15;
     if (free_theta) {
-        for (Eigen::Index i = 0; i < m; ++i) A(m, i) = A(i, m) = rows[static_cast<size_t>(i)].b / k;
+        for (Eigen::Index i = 0; i < m; ++i) A(m, i) = A(i, m) = bth[static_cast<size_t>(i)] / k;
         A(m, m) = 1.0 / k;
         q[m] = -th0 - theta_lo;
     }
@@ -1019,7 +1056,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     out.theta = theta_held ? *theta_held : theta_ref;
     if (free_theta) {
         double bl = 0;
-        for (Eigen::Index i = 0; i < m; ++i) bl += rows[static_cast<size_t>(i)].b * z[i];
+        for (Eigen::Index i = 0; i < m; ++i) bl += bth[static_cast<size_t>(i)] * z[i];
         out.theta = std::max(theta_lo, (bl + z[m]) / k - th0);
     }
     // The candidates' displacement: the free state's plus the compliance's columns of the pressed candidates only.
@@ -1037,28 +1074,35 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     }
     out.loads.opening_rad = out.theta;
     out.loads.spring_torque_nmm = spring.torque(out.theta);
+    out.more_loads.resize(ncl - 1);
+    for (size_t c = 1; c < ncl; ++c) {
+        out.more_loads[c - 1].opening_rad = clip_at[c].theta;
+        out.more_loads[c - 1].spring_torque_nmm = (*more)[c - 1].spring.torque(clip_at[c].theta);
+    }
     for (Eigen::Index i = 0; i < m; ++i) {
         const Row& r = rows[static_cast<size_t>(i)];
         out.lambda.push_back(z[i]);
         out.constraint.emplace_back(r.k[0], r.s);
-        if (r.s <= -2) {  // a friction row (its force may have either sign)
-            const int side = (-2 - r.s) / 2;
-            out.loads.friction_n[side] += std::abs(z[i]);
-            if (r.hi > 0 && std::abs(z[i]) >= r.hi * (1 - 1e-9)) ++out.loads.sliding[side];
-            for (int a = 0; a < r.n; ++a) out.loads.net_force -= z[i] * r.grad(a);
+        const CompliantRowKind kind = compliant_row_kind(r.s);
+        BladeLoads& L = kind.wall || r.clip == 0 ? out.loads : out.more_loads[static_cast<size_t>(r.clip - 1)];
+        if (kind.friction) {  // a friction row (its force may have either sign)
+            const int side = kind.side;
+            L.friction_n[side] += std::abs(z[i]);
+            if (r.hi > 0 && std::abs(z[i]) >= r.hi * (1 - 1e-9)) ++L.sliding[side];
+            for (int a = 0; a < r.n; ++a) L.net_force -= z[i] * r.grad(a);
             continue;
         }
         if (z[i] <= 0) continue;
-        if (r.s >= 2) {
+        if (kind.wall) {
             ++out.wall_contacts;
             out.wall_force_n += z[i];
             continue;
         }
-        const int side = r.s > 0 ? 0 : 1;
-        out.loads.force_n[side] += z[i];
-        out.loads.moment_nmm[side] += 2 * r.b * z[i];
-        ++out.loads.contacts[side];
-        out.loads.net_force -= z[i] * r.g[0];
+        const int side = kind.side;
+        L.force_n[side] += z[i];
+        L.moment_nmm[side] += 2 * r.b * z[i];
+        ++L.contacts[side];
+        L.net_force -= z[i] * r.g[0];
     }
     out.wall_rows = wall_rows;
     out.wall_min_distance_mm = wall_min;
@@ -1152,7 +1196,8 @@ void trace_walls(const Linearisation& lin, const CompliantWalls& walls, const Co
 
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm,
-                                    const CompliantOptions& opt, const CompliantWalls* walls, const Eigen::VectorXd* start_u) {
+                                    const CompliantOptions& opt, const CompliantWalls* walls, const Eigen::VectorXd* start_u,
+                                    const std::vector<CompliantClip>* more) {
     const Stopwatch sw;
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
     if (start_u && start_u->size() != 3 * nc)
@@ -1161,13 +1206,13 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // The gaps are linear in the candidates' motion only to first order (a blade's or a face's normal turns as it
     // moves): passes re-linearise them where the last pass ended, on the same compliance, until the candidates
     // move less than the sweeps' tolerance.
-    CompliantFrame f = solve_pass(lin, blades, spring, theta_held, theta_start, warm, opt, walls, start);
+    CompliantFrame f = solve_pass(lin, blades, spring, theta_held, theta_start, warm, opt, walls, start, more);
     static const bool wall_trace = std::getenv("ANEU_WALL_TRACE") != nullptr;
     std::vector<CompliantFrame> pass_ends;  // ANEU_WALL_TRACE: each pass's end, for the worst crossing's history
     if (wall_trace && walls) pass_ends.push_back(f);
     int passes = 1;
     for (; passes < opt.geometry_passes; ++passes) {
-        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start, more);
         if (wall_trace && walls) pass_ends.push_back(g);
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
@@ -1198,7 +1243,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // face its rows left out) takes more passes, from there, while they do: the next has that face's row.
     if (walls)
         for (int extra = 0; extra < opt.wall_extra_passes && f.wall_min_distance_mm < -opt.wall_crossed_mm; ++extra) {
-            CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start);
+            CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start, more);
             g.rows_s += f.rows_s;
             g.delassus_s += f.delassus_s;
             g.lcp_s += f.lcp_s;
@@ -1289,7 +1334,8 @@ void carry_compliant_frames(const std::vector<int>& from_cand, const Eigen::Matr
 
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
-                                          const CompliantFrame* warm, const CompliantOptions& opt, int* repeats, const Eigen::VectorXd* start) {
+                                          const CompliantFrame* warm, const CompliantOptions& opt, int* repeats, const Eigen::VectorXd* start,
+                                          const std::vector<CompliantClip>* more) {
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
     if (Xc.rows() != nc) throw InputError("compliant clip: " + std::to_string(Xc.rows()) + " candidate positions for " + std::to_string(nc) + " candidates");
     if (start && start->size() != 3 * nc)
@@ -1337,7 +1383,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         }
         walls.pairs = ws.pairs;
         search_s += sw.lap();
-        CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls, &u0);
+        CompliantFrame f = solve_compliant_clip(lin, blades, spring, theta_held, theta_start, warm, opt, &walls, &u0, more);
         frames_s += sw.lap();
         acc.rows_s += f.rows_s;
         acc.delassus_s += f.delassus_s;

@@ -344,6 +344,172 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
                 without.f.loads.force_n[0]);
 }
 
+TEST(CompliantClip, RowKindsNameTheClipTheSideAndTheDirection) {
+    for (int clip = 0; clip < 4; ++clip)
+        for (int side = 0; side < 2; ++side) {
+            const fem::CompliantRowKind b = fem::compliant_row_kind(fem::compliant_blade_row(clip, side));
+            EXPECT_TRUE(b.blade && !b.friction && !b.wall);
+            EXPECT_EQ(b.clip, clip);
+            EXPECT_EQ(b.side, side);
+            for (int dir = 0; dir < 2; ++dir) {
+                const fem::CompliantRowKind f = fem::compliant_row_kind(fem::compliant_friction_row(clip, side, dir));
+                EXPECT_TRUE(f.friction && !f.blade && !f.wall);
+                EXPECT_EQ(f.clip, clip);
+                EXPECT_EQ(f.side, side);
+                EXPECT_EQ(f.dir, dir);
+            }
+        }
+    // The first clip's rows as they always were: blades ±1, friction −2 − (2 side + dir); walls 2 + face.
+    EXPECT_EQ(fem::compliant_blade_row(0, 0), 1);
+    EXPECT_EQ(fem::compliant_blade_row(0, 1), -1);
+    EXPECT_EQ(fem::compliant_friction_row(0, 1, 1), -5);
+    const fem::CompliantRowKind w = fem::compliant_row_kind(2 + 17);
+    EXPECT_TRUE(w.wall && !w.blade && !w.friction);
+    EXPECT_EQ(w.face, 17);
+}
+
+TEST(CompliantClip, TandemClipsSideBySideFlattenTheTubeUnderBothInOneContactProblem) {
+    // Two clips with 1 mm blades side by side across the tube of the test above (BladesOnATube, 24 nodes round), 0.1 mm
+    // apart along it (z = 2 ∓ 0.55), both closed to 0.5 mm in the same frames (the second a further clip, held), against
+    // one of them alone: a neck line spread wider than one blade is what tandem clips are for.
+    const BladesOnATube tube(24);
+    const fem::ClipSpring spring = test_spring();
+    fem::ClipBlades a = tube.blades, b = tube.blades, far = tube.blades;
+    a.width_mm = b.width_mm = far.width_mm = 1.0;
+    a.hinge.z() = 2.0 - 0.55;
+    b.hinge.z() = 2.0 + 0.55;
+    far.hinge.z() = 50.0;  // nowhere near the tube
+    struct End {
+        fem::CompliantFrame f;
+        Eigen::VectorXd u;
+    };
+    auto run = [&](const fem::ClipBlades& first, const std::vector<fem::ClipBlades>& others) {
+        fem::CompliantWallSearch ws;
+        // One wall row a vertex, as aneusim's patch frames: with every face a vertex lies over as a row, the flattened
+        // band under both clips (500 rows) made the LCP so nearly degenerate that block pivoting took thousands of
+        // single flips and did not finish in 5,000 (with one face: at most 14).
+        fem::CompliantOptions opt;
+        opt.wall_one_face = true;
+        End e;
+        e.u = Eigen::VectorXd::Zero(tube.solid.dofs());
+        e.f.theta = tube.theta_touch;
+        for (int frame = 0; frame < 24; ++frame) {
+            const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * std::min(1.0, (frame + 1) / 16.0);
+            std::vector<fem::CompliantClip> more;
+            for (const fem::ClipBlades& o : others) {
+                fem::CompliantClip c;
+                c.blades = o;
+                c.theta = th;
+                c.theta_start = e.f.theta;
+                more.push_back(c);
+            }
+            const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, e.u, tube.cand);
+            const fem::CompliantFrame last = e.f;
+            e.f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, first, spring, th, last.theta, frame ? &last : nullptr, opt, nullptr, nullptr,
+                                                  &more);
+            e.u = lin.displacement(e.f.candidate_forces);
+        }
+        return e;
+    };
+    auto deepest = [&](const Eigen::VectorXd& u) {
+        double d = 0;
+        for (const auto& x : fem::surface_crossings(tube.m.V, tube.F.leftCols(3), u, 1, 0.25)) d = std::max(d, x.depth_mm);
+        return d;
+    };
+    // Along the tube, the span of the inner-wall vertices pressed on the opposite wall.
+    auto pressed_span = [&](const End& e) {
+        double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+        for (size_t i = 0; i < e.f.constraint.size(); ++i)
+            if (fem::compliant_row_kind(e.f.constraint[i].second).wall && e.f.lambda[i] > 0) {
+                const int k = e.f.constraint[i].first;
+                const double z = tube.Xc(k, 2) + e.f.candidate_u[3 * k + 2];
+                lo = std::min(lo, z);
+                hi = std::max(hi, z);
+            }
+        return hi - lo;
+    };
+    const End one = run(a, {});
+    const End pair = run(a, {b});
+    const End swapped = run(b, {a});
+    const End with_far = run(a, {far});
+    ASSERT_EQ(pair.f.more_loads.size(), 1u);
+    // Both clips press, alike (the pair is symmetric about z = 2, the tube's tetrahedra nearly so), and the walls under
+    // both touch, not through.
+    const double fa = pair.f.loads.force_n[0], fb = pair.f.more_loads[0].force_n[0];
+    EXPECT_GT(fa, 0.0);
+    EXPECT_NEAR(fb, fa, 0.02 * fa);
+    EXPECT_NEAR(pair.f.more_loads[0].force_n[1], fb, 0.02 * fb);
+    EXPECT_GT(pair.f.more_loads[0].contacts[0], 0);
+    EXPECT_NEAR(pair.f.more_loads[0].opening_rad, tube.theta_end, 1e-15);
+    EXPECT_LT(deepest(pair.u), 1e-3);
+    EXPECT_LE(pair.f.complementarity_mm, 1e-9);
+    // Which of the two is the first clip does not matter.
+    EXPECT_NEAR(swapped.f.loads.force_n[0], fb, 1e-3 * fb);
+    EXPECT_NEAR(swapped.f.more_loads[0].force_n[0], fa, 1e-3 * fa);
+    // The second clip flattens the tube over its own width too: the pressed walls span its offset further.
+    const double span_one = pressed_span(one), span_pair = pressed_span(pair);
+    EXPECT_GT(span_pair, span_one + 0.8);
+    // Together they push harder than one alone (a wider band flattened).
+    EXPECT_GT(fa + fb, one.f.loads.force_n[0]);
+    // A further clip that reaches nothing leaves the frame the single clip's, to the bit, with loads of zero.
+    EXPECT_EQ(with_far.f.loads.force_n[0], one.f.loads.force_n[0]);
+    EXPECT_EQ(with_far.f.loads.moment_nmm[1], one.f.loads.moment_nmm[1]);
+    EXPECT_EQ(with_far.u, one.u);
+    EXPECT_EQ(with_far.f.more_loads[0].contacts[0] + with_far.f.more_loads[0].contacts[1], 0);
+    EXPECT_EQ(with_far.f.more_loads[0].force_n[0], 0.0);
+    // With blade friction, each clip's pressed nodes get their own friction rows (held where they stood on its blades).
+    {
+        fem::CompliantOptions fo;
+        fo.wall_one_face = true;
+        fo.blade_friction = 0.3;
+        std::vector<fem::CompliantClip> more(1);
+        more[0].blades = b;
+        more[0].theta = more[0].theta_start = tube.theta_end;
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, pair.u, tube.cand);
+        fem::CompliantWallSearch ws;
+        const fem::CompliantFrame g =
+            fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, a, spring, tube.theta_end, tube.theta_end, &pair.f, fo, nullptr, nullptr, &more);
+        std::array<int, 2> rows{0, 0};
+        for (const auto& c : g.constraint)
+            if (const fem::CompliantRowKind k = fem::compliant_row_kind(c.second); k.friction) ++rows[static_cast<size_t>(k.clip)];
+        EXPECT_GT(rows[0], 0);
+        EXPECT_GT(rows[1], 0);
+        EXPECT_LE(g.complementarity_mm, 1e-6);
+        EXPECT_NEAR(g.more_loads[0].force_n[0], fb, 0.05 * fb);  // held where it was: about the same grip
+    }
+    // The setup for both: a node near either clip's wedge, once.
+    Eigen::MatrixX3d x = tube.m.V;
+    std::vector<int> reach;
+    for (Eigen::Index i = 0; i < x.rows(); ++i) reach.push_back(static_cast<int>(i));
+    Eigen::MatrixX3i inner = tube.F.leftCols(3);
+    std::vector<fem::CompliantClip> both(2);
+    both[0].blades = a;
+    both[1].blades = b;
+    both[0].theta = both[1].theta = tube.theta_touch;
+    const fem::CompliantSetup sa = fem::compliant_setup(a, tube.theta_touch, x, reach, inner, 0.0), sb = fem::compliant_setup(b, tube.theta_touch, x, reach, inner, 0.0);
+    const fem::CompliantSetup sab = fem::compliant_setup(both, x, reach, inner, 0.0);
+    std::vector<int> want(sa.candidates.begin(), sa.candidates.begin() + static_cast<long>(sa.blade_candidates));
+    want.insert(want.end(), sb.candidates.begin(), sb.candidates.begin() + static_cast<long>(sb.blade_candidates));
+    std::sort(want.begin(), want.end());
+    want.erase(std::unique(want.begin(), want.end()), want.end());
+    std::vector<int> got(sab.candidates.begin(), sab.candidates.begin() + static_cast<long>(sab.blade_candidates));
+    std::sort(got.begin(), got.end());
+    EXPECT_EQ(got, want);
+    EXPECT_GT(sab.blade_candidates, std::max(sa.blade_candidates, sb.blade_candidates));
+    EXPECT_GE(sab.faces.rows(), std::max(sa.faces.rows(), sb.faces.rows()));
+    EXPECT_THROW(fem::compliant_setup(std::vector<fem::CompliantClip>{}, x, reach, inner), InputError);
+    // A further clip's opening below 0 is refused.
+    {
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, Eigen::VectorXd::Zero(tube.solid.dofs()), tube.cand);
+        std::vector<fem::CompliantClip> bad(1);
+        bad[0].blades = b;
+        bad[0].theta = -0.1;
+        EXPECT_THROW(fem::solve_compliant_clip(lin, a, spring, tube.theta_touch, tube.theta_touch, nullptr, {}, nullptr, nullptr, &bad), InputError);
+    }
+    std::printf("tandem 1 mm clips on the tube: %.4f + %.4f N (swapped %.4f + %.4f), one alone %.4f N; pressed walls span %.3f mm (one: %.3f)\n", fa, fb,
+                swapped.f.loads.force_n[0], swapped.f.more_loads[0].force_n[0], one.f.loads.force_n[0], span_pair, span_one);
+}
+
 TEST(CompliantClip, WallsThatStartAFrameALittleThroughEachOtherArePushedBackOutNotTakenForACrease) {
     // The tube closed without the walls' contact until its walls are 0.01-0.05 mm through each other (as C0024's crept
     // 0.004 -> 0.022 mm, session 46), then held there with it. The walls were not through each other at rest: the frames

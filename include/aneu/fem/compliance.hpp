@@ -129,6 +129,48 @@ struct CompliantOptions {
     bool wall_one_face = false;
 };
 
+/// A further clip in the same frames (tandem clips over one neck on one patch: a neck line spread wider than one
+/// blade needs a second clip beside the first). Its opening is held in the frame (the simulator prescribes every
+/// clip's opening in its frames; a spring clip's by its balance's secant steps, each clip on its own R = τ − M).
+struct CompliantClip {
+    ClipBlades blades;
+    double theta = 0;         ///< the opening it holds in this frame [rad], ≥ 0
+    double theta_start = 0;   ///< its opening where the last frame left it (what lies behind a blade there stays behind)
+    ClipSpring spring{1.0, 0.0};  ///< for its loads' spring torque only (the opening is held)
+};
+
+/// CompliantFrame::constraint's row kinds, its second member s: the first clip's blades ±1 (+1, −1) and its friction
+/// rows −2 − (2 side + dir) (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across); a wall pair 2 + face;
+/// a further clip c ≥ 1 (CompliantClip c − 1) its blade side σ −6c − σ, its friction rows −6c − 2 − (2 side + dir).
+constexpr int compliant_blade_row(int clip, int side) { return clip == 0 ? (side == 0 ? 1 : -1) : -6 * clip - side; }
+constexpr int compliant_friction_row(int clip, int side, int dir) { return -6 * clip - 2 - (2 * side + dir); }
+struct CompliantRowKind {
+    bool blade = false, friction = false, wall = false;
+    int clip = 0, side = 0, dir = 0, face = -1;
+};
+constexpr CompliantRowKind compliant_row_kind(int s) {
+    CompliantRowKind k;
+    if (s >= 2) {
+        k.wall = true;
+        k.face = s - 2;
+    } else if (s == 1 || s == -1) {
+        k.blade = true;
+        k.side = s == 1 ? 0 : 1;
+    } else if (s <= -2) {
+        k.clip = (-s) / 6;
+        const int r = (-s) % 6;
+        if (r < 2) {
+            k.blade = true;
+            k.side = r;
+        } else {
+            k.friction = true;
+            k.side = (r - 2) / 2;
+            k.dir = (r - 2) % 2;
+        }
+    }
+    return k;
+}
+
 /// The inner walls' contact in the frame (wall-on-wall, as fem::ContactBody, but hard): vertex–face pairs of
 /// surface triangles whose corners are all candidates (indices into the linearisation's candidates), found by
 /// fem::contact_pairs where the frames are (the caller renews them as they move).
@@ -174,6 +216,12 @@ constexpr double APPROACH_BEHIND_MM = 0.05;
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
                                const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM,
                                const Eigen::MatrixX3i& outer = Eigen::MatrixX3i());
+/// The same for several clips on one patch (tandem clips: CompliantClip's blades at `theta`): a node or face near any
+/// clip's wedge is taken, once. The first clip alone gives the single clip's setup.
+/// @throws InputError no clip, or a node outside x
+CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
+                               const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM,
+                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i());
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {
@@ -181,9 +229,11 @@ struct CompliantFrame {
     Eigen::VectorXd candidate_forces;  ///< the blades' forces on the candidates (3|C|) [N]
     Eigen::VectorXd candidate_u;       ///< the candidates' displacement (3|C|) [mm]
     BladeLoads loads;                  ///< as ClipBody::loads: normal force and moment per blade, spring torque
+    std::vector<BladeLoads> more_loads; ///< the further clips' (CompliantClip), in their order
     std::vector<double> lambda;        ///< per constraint: its force, normal (a friction row's: tangential) (warm start of the next frame)
     /// per constraint: (candidate, blade ±1), (vertex, 2 + face) for a wall pair, or (candidate, −2 − (2 side + dir))
-    /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it; a cell's: its first candidate)
+    /// for a friction row (side 0: blade +1, 1: blade −1; dir 0 along the blade, 1 across it; a cell's: its first candidate);
+    /// a further clip's rows as compliant_row_kind says
     std::vector<std::pair<int, int>> constraint;
     int wall_rows = 0;                 ///< wall pairs within reach (constraints)
     int wall_contacts = 0;             ///< wall pairs pressed together
@@ -219,9 +269,14 @@ struct CompliantFrame {
 ///                    solved again on a new linearisation, warm from its own last attempt, passes where it started:
 ///                    with the attempt's end taken for the start, every re-solve turned the gripped tissue with the
 ///                    blades once more (session 49: the re-solves' reach stayed at the blades' step a frame).
+/// @param more        further clips in the same frame, each held at its opening (null or empty: one clip); their
+///                    rows join the same problem, their loads are the frame's more_loads. The first clip's θ alone
+///                    may be free (theta_held none).
+/// @throws InputError a further clip's opening below 0
 CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring,
                                     std::optional<double> theta_held, double theta_start, const CompliantFrame* warm = nullptr,
-                                    const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr, const Eigen::VectorXd* start = nullptr);
+                                    const CompliantOptions& opt = {}, const CompliantWalls* walls = nullptr, const Eigen::VectorXd* start = nullptr,
+                                    const std::vector<CompliantClip>* more = nullptr);
 
 /// What a sequence of wall frames keeps between frames: the pair rules (their close vertices grow as crossings are
 /// found), the last pair search and where it was made, the crossings where the last frame ended.
@@ -257,7 +312,7 @@ struct CompliantWallSearch {
 CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, CompliantWallSearch& ws,
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr,
-                                          const Eigen::VectorXd* start = nullptr);
+                                          const Eigen::VectorXd* start = nullptr, const std::vector<CompliantClip>* more = nullptr);
 
 /// A sequence of frames carried over to another candidate set (a refresh that selects the candidates again for the
 /// jaws as they are now: aneusim's patch): the last frame's constraints and their forces, and the candidates'
