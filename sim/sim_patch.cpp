@@ -427,6 +427,22 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         O.pm.reset();
         patches[static_cast<size_t>(old)] = std::move(P);
     } else {
+        // Another clip's patch over the same tissue (tandem clips on one neck): the two are not coupled, each solves
+        // with its own blades and writes its displacement to the nodes they share. The compliance frames can take
+        // several clips in one problem (fem::CompliantClip); a patch owning several clips is not built yet (notes:
+        // compliance.md, session 54). Said once a pair, not hidden.
+        for (const PatchRun& O : patches) {
+            if (!O.alive || !O.pm || O.clip == clip) continue;
+            size_t shared = 0;
+            for (int n : P.pm->nodes()) shared += O.pm->local(n) >= 0 ? 1 : 0;
+            if (shared == 0) continue;
+            char b[400];
+            std::snprintf(b, sizeof b,
+                          "clip %d's nonlinear patch shares %zu nodes with clip %d's: two clips on the same tissue are not coupled in the patch model "
+                          "(each patch solves with its own clip's blades only); place the clips further apart or use model.wall = \"linear\"",
+                          clip, shared, O.clip);
+            warn(b);
+        }
         patch_of_clip[static_cast<size_t>(clip)] = static_cast<int>(patches.size());
         patches.push_back(std::move(P));
     }

@@ -937,6 +937,43 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
                 ref_min, p.wall_pairs_touching, p.mean_iterations, p.mean_solve_ms);
 }
 
+TEST(SimulatorPatch, ASecondClipsPatchOverTheFirstsTissueIsWarnedNotSilentlyUncoupled) {
+    // The compliance flattening scene with a second applier closing the same clip model 2 mm along the tube (0.8 mm
+    // between the 1.2 mm blades): the two patches share tissue. A patch owning several clips is not built yet (the
+    // frames can take them: fem::CompliantClip), so the simulator says so, once, naming both clips; one clip alone
+    // says nothing of the kind.
+    test::TempDir d("patchtwo");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    auto count = [&](const json& j, const std::string& name) {
+        sim::Simulator s = make(j, d.file(""), name);
+        int shared = 0;
+        std::string said;
+        sim::RunOptions ro;
+        ro.on_message = [&](const std::string& m) {
+            if (m.find("nonlinear patch shares") != std::string::npos) {
+                ++shared;
+                said = m;
+            }
+        };
+        const sim::Assessment a = sim::run_scene(s, ro);
+        return std::make_tuple(shared, said, a.patches.size());
+    };
+    const json one = compliance_flattening_scene(bundle, 0, -1);
+    json two = one;
+    json second = two["instruments"][0];
+    second["name"] = "applier 2";
+    for (json& k : second["keyframes"]) k["position"][2] = k["position"][2].get<double>() + 2.0;
+    two["instruments"].push_back(second);
+    const auto [n1, said1, patches1] = count(one, "one.json");
+    EXPECT_EQ(n1, 0) << said1;
+    EXPECT_EQ(patches1, 1u);
+    const auto [n2, said2, patches2] = count(two, "two.json");
+    EXPECT_EQ(patches2, 2u);
+    EXPECT_EQ(n2, 1) << said2;
+    EXPECT_NE(said2.find("clip 1's nonlinear patch shares"), std::string::npos) << said2;
+    EXPECT_NE(said2.find("with clip 0's"), std::string::npos) << said2;
+}
+
 TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceWhenRelinearisedEveryFrame) {
     // model.patch_solver = "compliance": each frame is the blades' and walls' hard contact on the patch's compliance
     // at a linearisation (fem::solve_compliant_clip_walls). Relinearised every frame (refresh_frames 1) the frames are
