@@ -430,7 +430,7 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         // Another clip's patch over the same tissue (tandem clips on one neck): the two are not coupled, each solves
         // with its own blades and writes its displacement to the nodes they share. The compliance frames can take
         // several clips in one problem (fem::CompliantClip); a patch owning several clips is not built yet (notes:
-        // compliance.md, session 54). Said once a pair, not hidden.
+        // compliance.md, session 54). Said when the patch is made, for each clip whose patch it overlaps.
         for (const PatchRun& O : patches) {
             if (!O.alive || !O.pm || O.clip == clip) continue;
             size_t shared = 0;
@@ -996,8 +996,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);
             const Eigen::Vector3d w_dir = blades.axis.cross(blades.up);
             for (size_t i = 0; i < f.constraint.size() && i < f.lambda.size(); ++i) {
-                const auto [k, side] = f.constraint[i];
-                if ((side != 1 && side != -1) || !(f.lambda[i] > 0)) continue;
+                const auto [k, s] = f.constraint[i];
+                const fem::CompliantRowKind kind = fem::compliant_row_kind(s);
+                if (!kind.blade || kind.clip != 0 || !(f.lambda[i] > 0)) continue;
                 const Eigen::Vector3d x = C->Xc.row(k).transpose() + f.candidate_u.segment<3>(3 * static_cast<Eigen::Index>(k));
                 const double r = (x - blades.hinge).dot(blades.axis), a = (x - blades.hinge).dot(w_dir) + 0.5 * blades.width_mm + 0.1;
                 const auto bin = static_cast<size_t>(std::clamp(std::floor(r), 0.0, static_cast<double>(c_profile.size() - 1)));
