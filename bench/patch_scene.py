@@ -24,6 +24,9 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
                     experiment on how much of the neck line the grip holds between the jaws
   --hold            the applier holds the clip closed to the scene's end (the keyframes after the one that closes it
                     dropped: no release): a real-time run whose patch is made long after the planned release
+  --tandem-mm D     a second applier beside the first (tandem clips: the same clip model, the same timeline), its path
+                    D mm across the blades (along axis x up; the sign picks the side: the plan's header's neck normal
+                    is printed with the side it lands on); an experiment until `aneusim plan` plans tandem clips
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
@@ -53,6 +56,7 @@ ap.add_argument("--hold", action="store_true")
 ap.add_argument("--curve-radius-mm", type=float, default=0.0)
 ap.add_argument("--turn-deg", type=float, default=0.0)
 ap.add_argument("--across-mm", type=float, default=0.0)
+ap.add_argument("--tandem-mm", type=float, default=0.0)
 a = ap.parse_args()
 raw = open(a.plan).read()
 text = "\n".join(l for l in raw.splitlines() if not l.lstrip().startswith("//"))
@@ -160,4 +164,26 @@ if a.slow > 0:
     end.update(t=600.0, opening_deg=0.0)
     s["instruments"][0]["keyframes"] = [k[0], at, mid, end]
     s["duration_s"] = a.slow
+if a.tandem_mm != 0:
+    import copy
+    import math
+    import re
+    first = next(i for i in s["instruments"] if i["kind"] == "clip_applier")
+    keys = first["keyframes"]
+    ax = next(k["axis"] for k in keys if "axis" in k)
+    up = next(k["up"] for k in keys if "up" in k)
+    w = [ax[1] * up[2] - ax[2] * up[1], ax[2] * up[0] - ax[0] * up[2], ax[0] * up[1] - ax[1] * up[0]]
+    nw = math.sqrt(sum(x * x for x in w))
+    w = [x / nw for x in w]
+    second = copy.deepcopy(first)
+    second["name"] = first["name"] + " 2"
+    for k in second["keyframes"]:
+        if "position" in k:
+            k["position"] = [round(p + a.tandem_mm * x, 4) for p, x in zip(k["position"], w)]
+    s["instruments"].insert(s["instruments"].index(first) + 1, second)
+    m = re.search(r"normal towards the sac \(([-0-9.e]+), ([-0-9.e]+), ([-0-9.e]+)\)", raw)
+    if m:
+        n = [float(v) for v in m.groups()]
+        along = a.tandem_mm * sum(x * y for x, y in zip(w, n))
+        print("tandem: the second clip %+.3f mm along the neck's normal (%s side)" % (along, "sac" if along > 0 else "parent"))
 json.dump(s, open(a.scene, "w"), indent=1)

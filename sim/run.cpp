@@ -574,7 +574,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
     if (scene.wall_model == WallModel::PATCH) {
         j["patches"] = nlohmann::json::array();
         for (const auto& p : a.patches)
-            j["patches"].push_back({{"clip", p.clip}, {"tets", p.tets}, {"nodes", p.nodes}, {"interface_nodes", p.interface_nodes},
+            j["patches"].push_back({{"clip", p.clip}, {"more_clips", p.more_clips}, {"tets", p.tets}, {"nodes", p.nodes}, {"interface_nodes", p.interface_nodes},
                                     {"builds", p.builds}, {"setup_s", p.setup_s}, {"frames", p.frames},
                                     {"unconverged_frames", p.unconverged_frames}, {"max_newton_iterations", p.max_iterations},
                                     {"mean_newton_iterations", p.mean_iterations}, {"mean_solve_ms", p.mean_solve_ms},

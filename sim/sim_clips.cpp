@@ -132,16 +132,20 @@ void Simulator::Impl::release(int i, double t) {
         c.state = Clip::State::DEPOSITED;
         for (Area& ar : areas)
             if (ar.part / 2 == i) ar.alive = false;
-        if (P.contacts > 0) {
+        // (A patch's further clip, tandem: its own blades' contacts.)
+        int gripping = P.contacts;
+        for (const PatchRun::Member& m : P.more)
+            if (m.clip == c.id) gripping = m.contacts;
+        if (gripping > 0) {
             c.release_pose = c.pose;
             c.shift.setZero();
-            c.n_nodes = P.contacts;
+            c.n_nodes = gripping;
             return;
         }
         warn("clip " + std::to_string(c.id) + " released at t=" + std::to_string(t) + " grips no vessel node: it falls away and is not deposited");
         c.n_nodes = 0;
         c.model.clear();
-        drop_patch(patch);
+        leave_patch(c.id);  // (its patch goes with it, unless another clip of it stays)
         return;
     }
     for (Eigen::Index v = 0; v < S; ++v) {

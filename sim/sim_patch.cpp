@@ -142,8 +142,45 @@ void Simulator::Impl::drop_patch(int index) {
     for (size_t k = 0; k < P.cand_vertex.size(); ++k) set_patch_part(P.cand_vertex[k], Eigen::Vector3d::Zero());
     for (int v : P.map_vertex) set_patch_part(v, Eigen::Vector3d::Zero());
     patch_of_clip[static_cast<size_t>(P.clip)] = -1;
+    for (const PatchRun::Member& m : P.more) patch_of_clip[static_cast<size_t>(m.clip)] = -1;
+    P.more.clear();
     P.alive = false;
     P.pm.reset();
+}
+
+void Simulator::Impl::leave_patch(int clip) {
+    const int index = patch_of_clip[static_cast<size_t>(clip)];
+    if (index < 0) return;
+    PatchRun& P = patches[static_cast<size_t>(index)];
+    if (P.more.empty()) {
+        drop_patch(index);
+        return;
+    }
+    patch_of_clip[static_cast<size_t>(clip)] = -1;
+    // The compliance frames' rows are numbered by clip (fem::compliant_row_kind): they begin again on the clips left.
+    P.compliant.reset();
+    const auto it = std::find_if(P.more.begin(), P.more.end(), [&](const PatchRun::Member& m) { return m.clip == clip; });
+    if (it != P.more.end()) {
+        P.more.erase(it);
+        return;
+    }
+    // The first clip: the next takes its place (its opening the patch's θ, its balance the course's).
+    const PatchRun::Member m = P.more.front();
+    P.more.erase(P.more.begin());
+    const Eigen::Index nb = P.pm->dofs();
+    P.clip = m.clip;
+    P.v[nb] = m.theta;
+    if (P.v_ok.size() == P.v.size()) P.v_ok[nb] = m.theta_ok;
+    P.course.theta_bal = m.course.theta_bal;
+    P.course.prev_theta = m.course.prev_theta;
+    P.course.prev_R = m.course.prev_R;
+    P.course.tissue_k = m.course.tissue_k;
+    P.course.loads_ok = m.course.loads_ok;
+    P.contacts = m.contacts;
+    P.grips.clear();
+    P.grips_ok.clear();
+    P.gripped = P.gripped_ok = false;
+    P.hinge_prev = blades_of(clips[static_cast<size_t>(m.clip)], scene.clip_models.at(clips[static_cast<size_t>(m.clip)].model)).hinge;
 }
 
 // Patches for held clips whose jaws come near the wall, and remade ones for jaws that left theirs.
@@ -211,7 +248,7 @@ void Simulator::Impl::make_patches(Frame& fr) {
 // Made without the lock (the factorisation and interface solves take seconds); what the other threads read is
 // changed under it. In threaded mode the haptic thread may release the clip meanwhile (it is then deposited on
 // what the linear model holds, or falls away and drops the old patch): the new patch is then not used.
-void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why) {
+void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why, int join) {
     const Stopwatch sw;
     const SimSurface& sf = model.surface;
     const VolumeData& vol = *model.volume;
@@ -221,13 +258,40 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     const double theta = jaws.theta;
     int old = -1;
     std::shared_ptr<const fem::PatchModel> old_pm;  // kept alive while it is read below, without the lock
+    // The wedges the patch covers: this clip's jaws, and a remade (or joined) patch's other clips' where they are now
+    // (their poses taken under the lock; the first clip's opening the patch's θ, the others' their own).
+    std::vector<std::pair<fem::ClipBlades, double>> wedges;
+    std::vector<int> members;  // the old patch's clips as they were (still so when the patch is taken: below)
+    auto clips_of = [](const PatchRun& O) {
+        std::vector<int> c{O.clip};
+        for (const PatchRun::Member& m : O.more) c.push_back(m.clip);
+        return c;
+    };
     {
         std::unique_lock<std::mutex> lk;
         if (mx) lk = std::unique_lock<std::mutex>(*mx);
-        old = patch_of_clip[static_cast<size_t>(clip)];
-        if (old >= 0) old_pm = patches[static_cast<size_t>(old)].pm;
+        old = join >= 0 ? join : patch_of_clip[static_cast<size_t>(clip)];
+        if (old >= 0) {
+            const PatchRun& O = patches[static_cast<size_t>(old)];
+            old_pm = O.pm;
+            members = clips_of(O);
+            auto add = [&](int c, double th) {
+                const Clip& k = clips[static_cast<size_t>(c)];
+                if (c != clip && !k.model.empty()) wedges.emplace_back(blades_of(k, scene.clip_models.at(k.model)), th);
+            };
+            if (old_pm) {
+                add(O.clip, O.v[old_pm->dofs()]);
+                for (const PatchRun::Member& m : O.more) add(m.clip, m.theta);
+            }
+        }
     }
     if (old >= 0 && !old_pm) return;  // dropped: its clip fell away
+    wedges.emplace_back(blades, theta);
+    auto near_any = [&](const Eigen::Vector3d& p) {
+        for (const auto& [b, th] : wedges)
+            if (b.near_wedge(th, p, scene.patch.radius_mm)) return true;
+        return false;
+    };
     // The tetrahedra with a corner within radius_mm of the wedge, at rest or where it is now: the surface's vertices
     // where they are displaced to, the old patch's nodes where it holds them. (At rest alone, a remade patch missed
     // tissue the closing jaws had drawn in from beyond the radius, and the next frame's check found it uncovered
@@ -256,13 +320,36 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     for (Eigen::Index t = 0; t < vol.tets.rows(); ++t)
         for (int k = 0; k < 4; ++k) {
             const int n = vol.tets(t, k);
-            if (blades.near_wedge(theta, vol.nodes.row(n).transpose(), scene.patch.radius_mm) ||
-                (!moved.empty() && moved[static_cast<size_t>(n)] && blades.near_wedge(theta, now[static_cast<size_t>(n)], scene.patch.radius_mm))) {
+            if (near_any(vol.nodes.row(n).transpose()) || (!moved.empty() && moved[static_cast<size_t>(n)] && near_any(now[static_cast<size_t>(n)]))) {
                 tets.push_back(static_cast<int>(t));
                 break;
             }
         }
     if (tets.empty()) return;
+    // A compliance patch's new clip whose tissue another clip's patch already holds (tandem clips on one neck) joins
+    // that patch: it is remade over both clips' jaws and its frames solve with both (fem::CompliantClip). (Two patches
+    // over the same tissue would each solve with its own clip's blades and write their displacements to the nodes they
+    // share.) The Newton frames take one clip: there the second patch is made, and warned below.
+    if (old < 0 && scene.patch.solver == PatchSpec::Solver::COMPLIANCE) {
+        int with = -1;
+        {
+            std::unique_lock<std::mutex> lk;
+            if (mx) lk = std::unique_lock<std::mutex>(*mx);
+            for (size_t h = 0; h < patches.size() && with < 0; ++h) {
+                const PatchRun& H = patches[h];
+                if (!H.alive || !H.pm) continue;
+                for (int t : tets) {
+                    for (Eigen::Index k = 0; k < vol.tets.cols() && with < 0; ++k)
+                        if (H.pm->local(vol.tets(t, k)) >= 0) with = static_cast<int>(h);
+                    if (with >= 0) break;
+                }
+            }
+        }
+        if (with >= 0) {
+            build_patch(instrument, jaws, mx, why, with);
+            return;
+        }
+    }
     // The visible surface the patch moves: in-region vertices (their displacement from the interface).
     std::vector<int> map_vertex, map_nodes;
     for (Eigen::Index v = 0; v < S; ++v)
@@ -375,17 +462,21 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     if (mx) lock = std::unique_lock<std::mutex>(*mx);
     // Still the instrument's held clip, with the patch it had when the build began?
     const Clip& now_clip = clips[static_cast<size_t>(clip)];
-    if (ins[instrument].clip != clip || now_clip.state != Clip::State::HELD || now_clip.model.empty() || patch_of_clip[static_cast<size_t>(clip)] != old ||
-        (old >= 0 && patches[static_cast<size_t>(old)].pm != old_pm)) {
+    if (ins[instrument].clip != clip || now_clip.state != Clip::State::HELD || now_clip.model.empty() ||
+        patch_of_clip[static_cast<size_t>(clip)] != (join >= 0 ? -1 : old) ||
+        (old >= 0 && (patches[static_cast<size_t>(old)].pm != old_pm || clips_of(patches[static_cast<size_t>(old)]) != members))) {
         char b[200];
         std::snprintf(b, sizeof b, "clip %d was released while its nonlinear patch was being %s (%.2f s): the patch is not used", clip,
-                      old >= 0 ? "remade" : "made", sw.seconds());
+                      join >= 0 ? "joined" : old >= 0 ? "remade" : "made", sw.seconds());
         warn(b);
         return;
     }
     if (old >= 0) {
         // Remade: the state carries over exactly (the old patch's whole displacement, restricted to the new one).
         PatchRun& O = patches[static_cast<size_t>(old)];
+        P.clip = O.clip;
+        P.more = O.more;
+        if (O.clip != clip) P.hinge_prev = O.hinge_prev;  // (remade for a further clip: the first's hinge at its last solve)
         const auto carry = [&](const Eigen::VectorXd& ov) {
             Eigen::VectorXd nv(pm.dofs() + 1);
             nv.head(pm.dofs()) = pm.restrict_to_patch(O.pm->full_displacement(ov.head(O.pm->dofs())));
@@ -423,6 +514,28 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         ++P.stats.builds;
         P.iterations_sum = O.iterations_sum;
         P.solve_ms_sum = O.solve_ms_sum;
+        P.contacts = O.contacts;
+        if (join >= 0) {
+            // The joining clip: its blades start, as a first patch's do, at the smallest opening from θ up that holds
+            // none of the patch's nodes inside them where the patch now holds them (the linear model's contacts pushed
+            // the tissue it closed on before the patch took it over).
+            PatchRun::Member m;
+            m.clip = clip;
+            m.theta = theta;
+            const Eigen::MatrixX3d x = P.positions();
+            inside = nodes_in_blades(blades, theta, x, P.cand, 0.01);
+            cleared = inside == 0;
+            const double top = std::max(theta, jaws.max_opening_deg * DEG);
+            for (double th = theta; !cleared && th <= top; th += 0.25 * DEG)
+                if (nodes_in_blades(blades, th, x, P.cand, 0.01) == 0) {
+                    m.theta = th;
+                    cleared = true;
+                }
+            m.theta_ok = m.theta;
+            P.more.push_back(m);
+            P.stats.more_clips.push_back(clip);
+            patch_of_clip[static_cast<size_t>(clip)] = old;
+        }
         for (int v : O.map_vertex) set_patch_part(v, Eigen::Vector3d::Zero());
         O.pm.reset();
         patches[static_cast<size_t>(old)] = std::move(P);
@@ -447,19 +560,24 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         patches.push_back(std::move(P));
     }
     PatchRun& N = patches[static_cast<size_t>(patch_of_clip[static_cast<size_t>(clip)])];
+    const double theta_start = join >= 0 ? N.more.back().theta : N.v[N.pm->dofs()];
     N.stats.nodes = static_cast<int>(np);
     N.stats.interface_nodes = static_cast<int>(N.pm->interface_nodes());
     N.stats.tets = N.tets;
     N.stats.setup_s = N.pm->setup_seconds();
     N.t_map = -1;
     char b[300];
-    std::snprintf(b, sizeof b, "clip %d: nonlinear patch %s at t=%.3f s: %d tetrahedra, %lld nodes (%lld on the interface), made in %.2f s", clip,
-                  old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
-                  sw.seconds());
+    if (join >= 0)
+        std::snprintf(b, sizeof b, "clip %d joins clip %d's nonlinear patch at t=%.3f s (tandem clips: one patch, solved with every clip's blades): remade over %zu clips' jaws: %d tetrahedra, %lld nodes (%lld on the interface), made in %.2f s",
+                      clip, N.clip, t_phys, N.more.size() + 1, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()), sw.seconds());
+    else
+        std::snprintf(b, sizeof b, "clip %d: nonlinear patch %s at t=%.3f s: %d tetrahedra, %lld nodes (%lld on the interface), made in %.2f s", clip,
+                      old >= 0 ? "remade" : "made", t_phys, N.tets, static_cast<long long>(np), static_cast<long long>(N.pm->interface_nodes()),
+                      sw.seconds());
     warn(b + why);
     if (inside > 0 && cleared) {
         std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lay inside the blades at %.2f deg: the patch's blades start at %.2f deg and close from there",
-                      clip, inside, theta / DEG, N.v[N.pm->dofs()] / DEG);
+                      clip, inside, theta / DEG, theta_start / DEG);
         warn(b);
     } else if (inside > 0) {
         std::snprintf(b, sizeof b, "clip %d: %d surface nodes the linear model had pushed lie inside the blades at every opening up to the clip's largest: the patch starts with them there",
@@ -512,6 +630,43 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.gripped_ok = P.gripped;
         }
         const fem::ClipSpring spring = cm.spring ? *cm.spring : fem::ClipSpring{1e-3, 0.0};
+        // The patch's further clips (tandem clips; compliance frames only): each holds its own opening this frame, found
+        // as the first clip's (the applier's, or its spring's balance, never below what the applier holds open), by
+        // the frame's step bound. Copied under the lock: the haptic thread may release one meanwhile (leave_patch),
+        // and what the frame finds is written back to the clips still in the patch after it.
+        struct MemberFrame {
+            int clip = -1;
+            fem::ClipBlades blades;
+            fem::ClipSpring spring{1e-3, 0.0};
+            bool held = false, has_spring = false;
+            double theta_from = 0, theta_ok = 0, theta_kept = 0;
+            double turn = 1;                     // ClipModel::turn_per_heel_turn
+            PatchRun::Course course;             // its balance, updated by the frame
+            fem::BladeLoads loads;               // the frame's loads on its blades
+        };
+        std::vector<MemberFrame> mf;
+        for (PatchRun::Member& m : P.more) {
+            const Clip& cj = clips[static_cast<size_t>(m.clip)];
+            const ClipModel& cmj = scene.clip_models.at(cj.model);
+            MemberFrame g;
+            g.clip = m.clip;
+            g.blades = blades_of(cj, cmj);
+            g.has_spring = cmj.spring.has_value();
+            if (cmj.spring) g.spring = *cmj.spring;
+            g.held = cj.state == Clip::State::HELD;
+            g.theta_from = m.theta;
+            g.theta_ok = m.theta_ok;
+            g.turn = cmj.turn_per_heel_turn();
+            if (m.course.theta_bal < 0) m.course.theta_bal = m.theta;
+            g.course = m.course;
+            const double applier = std::clamp(cj.forceps_deg, 0.0, cmj.max_opening_deg) * DEG;
+            const double wanted = !cmj.spring ? (g.held ? applier : cj.opening_deg * DEG) : std::max(g.held ? applier : 0.0, m.course.theta_bal);
+            const double smax = fr.mx ? std::min(P.course.theta_step, REALTIME_STEP_DEG * DEG * g.turn) : P.course.theta_step;
+            g.theta_kept = m.theta + std::clamp(wanted - m.theta, -smax, smax);
+            mf.push_back(std::move(g));
+        }
+        std::vector<int> frame_clips{P.clip};  // the clips the frame solves with, first to last
+        for (const MemberFrame& g : mf) frame_clips.push_back(g.clip);
         if (fr.mx) fr.lock.unlock();
         const Stopwatch sw;
         const Eigen::VectorXd v0 = P.v;
@@ -668,16 +823,30 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // walls they flatten (faces whose corners lie within 0.3 mm of it) or that are about to meet anywhere in the
             // patch (within 0.3 mm of each other), the faces' corners candidates too (fem::compliant_setup, as
             // aneu_bench_compliance's frames), the patch's nodes standing at X + u.
-            auto setup_at = [&](const Eigen::VectorXd& u, double th) {
+            // (Tandem clips: near any clip's wedge, each at its own opening `th_more`.)
+            auto setup_at = [&](const Eigen::VectorXd& u, double th, const std::vector<double>& th_more) {
                 Eigen::MatrixX3d x = P.X;
                 for (Eigen::Index a = 0; a < x.rows(); ++a) x.row(a) += u.segment<3>(3 * a).transpose();
                 // (ANEU_NO_OUTER_CONTACT: without the outer surface's faces, to measure what they cost; not a scene option.)
                 static const bool outer = !std::getenv("ANEU_NO_OUTER_CONTACT");
-                return fem::compliant_setup(blades, th, x, P.cand, scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i(), fem::COMPLIANT_WALL_APPROACH_MM,
-                                            scene.patch.wall_contact && outer ? P.outer : Eigen::MatrixX3i());
+                const Eigen::MatrixX3i inner = scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i();
+                const Eigen::MatrixX3i outer_faces = scene.patch.wall_contact && outer ? P.outer : Eigen::MatrixX3i();
+                if (mf.empty()) return fem::compliant_setup(blades, th, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces);
+                std::vector<fem::CompliantClip> all{fem::CompliantClip{blades, th, th, spring}};
+                for (size_t j = 0; j < mf.size(); ++j) all.push_back(fem::CompliantClip{mf[j].blades, th_more[j], th_more[j], mf[j].spring});
+                return fem::compliant_setup(all, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces);
             };
-            // The candidates the frames act on from here, selected at opening th with the hinge there.
-            auto adopt = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge) {
+            std::vector<double> more_from, more_kept;
+            std::vector<Eigen::Vector3d> more_hinges;
+            for (const MemberFrame& g : mf) {
+                more_from.push_back(g.theta_from);
+                more_kept.push_back(g.theta_kept);
+                more_hinges.push_back(g.blades.hinge);
+            }
+            // The candidates the frames act on from here, selected at opening th with the hinge there (the further
+            // clips' at th_more with theirs).
+            auto adopt = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge, const std::vector<double>& th_more,
+                             const std::vector<Eigen::Vector3d>& hinges_more) {
                 C->cand = std::move(cs.candidates);
                 C->faces = std::move(cs.faces);
                 C->search.params.face_surface = std::move(cs.face_surface);
@@ -686,23 +855,32 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 for (size_t k = 0; k < C->cand.size(); ++k) C->Xc.row(static_cast<Eigen::Index>(k)) = P.X.row(C->cand[k]);
                 C->theta_sel = th;
                 C->hinge_sel = hinge;
+                C->more_theta_sel = th_more;
+                C->more_hinge_sel = hinges_more;
             };
+            // Frames made for other clips than this frame's (a further clip left the patch, or the first handed it on:
+            // leave_patch) begin again: their rows are numbered by clip.
+            if (C && C->clips != frame_clips) C.reset();
             if (!C) {
                 C = std::make_shared<PatchRun::Compliant>();
-                adopt(setup_at(u0, v0[nb]), v0[nb], blades.hinge);
+                C->clips = frame_clips;
+                adopt(setup_at(u0, v0[nb], more_from), v0[nb], blades.hinge, more_from, more_hinges);
             }
             // A refresh selects the candidates again, for the jaws as they are (the wedge they sweep closing from a
             // little more than this opening), and the inner walls' faces where the walls now are: the first selection
             // is for the jaws as they first closed on the wall (the sample's: 2,391 candidates at 60 deg, 1,821 at the
             // end; its walls on the neck line 0.0011 mm through each other, 0.0685 mm with the first selection kept).
+            std::vector<double> more_sel;
+            for (size_t j = 0; j < mf.size(); ++j) more_sel.push_back(std::max(more_from[j], more_kept[j]) + RESELECT_MARGIN_RAD);
             auto select = [&](const Eigen::VectorXd& u) {
                 const double th = std::max(v0[nb], theta_kept) + RESELECT_MARGIN_RAD;
-                return std::make_pair(setup_at(u, th), th);
+                return std::make_pair(setup_at(u, th, more_sel), th);
             };
             // The frames' state carried over to a refresh's candidates, which the frames then act on.
-            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge, const Eigen::VectorXd& at) {
+            auto take_setup = [&](fem::CompliantSetup&& cs, double th, const Eigen::Vector3d& hinge, const std::vector<double>& th_more,
+                                  const std::vector<Eigen::Vector3d>& hinges_more, const Eigen::VectorXd& at) {
                 fem::carry_compliant_frames(C->cand, C->faces, cs.candidates, cs.faces, at, C->last, C->search);
-                adopt(std::move(cs), th, hinge);
+                adopt(std::move(cs), th, hinge, th_more, hinges_more);
             };
             // A refresh made on the second core (threaded mode) that is done: the frames go on with it from here.
             if (C->pending && C->pending->done.load(std::memory_order_acquire)) {
@@ -719,7 +897,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                         std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s) dropped: the surface has moved %.2f wall thicknesses since\n",
                                      fr.t, q.t, q.seconds, moved);
                 } else if (q.lin) {
-                    take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel, u0);
+                    take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel, q.more_theta_sel, q.more_hinge_sel, u0);
                     C->lin = std::move(q.lin);
                     ++P.stats.linearisations;
                     P.stats.last_candidates = static_cast<int>(C->cand.size());
@@ -738,7 +916,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // (Refreshed frames are also due for one when the jaws open past the wedge their candidates were selected
             // for, or the hinge moves: the candidates may miss what the blades now reach.)
             const bool reselect = scene.patch.refresh_frames > 0;
-            const bool left_wedge = reselect && (theta_kept > C->theta_sel || (blades.hinge - C->hinge_sel).norm() > RESELECT_HINGE_MM);
+            bool left_wedge = reselect && (theta_kept > C->theta_sel || (blades.hinge - C->hinge_sel).norm() > RESELECT_HINGE_MM);
+            if (reselect && C->more_theta_sel.size() != mf.size()) left_wedge = true;
+            for (size_t j = 0; reselect && j < mf.size() && j < C->more_theta_sel.size(); ++j)
+                if (more_kept[j] > C->more_theta_sel[j] || (more_hinges[j] - C->more_hinge_sel[j]).norm() > RESELECT_HINGE_MM) left_wedge = true;
             const bool due = reselect && (C->since >= scene.patch.refresh_frames || left_wedge);
             if (C->lin && due && fr.mx && !C->pending) {
                 // Threaded (real-time) mode: the refresh is made on another thread (the second core) from this frame's
@@ -749,6 +930,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 q->t = fr.t;
                 std::tie(q->setup, q->theta_sel) = select(u0);
                 q->hinge_sel = blades.hinge;
+                q->more_theta_sel = more_sel;
+                q->more_hinge_sel = more_hinges;
                 C->pending = q;
                 refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = q->setup.candidates] {
                     omp_set_num_threads(1);  // the tangent's assembly beside the physics thread, not across its core
@@ -773,7 +956,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (C->lin && reselect) {
                         auto [cs, th] = select(at);
                         std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back);
-                        take_setup(std::move(cs), th, blades.hinge, at);
+                        take_setup(std::move(cs), th, blades.hinge, more_sel, more_hinges, at);
                         C->lin = std::move(lin);
                     } else {
                         C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
@@ -835,7 +1018,20 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // One span of the frame: the opening from th_from to th_to, the patch starting at v_from (where the last
             // frame, or the span before, ended: the first solve is warm from it, its re-solves start there). Leaves the
             // span's end in f, res.u.head(nb) and lag.
+            // The further clips in a span of the first's opening th_from -> th_to: each over the same part of its own
+            // change this frame (a span split in halves splits theirs too).
+            auto more_at = [&](double th_from, double th_to) {
+                std::vector<fem::CompliantClip> out;
+                const double whole = theta_kept - v0[nb];
+                const bool moves = std::abs(whole) > 1e-12;
+                const double a = moves ? (th_from - v0[nb]) / whole : 0.0, b = moves ? (th_to - v0[nb]) / whole : 1.0;
+                for (const MemberFrame& g : mf)
+                    out.push_back(fem::CompliantClip{g.blades, g.theta_from + b * (g.theta_kept - g.theta_from), g.theta_from + a * (g.theta_kept - g.theta_from), g.spring});
+                return out;
+            };
             auto span = [&](double th_from, double th_to, const Eigen::VectorXd& v_from) {
+                const std::vector<fem::CompliantClip> more = more_at(th_from, th_to);
+                const std::vector<fem::CompliantClip>* more_p = more.empty() ? nullptr : &more;
                 std::optional<Attempt> best;
                 double last_ratio = -1;
                 for (int range_again = 0;; ++range_again) {
@@ -851,8 +1047,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     const Eigen::VectorXd* start_at = range_again > 0 ? &start : nullptr;
                     int again = 0;  // this solve's repeats for crossings (summed over the frame's solves)
                     try {
-                        f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, th_to, th_from, warm, co, &again, start_at)
-                                                : fem::solve_compliant_clip(*C->lin, blades, spring, th_to, th_from, warm, co, nullptr, start_at);
+                        f = C->faces.rows() > 0 ? fem::solve_compliant_clip_walls(*C->lin, C->Xc, C->faces, C->search, blades, spring, th_to, th_from, warm, co, &again, start_at, more_p)
+                                                : fem::solve_compliant_clip(*C->lin, blades, spring, th_to, th_from, warm, co, nullptr, start_at, more_p);
                         repeats += again;
                     } catch (const NumericalError& e) {
                         // The active rows' factorisation failed: the frame is not solved (an unconverged frame: the patch
@@ -946,6 +1142,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             const Span got = solve_split(v0[nb], theta_kept, v0, 0);
             if (got == Span::FAILED) {
                 loads = C->last.loads;
+                for (size_t j = 0; j < mf.size() && j < C->last.more_loads.size(); ++j) mf[j].loads = C->last.more_loads[j];
                 wall_min = walls_at(C->last);
                 touching = C->last.wall_contacts;
                 return res;
@@ -955,7 +1152,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // as a Newton frame (the nonlinear patch has no linear range), from where it started, and the frames go on
             // from the state it reached, linearised there. Where it does not converge within those iterations the
             // compliance frame's nearest attempt stands (and is warned, as without it).
-            if (got == Span::BEYOND && scene.patch.range_newton > 0) {
+            // (Tandem clips: the Newton frames take one clip; their frames stay the compliance frame's.)
+            if (got == Span::BEYOND && scene.patch.range_newton > 0 && mf.empty()) {
                 const Stopwatch nw;
                 const int frame_halvings = o.max_halvings;  // (the frame's own budget, given back after)
                 o.max_iterations = o.max_total_iterations = scene.patch.range_newton;
@@ -1012,12 +1210,15 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             res.converged = f.complementarity_mm <= 1e-3;
             if (!res.converged) res.failure = "complementarity " + std::to_string(f.complementarity_mm) + " mm left";
             loads = f.loads;
+            for (size_t j = 0; j < mf.size() && j < f.more_loads.size(); ++j) mf[j].loads = f.more_loads[j];
             wall_min = walls_at(f);
             touching = f.wall_contacts;
             P.stats.wall_resolves += repeats;
             its += f.passes;
             // Only frames that press something count towards the refresh: one in the air leaves the patch where it was.
-            if (f.loads.contacts[0] + f.loads.contacts[1] + f.wall_contacts > 0) ++C->since;
+            int pressing = f.loads.contacts[0] + f.loads.contacts[1] + f.wall_contacts;
+            for (const fem::BladeLoads& l : f.more_loads) pressing += l.contacts[0] + l.contacts[1];
+            if (pressing > 0) ++C->since;
             C->last = std::move(f);
             C->warm = true;
             return res;
@@ -1045,6 +1246,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             P.course.loads_ok = loads;
             P.course.wall_min_ok = wall_min;
             P.course.touching_ok = touching;
+            for (MemberFrame& g : mf) {
+                g.theta_ok = g.theta_kept;
+                g.course.loads_ok = g.loads;
+            }
         } else if (++P.course.failed_in_row == 1) {
             P.course.theta_failed = theta_kept;
         } else {
@@ -1060,6 +1265,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             loads = P.course.loads_ok;
             wall_min = P.course.wall_min_ok;
             touching = P.course.touching_ok;
+            for (MemberFrame& g : mf) {  // the further clips back to theirs
+                g.theta_kept = g.theta_ok;
+                g.loads = g.course.loads_ok;
+            }
         }
         // A frame whose solve did not converge leaves the balance's estimate as it was (its reaction is not the
         // tissue's; a held clip goes on following the applier).
@@ -1100,6 +1309,31 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             if (std::getenv("ANEU_PATCH_TRACE"))
                 std::fprintf(stderr, "balance t=%.4f theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, th / DEG, R, k, P.course.theta_bal / DEG);
         }
+        // The further clips' balances, each on its own R = τ − M from its blades' loads, as the first's.
+        for (MemberFrame& g : mf) {
+            if (!g.has_spring || !r.converged) continue;
+            PatchRun::Course& q = g.course;
+            const double R = g.loads.spring_torque_nmm - 0.5 * (g.loads.moment_nmm[0] + g.loads.moment_nmm[1]), th = g.theta_kept;
+            double k = std::max(q.tissue_k, g.spring.k_nmm_per_rad);
+            const double min_step = SECANT_MIN_DEG * DEG * g.turn;
+            if (q.prev_theta < 0 || std::abs(th - q.prev_theta) >= min_step) {
+                if (q.prev_theta >= 0) {
+                    const double secant = (R - q.prev_R) / (th - q.prev_theta);
+                    if (secant > g.spring.k_nmm_per_rad) k = secant;
+                }
+                q.tissue_k = k;
+                q.prev_theta = th;
+                q.prev_R = R;
+            }
+            const bool pressed = g.loads.contacts[0] + g.loads.contacts[1] > 0;
+            q.theta_bal = fem::next_spring_opening(th, R, k, g.held, pressed);
+            if (compliance && pressed) {
+                const double cap = 125.0 * DEG / scene.physics_hz * g.turn;
+                q.theta_bal = std::clamp(q.theta_bal, th - cap, th + cap);
+            }
+            if (std::getenv("ANEU_PATCH_TRACE"))
+                std::fprintf(stderr, "balance t=%.4f clip %d theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, g.clip, th / DEG, R, k, q.theta_bal / DEG);
+        }
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
@@ -1124,6 +1358,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             fr.lock.lock();
             // Released meanwhile and fallen away (the haptic thread dropped the patch): the frame goes with it.
             if (!P.alive || P.pm != hold) continue;
+            // Or the first clip fell away and handed the patch on (leave_patch): the frame was for the clips before.
+            if (P.clip != frame_clips[0]) continue;
         }
         Clip& cl = clips[static_cast<size_t>(P.clip)];  // (the haptic thread may have added clips: c may have moved)
         P.v = r.u;
@@ -1186,6 +1422,35 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         st.peak_blade_force_n = std::max(st.peak_blade_force_n, cl.grip_force_n);
         st.peak_label_force_n = std::max(st.peak_label_force_n, cl.label_force_n);
         a.peak_clip_label_force_n = std::max(a.peak_clip_label_force_n, cl.label_force_n);
+        // The further clips, those still in the patch (the haptic thread may have let one go meanwhile).
+        for (MemberFrame& g : mf) {
+            const auto m = std::find_if(P.more.begin(), P.more.end(), [&](const PatchRun::Member& x) { return x.clip == g.clip; });
+            if (m == P.more.end()) continue;
+            Clip& cj = clips[static_cast<size_t>(g.clip)];
+            const ClipModel& cmj = scene.clip_models.at(cj.model);
+            m->theta = g.theta_kept;
+            m->theta_ok = g.theta_ok;
+            m->course = g.course;
+            m->contacts = g.loads.contacts[0] + g.loads.contacts[1];
+            const bool held_j = cj.state == Clip::State::HELD;
+            cj.opening_deg = g.theta_kept / DEG;
+            if (held_j && cmj.spring) cj.spring_deg = g.course.theta_bal / DEG;
+            cj.grip_force_n = 0.5 * (g.loads.force_n[0] + g.loads.force_n[1]);
+            cj.friction_n = 0.5 * (g.loads.friction_n[0] + g.loads.friction_n[1]);
+            cj.tissue_moment_nmm = 0.5 * (g.loads.moment_nmm[0] + g.loads.moment_nmm[1]);
+            cj.label_force_n = cj.tissue_moment_nmm / cmj.label_arm_mm();
+            cj.spring_torque_nmm = cmj.spring ? g.loads.spring_torque_nmm : 0.0;
+            cj.net_force = -g.loads.net_force;
+            if (held_j && cj.holder >= 0) patch_force[static_cast<size_t>(cj.holder)] += g.loads.net_force;
+            a.peak_vessel_force_n = std::max(a.peak_vessel_force_n, cj.grip_force_n);
+            st.peak_blade_force_n = std::max(st.peak_blade_force_n, cj.grip_force_n);
+            st.peak_label_force_n = std::max(st.peak_label_force_n, cj.label_force_n);
+            a.peak_clip_label_force_n = std::max(a.peak_clip_label_force_n, cj.label_force_n);
+            if (std::getenv("ANEU_PATCH_TRACE"))
+                std::fprintf(stderr, "patch t=%.4f clip %d theta %.3f->%.3f deg (%s) blade %.4f/%.4f N contacts %d/%d friction %.4f/%.4f N\n", fr.t, g.clip,
+                             g.theta_from / DEG, g.theta_kept / DEG, held_j ? "held" : "deposited", g.loads.force_n[0], g.loads.force_n[1], g.loads.contacts[0],
+                             g.loads.contacts[1], g.loads.friction_n[0], g.loads.friction_n[1]);
+        }
         if (compliance && !restarted) {
             st.end_lag_to_thickness = lag.ratio;
             if (!c_profile.empty()) {

@@ -44,6 +44,8 @@ struct Refresh {
     fem::CompliantSetup setup;
     double theta_sel = 0;
     Eigen::Vector3d hinge_sel = Eigen::Vector3d::Zero();
+    std::vector<double> more_theta_sel;  ///< the same for a patch's further clips
+    std::vector<Eigen::Vector3d> more_hinge_sel;
     std::atomic<bool> done{false};
 };
 
@@ -186,6 +188,18 @@ struct Simulator::Impl {
             /// change that failed; doubled by every converged frame after that (unbounded again past 1 rad).
             double theta_step = std::numeric_limits<double>::infinity();
         } course;
+        /// Further clips the patch solves with its first (PatchSpec::Solver::COMPLIANCE; tandem clips on one neck: a
+        /// clip whose patch would share tissue with this one's joins it, and the patch is remade over every member's
+        /// jaws). Each holds its own opening in the frames (fem::CompliantClip) and approaches its own spring's balance;
+        /// the restart bookkeeping (course.failed_in_row, theta_step) is the frame's, shared.
+        struct Member {
+            int clip = -1;
+            double theta = 0;                 // its opening where the last frame left it [rad]
+            double theta_ok = 0;              // ... at the last converged frame
+            Course course;                    // its balance: theta_bal, prev_theta, prev_R, tissue_k, loads_ok
+            int contacts = 0;                 // nodes pressing on its blades at the last solve
+        };
+        std::vector<Member> more;
         bool alive = true;                    // false once its clip fell away
         /// PatchSpec::Solver::COMPLIANCE: the linearisation the frames solve on and what they carry between frames
         /// (made at the first frame, again every refresh_frames frames and when the patch is remade).
@@ -206,6 +220,9 @@ struct Simulator::Impl {
             /// the frames are due for one).
             double theta_sel = 0;
             Eigen::Vector3d hinge_sel = Eigen::Vector3d::Zero();
+            std::vector<int> clips;                      // the clips its rows are for, first to last (fem::compliant_row_kind)
+            std::vector<double> more_theta_sel;          // the same for the further clips (PatchRun::more)
+            std::vector<Eigen::Vector3d> more_hinge_sel;
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
             bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
             /// Threaded mode: a refresh being made on another thread (the second core) while the frames go on with lin;
@@ -288,7 +305,11 @@ struct Simulator::Impl {
     // solve_patches: each patch's Newton solve with the clip's blades, spring and wall contact, then d.
     bool patch_holds_instrument(size_t i) const;
     void make_patches(Frame& fr);
-    void build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why = {});
+    // (join: the patch the clip joins, −1: its own, made or remade; a compliance patch's new clip whose tissue another
+    // patch holds joins that one)
+    void build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why = {}, int join = -1);
+    // A clip of a patch gone (fallen away): a further clip leaves it, the first hands it to the next (none: dropped).
+    void leave_patch(int clip);
     void solve_patches(Frame& fr);
     void set_patch_part(Eigen::Index v, const Eigen::Vector3d& value);
     void drop_patch(int index);  // its clip fell away: the wall returns to what the linear model gives

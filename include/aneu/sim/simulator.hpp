@@ -153,6 +153,9 @@ struct Assessment {
     /// Each nonlinear patch (Scene::wall_model = PATCH) over the session.
     struct PatchEnd {
         int clip = 0;
+        /// the further clips it solved with the first (tandem clips on the same tissue, compliance solver), in the
+        /// order they joined (a clip that fell away stays listed)
+        std::vector<int> more_clips;
         int nodes = 0, interface_nodes = 0, tets = 0;
         int builds = 0;                      ///< made, then remade when the jaws moved out of it
         double setup_s = 0;                  ///< the last build's factorisation and interface solves
