@@ -9,10 +9,11 @@
 import json, math, sys
 
 
-def neck_line_in_jaws(obj, scene):
+def neck_line_in_jaws(obj, scene, applier=0, keep_order=False):
     """The neck line's points of LUMEN.obj `obj` in the jaws' frame of `scene` (a parsed scene): (rows, model, reach),
-    rows (r, across, up, gap) sorted by r, `model` the scene's clip model, `reach` fulcrum_mm + jaw_length_mm."""
-    app = next(i for i in scene["instruments"] if i["kind"] == "clip_applier")
+    rows (r, across, up, gap) sorted by r, `model` the scene's clip model, `reach` fulcrum_mm + jaw_length_mm.
+    `applier`: which of the scene's clip appliers (tandem clips: 0 the first, 1 the second)."""
+    app = [i for i in scene["instruments"] if i["kind"] == "clip_applier"][applier]
     keys = app["keyframes"]
     axis, up = keys[0]["axis"], keys[0]["up"]
     closing = keys[0]
@@ -42,14 +43,29 @@ def neck_line_in_jaws(obj, scene):
         g, Rm = (1.0 if R > 0 else -1.0), abs(R)
         bent = lambda r, a: (r, a) if r <= r0 else (r0 + Rm * math.atan2(r - r0, Rm - g * a), g * (Rm - math.hypot(r - r0, Rm - g * a)))
         rows = [bent(r, a) + (u, gp) for r, a, u, gp in rows]
-    rows.sort()
+    if not keep_order:  # (keep_order: in the OBJ's order, to match the same point in another applier's frame)
+        rows.sort()
     return rows, model, reach
 
 
 if __name__ == "__main__":
-    rows, model, reach = neck_line_in_jaws(sys.argv[1], json.load(open(sys.argv[2])))
+    # Tandem clips (several clip appliers): the rows in the first's frame; a point between the first clip's jaws is
+    # "in the jaws", one between a further clip's "in clip K's jaws" (K from 2), else beside or past them.
+    sc = json.load(open(sys.argv[2]))
+    n_app = sum(1 for i in sc["instruments"] if i["kind"] == "clip_applier")
+    rows, model, reach = neck_line_in_jaws(sys.argv[1], sc, 0, keep_order=True)
+    more = [neck_line_in_jaws(sys.argv[1], sc, k, keep_order=True) for k in range(1, n_app)]
     half = 0.5 * model["jaw_width_mm"]
     print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
-    for r, a, u, g in rows:
+    out = []
+    for i, (r, a, u, g) in enumerate(rows):
         where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
+        if where != "in the jaws":
+            for k, (rk, mk, reach_k) in enumerate(more):
+                rr, aa = rk[i][0], rk[i][1]
+                if 0 <= rr <= reach_k and abs(aa) <= 0.5 * mk["jaw_width_mm"]:
+                    where = "in clip %d's jaws" % (k + 2)
+                    break
+        out.append((r, a, u, g, where))
+    for r, a, u, g, where in sorted(out):
         print("%.3f\t%+.3f\t%+.3f\t%s\t%s" % (r, a, u, "inf" if math.isinf(g) else "%.4f" % g, where))

@@ -1019,6 +1019,70 @@ TEST(SimulatorPatch, TandemClipsOnTheSameTissueShareOnePatchAndBothGripAsMirrorI
     }
 }
 
+TEST(SimulatorPatch, ATandemClipThatLetsGoLeavesThePatchToTheOtherWhichGripsAsIfAlone) {
+    // The tandem pair of the test above (linearised once: the frames are the linear problem about rest), then one
+    // applier opens its clip to 40 deg (no spring: the clip opens with it) and releases it gripping nothing: it falls
+    // away and leaves the patch; the other clip goes on in it, alone. Either way round: the further clip leaving, and
+    // the first (the patch's θ and course handed to the other). On the linear frames what is left is the one clip's
+    // problem: it grips as that clip alone at its place does, up to its friction's path (stick points made with the
+    // other clip there).
+    test::TempDir d("patchleave");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    const json one = compliance_flattening_scene(bundle, 0, -1);
+    auto moved = [&](json inst, double dz, bool lets_go) {
+        for (json& k : inst["keyframes"]) k["position"][2] = k["position"][2].get<double>() + dz;
+        json last = inst["keyframes"].back();
+        if (lets_go) {
+            last["t"] = 0.20;
+            last["opening_deg"] = 40;
+            inst["keyframes"].push_back(last);
+            last["t"] = 0.21;
+            last["release"] = true;
+            inst["keyframes"].push_back(last);
+        }
+        last.erase("release");
+        last["t"] = 0.30;
+        last["opening_deg"] = lets_go ? 40.0 : FLAT_END_DEG;
+        inst["keyframes"].push_back(last);
+        return inst;
+    };
+    for (const int leaving : {1, 0}) {
+        SCOPED_TRACE("clip " + std::to_string(leaving) + " lets go");
+        const int stays = 1 - leaving;
+        const double dz_stays = stays == 0 ? -1.0 : 1.0;
+        json alone = one;
+        alone["instruments"][0] = moved(one["instruments"][0], dz_stays, false);
+        sim::Simulator sa = make(alone, d.file(""), "alone.json");
+        sim::run_scene(sa, sim::RunOptions{});
+        const double grip_alone = sa.clips().at(0).grip_force_n;
+        json two = one;
+        two["instruments"][0] = moved(one["instruments"][0], -1.0, leaving == 0);
+        json second = moved(one["instruments"][0], 1.0, leaving == 1);
+        second["name"] = "applier 2";
+        two["instruments"].push_back(second);
+        sim::Simulator s = make(two, d.file(""), "leave" + std::to_string(leaving) + ".json");
+        int fell = 0;
+        sim::RunOptions ro;
+        ro.on_message = [&](const std::string& m) {
+            fell += m.find("clip " + std::to_string(leaving) + " released") != std::string::npos && m.find("falls away") != std::string::npos;
+        };
+        const sim::Assessment a = sim::run_scene(s, ro);
+        EXPECT_EQ(fell, 1);
+        ASSERT_EQ(a.patches.size(), 1u);
+        const auto& p = a.patches[0];
+        EXPECT_EQ(p.clip, 0);  // (the clip it was made for; the first clip falling hands the patch on)
+        EXPECT_EQ(p.more_clips, std::vector<int>{1});
+        EXPECT_EQ(p.unconverged_frames, 0);
+        EXPECT_GT(p.frames, 25);  // the patch went on after the release (0.21 s) to the end (0.30 s)
+        const sim::Clip& c = s.clips().at(static_cast<size_t>(stays));
+        EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+        EXPECT_NEAR(c.grip_force_n, grip_alone, 0.05 * grip_alone);
+        EXPECT_TRUE(s.clips().at(static_cast<size_t>(leaving)).model.empty());  // lost, not deposited
+        EXPECT_GT(p.min_wall_distance_mm, -0.02);
+        std::printf("clip %d lets go: clip %d grips %.4f N in the patch alone, %.4f N alone from the start\n", leaving, stays, c.grip_force_n, grip_alone);
+    }
+}
+
 TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceWhenRelinearisedEveryFrame) {
     // model.patch_solver = "compliance": each frame is the blades' and walls' hard contact on the patch's compliance
     // at a linearisation (fem::solve_compliant_clip_walls). Relinearised every frame (refresh_frames 1) the frames are
@@ -1328,12 +1392,13 @@ TEST(SimulatorPatch, FramesThatDoNotConvergeTwiceInARowRestartFromTheLastConverg
 TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRange) {
     // The jaws slide 3 mm along the tube as they close (2.9 deg a frame), out of their patch: it is remade twice. A
     // remade patch takes nodes from the linear exterior where its linear map put them, off the neo-Hookean
-    // equilibrium, and its first compliance frame goes there from them (here 2.3 wall thicknesses from its
-    // linearisation). Solved again on linearisations made where it got to, it ends within the linear range:
-    // measured 2.27 -> 2.33 -> 1.83 -> 0.36 -> 0.23 x, four re-solves, where three were allowed before session 49
-    // (it then ended at 0.36 x, warned). Every other frame here needs at most one. (Before the re-solves kept the
-    // frame's start, every re-solve turned the gripped tissue with the blades again, and this frame's attempts stayed
-    // at 0.6-0.8 x however many.)
+    // equilibrium, and is linearised where its state was carried. Its first compliance frame starts where the patch
+    // stands: measured at most one re-solve for the linear range in any frame (7 in the run), reach 0.217 x, blade
+    // force 0.4342 N. (Until session 55 it started at the new linearisation's free state, the gripped tissue sprung
+    // back through the blades, and went 2.3 wall thicknesses from its linearisation: re-solved 2.27 -> 2.33 -> 1.83
+    // -> 0.36 -> 0.23 x, four re-solves, 10 in the run, reach 0.232 x, 0.4433 N; with three allowed, before session
+    // 49, it ended at 0.36 x, warned. Before the re-solves kept the frame's start, every re-solve turned the gripped
+    // tissue with the blades again, and this frame's attempts stayed at 0.6-0.8 x however many.)
     test::TempDir d("remade");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
     json j = compliance_flattening_scene(bundle, 1, -1);
@@ -1350,8 +1415,8 @@ TEST(SimulatorPatch, ARemadeCompliancePatchsFirstFrameIsSolvedWithinTheLinearRan
     EXPECT_GE(p.builds, 3) << "the sliding jaws did not leave their patch twice";
     EXPECT_EQ(p.unconverged_frames, 0);
     EXPECT_EQ(p.linearisations_failed, 0);
-    EXPECT_GT(p.max_frame_resolves, 3);
-    EXPECT_LE(p.max_frame_resolves, 8);
+    EXPECT_GT(p.range_refreshes, 0);
+    EXPECT_LE(p.max_frame_resolves, 1);
     EXPECT_EQ(p.range_earlier_kept, 0);
     EXPECT_LE(p.max_lag_to_thickness, 0.3);
     EXPECT_EQ(warnings, 0);

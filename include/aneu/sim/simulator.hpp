@@ -152,7 +152,7 @@ struct Assessment {
     std::vector<ClipEnd> clip_ends;
     /// Each nonlinear patch (Scene::wall_model = PATCH) over the session.
     struct PatchEnd {
-        int clip = 0;
+        int clip = 0;                        ///< the clip it was made for (its first; one that fell away handed it on)
         /// the further clips it solved with the first (tandem clips on the same tissue, compliance solver), in the
         /// order they joined (a clip that fell away stays listed)
         std::vector<int> more_clips;
