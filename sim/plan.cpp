@@ -124,6 +124,8 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     // at the neck's far end at rest (the heel 1 mm before a neck of its length): tan(θ_F/2) = tan(θ/2)·(1 + len) /
     // (F + 1 + len); F = 0 gives θ.
     const double F = o.fulcrum_mm;
+    if (o.tandem && o.curve_radius_mm > 0)
+        throw InputError("--tandem: tandem clips are planned straight (a curved clip's neighbour would need its own bend); drop --curve-radius-mm");
     // A curved clip (PlanOptions::curve_radius_mm): a point's place along and across a blade bent by `bend` (+1 towards
     // +a, −1 away, 0 straight) from the heel, in the blade's frame (r along it from the hinge, a across it).
     const double CR = o.curve_radius_mm;
@@ -566,7 +568,67 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
     su["keyframes"] = nlohmann::ordered_json::array();
     su["keyframes"].push_back({{"t", 0.0}, {"position", vec(park)}, {"axis", vec(w)}, {"up", vec(n)}});
     su["keyframes"].push_back({{"t", t_out}, {"position", vec(park)}});
-    j["instruments"] = nlohmann::ordered_json::array({ap, su});
+    // Tandem clips (PlanOptions::tandem): the second beside the first, across the blades (axis × up, the scene's
+    // width direction), on the side where more of the neck line lies beside the first's jaws within the second's.
+    std::string tandem_note;
+    nlohmann::ordered_json ap2;
+    if (o.tandem) {
+        const Eigen::Vector3d acr = axis.cross(w).normalized();
+        const double step = JAW_W + TANDEM_GAP_MM;
+        double beside[2] = {0, 0};  // line length beside the first's jaws: [0] towards −acr, [1] towards +acr
+        for (const auto& [q, len] : seg) {
+            const Eigen::Vector3d rel = q + nf.centre - hinge;
+            const double r = rel.dot(axis), h = rel.dot(acr);
+            if (r < F || r > F + blade) continue;
+            if (h > 0.5 * JAW_W && h <= step + 0.5 * JAW_W) beside[1] += len;
+            if (h < -0.5 * JAW_W && h >= -step - 0.5 * JAW_W) beside[0] += len;
+        }
+        const double to_parent = acr.dot(n) < 0 ? 1.0 : -1.0;  // the sign of acr towards the parent
+        const bool any = beside[0] + beside[1] > 0;
+        const double preferred = !any ? to_parent : (beside[1] >= beside[0] ? 1.0 : -1.0);
+        // The preferred side, or where the second clip would close there on the domain's clamped ends, the other.
+        const Way& wy = ways[static_cast<size_t>(chosen->way)];
+        double sign = preferred;
+        int gripped2 = clamped_gripped(wy, hinge + sign * step * acr, axis, F + blade, 0.0), gripped_first = gripped2;
+        if (gripped2 > 0) {
+            sign = -preferred;
+            gripped2 = clamped_gripped(wy, hinge + sign * step * acr, axis, F + blade, 0.0);
+        }
+        const Eigen::Vector3d off = sign * step * acr;
+        auto towards = [&](double sg) { return sg == to_parent ? "parent" : "sac"; };
+        char b[1200];
+        if (gripped2 > 0) {
+            std::snprintf(b, sizeof b,
+                          "// Tandem clips asked for: a second clip %.1f mm across the blades would close on the domain's clamped nodes on either side\n"
+                          "// (%d towards the %s, %d towards the %s); not planned (one clip).\n",
+                          step, gripped_first, towards(preferred), gripped2, towards(-preferred));
+            tandem_note = b;
+        } else {
+            const int in_way2 = approach_hits(wy, hinge + off, axis, F + blade, 0.0);
+            const int pinched2 = parent_pinched(wy, hinge + off, axis, F + blade, 0.0);
+            std::snprintf(b, sizeof b,
+                          "// Tandem clips: a second applier (\"applier 2\", the same clip) beside the first, its path moved %.1f mm across the blades\n"
+                          "// (%s axis x up: towards the %s), closing with it. Beside the first clip's jaws at rest lie %.2f mm of the neck line on that side\n"
+                          "// (%.2f mm on the other)%s. Its path: %d outer-surface vertices within %.1f mm of its open blades along the approach,\n"
+                          "// %d lumen vertices of the parent between its jaws (as for the first).\n",
+                          step, sign > 0 ? "along" : "against", towards(sign), beside[sign > 0 ? 1 : 0], beside[sign > 0 ? 0 : 1],
+                          sign != preferred ? ", not the other: there it would close on the domain's clamped ends"
+                          : any ? "" : ": none, so towards the parent, where the closing jaws squeeze the line",
+                          in_way2, CLEAR, pinched2);
+            tandem_note = b;
+            if (sign != preferred) {
+                std::snprintf(b, sizeof b, "// (Towards the %s it would have closed on %d of the domain's clamped nodes.)\n", towards(preferred), gripped_first);
+                tandem_note += b;
+            }
+            ap2 = ap;
+            ap2["name"] = "applier 2";
+            for (auto& k : ap2["keyframes"]) {
+                const Eigen::Vector3d p(k["position"][0].get<double>(), k["position"][1].get<double>(), k["position"][2].get<double>());
+                k["position"] = vec(p + off);
+            }
+        }
+    }
+    j["instruments"] = ap2.is_null() ? nlohmann::ordered_json::array({ap, su}) : nlohmann::ordered_json::array({ap, ap2, su});
     char head[1280];
     std::snprintf(head, sizeof head,
                   "// Planned by `aneusim plan` for %s: neck centre (%.2f, %.2f, %.2f) mm, %.2f x %.2f mm (border %.1f mm, label edges %.1f mm),\n"
@@ -617,6 +679,7 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
             header += span;
         }
     }
+    header += tandem_note;
     if (short_tips)
         header += "// No standard blade reaches past the far fold of the neck flattened between the jaws: the 15 mm clip's tips stop short,\n"
                   "// expect the far end of the neck to stay open (a longer clip, or a second one, would close it).\n";

@@ -89,6 +89,10 @@ int main(int argc, char** argv) {
     plan->add_option("--min-cover", plan_min_cover, "least share of the neck's border the jaws must cover (0-1); a case whose only clear way is beside the neck is refused below it")
         ->check(CLI::Range(0.0, 1.0))
         ->capture_default_str();
+    bool plan_tandem = aneu::sim::PlanOptions{}.tandem;
+    plan->add_flag("--tandem", plan_tandem,
+                   "tandem clips: a second clip (straight, the same model) beside the first, a jaw's width and 0.1 mm across the blades, on the side "
+                   "where more of the neck line lies beside the first's jaws (none: the parent's side)");
     double plan_fulcrum = aneu::sim::PlanOptions{}.fulcrum_mm;
     double plan_curve = aneu::sim::PlanOptions{}.curve_radius_mm;
     plan->add_option("--fulcrum-mm", plan_fulcrum, "the planned clip's blades turn about a fulcrum this far behind their heel (the model's fulcrum_mm; 0: about the heel)")
@@ -154,6 +158,7 @@ int main(int argc, char** argv) {
             po.min_cover = plan_min_cover;
             po.fulcrum_mm = plan_fulcrum;
             po.curve_radius_mm = plan_curve;
+            po.tandem = plan_tandem;
             const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -336,6 +337,64 @@ TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAsk
         EXPECT_NE(w.find("covers 100 % of the neck's border"), std::string::npos) << w;
         EXPECT_NE(w.find("the clear poses cover at most " + std::to_string(cover) + " %"), std::string::npos) << w;
     }
+}
+
+// Tandem clips (PlanOptions::tandem) on the wide neck above (±80°: its border spans more than the jaws' 1 mm): a second
+// applier with the same clip beside the first, its every keyframe the first's moved 1.1 mm (a jaw's width and
+// TANDEM_GAP_MM) across the blades (along ± axis × up), to the side where the neck line the first's jaws leave lies;
+// its header line gives that line's length. Without the option: one applier, no such line. A curved clip: refused.
+TEST(Plan, TandemClipsOnAWideNeckPutTheSecondBesideTheFirstWhereTheLineItLeavesLies) {
+    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_tandem_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const fs::path bundle = dir / "tube.h5";
+    write_bundle(bundle.string(), test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.5, 5.5, 80.0).bundle);
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    const sim::SimModel m = sim::load_model(bundle.string(), lo);
+    fs::remove_all(dir);
+    auto scene_of = [](const std::string& text) {
+        std::string body;
+        std::istringstream in(text);
+        for (std::string line; std::getline(in, line);)
+            if (line.rfind("//", 0) != 0) body += line + "\n";
+        return nlohmann::json::parse(body);
+    };
+    const std::string single = sim::plan_scene(m, "tube.h5", "planned");
+    sim::PlanOptions po;
+    po.tandem = true;
+    const std::string text = sim::plan_scene(m, "tube.h5", "planned", po);
+    EXPECT_EQ(single.find("Tandem clips"), std::string::npos);
+    const auto at = text.find("Beside the first clip's jaws at rest lie ");
+    ASSERT_NE(at, std::string::npos) << text.substr(0, 2000);
+    const double beside = std::stod(text.substr(at + 41));
+    EXPECT_GT(beside, 0.5) << text.substr(0, 2000);  // the border spans ~±1.5 mm across: much of it beside one 1 mm jaw
+    const nlohmann::json one = scene_of(single), two = scene_of(text);
+    ASSERT_EQ(one["instruments"].size(), 2u);  // the applier, the suction tube
+    ASSERT_EQ(two["instruments"].size(), 3u);
+    const auto& a1 = two["instruments"][0];
+    const auto& a2 = two["instruments"][1];
+    EXPECT_EQ(a1, one["instruments"][0]);  // the first clip as planned alone
+    EXPECT_EQ(a2["kind"], "clip_applier");
+    EXPECT_EQ(a2["name"], "applier 2");
+    ASSERT_EQ(a2["keyframes"].size(), a1["keyframes"].size());
+    EXPECT_EQ(a2["keyframes"][0]["load"], a1["keyframes"][0]["load"]);
+    auto v3 = [](const nlohmann::json& j) { return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>()); };
+    const Eigen::Vector3d axis = v3(a1["keyframes"][0]["axis"]).normalized(), up = v3(a1["keyframes"][0]["up"]).normalized();
+    const Eigen::Vector3d across = axis.cross(up).normalized();
+    for (size_t k = 0; k < a1["keyframes"].size(); ++k) {
+        const Eigen::Vector3d d = v3(a2["keyframes"][k]["position"]) - v3(a1["keyframes"][k]["position"]);
+        EXPECT_NEAR(std::abs(d.dot(across)), 1.0 + sim::TANDEM_GAP_MM, 2e-4) << "keyframe " << k;
+        EXPECT_NEAR((d - d.dot(across) * across).norm(), 0.0, 2e-4) << "keyframe " << k;
+        EXPECT_EQ(a2["keyframes"][k].value("opening_deg", -1.0), a1["keyframes"][k].value("opening_deg", -1.0));
+    }
+    // The side it went to holds at least as much of the line beside the first's jaws as the other.
+    const auto other = text.find("mm on the other", at);
+    ASSERT_NE(other, std::string::npos);
+    const double opposite = std::stod(text.substr(text.rfind('(', other) + 1));
+    EXPECT_GE(beside, opposite);
+    po.curve_radius_mm = 5.0;
+    EXPECT_THROW(sim::plan_scene(m, "tube.h5", "planned", po), InputError);
+    std::printf("tandem plan: %.2f mm of the neck line beside the first clip's jaws on the second's side, %.2f on the other\n", beside, opposite);
 }
 
 // The 8 mm tube with its sac between z0 and z1 (±25°), and the nodes of its two clamped ends (z = 0 and 8 mm: the

@@ -45,7 +45,16 @@ struct PlanOptions {
     /// radius [mm], towards the sac or away from it, whichever covers more of the neck line; the pose search, the
     /// clearance checks and the cover follow the bent blades.
     double curve_radius_mm = 0.0;
+    /// Tandem clips (straight clips only): a second applier with the same clip model beside the first, its path the
+    /// first's moved a jaw's width and TANDEM_GAP_MM across the blades (along axis × up), to the side where more of the
+    /// neck line lies beside the first clip's jaws at rest (within the second's), or, where none does, to the parent's
+    /// side, where the closing jaws squeeze the line (measured on the corpus's sidewall necks: 0.5-0.8 mm towards the
+    /// parent). Both close together. The second path's approach, parent and clamped-end checks are reported in the
+    /// header, not chosen for: a second clip the clamped ends forbid is not planned (said in the header).
+    bool tandem = false;
 };
+/// How far apart the tandem clips' jaws stand (PlanOptions::tandem): their blades' facing edges [mm].
+constexpr double TANDEM_GAP_MM = 0.1;
 
 /// The planned scene as JSON text (docs/scene_format.md): `bundle_ref` is written as the scene's bundle, the
 /// outputs are named after `stem` beside the scene. The clip opens to 80 % of `max_opening_deg`; its hinge stands
