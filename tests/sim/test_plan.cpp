@@ -311,15 +311,23 @@ TEST(Plan, ACurvedClipIsPlannedAlongAndAcrossItsBentBlades) {
 // A sac spanning ±80° of the tube: its border's heights along the normal span more than the jaws' 1 mm width, so
 // no pose covers all of it. The planner takes the best; asked for more than any clear pose covers (--min-cover), it
 // refuses with an input error that says how much the clear poses and the best-covering pose cover.
-TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAskedFor) {
-    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_wide_" + std::to_string(::getpid()));
+namespace {
+/// The tube with a sac spanning ±80° (z 2.5-5.5 mm), loaded for planning.
+sim::SimModel wide_neck_tube(const std::string& tag) {
+    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_" + tag + "_" + std::to_string(::getpid()));
     fs::create_directories(dir);
     const fs::path bundle = dir / "tube.h5";
     write_bundle(bundle.string(), test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.5, 5.5, 80.0).bundle);
     sim::LoadOptions lo;
     lo.geometry_only = true;
-    const sim::SimModel m = sim::load_model(bundle.string(), lo);
+    sim::SimModel m = sim::load_model(bundle.string(), lo);
     fs::remove_all(dir);
+    return m;
+}
+}  // namespace
+
+TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAskedFor) {
+    const sim::SimModel m = wide_neck_tube("wide");
     const std::string text = sim::plan_scene(m, "tube.h5", "planned");
     const auto at = text.find("they cover ");
     ASSERT_NE(at, std::string::npos) << text.substr(0, 600);
@@ -344,14 +352,7 @@ TEST(Plan, ANeckWiderThanTheJawsIsPlannedAtItsBestCoverOrRefusedBelowTheLeastAsk
 // TANDEM_GAP_MM) across the blades (along ± axis × up), to the side where the neck line the first's jaws leave lies;
 // its header line gives that line's length. Without the option: one applier, no such line. A curved clip: refused.
 TEST(Plan, TandemClipsOnAWideNeckPutTheSecondBesideTheFirstWhereTheLineItLeavesLies) {
-    const fs::path dir = fs::temp_directory_path() / ("aneu_plan_tandem_" + std::to_string(::getpid()));
-    fs::create_directories(dir);
-    const fs::path bundle = dir / "tube.h5";
-    write_bundle(bundle.string(), test::tube_case(Precision::FLOAT64, 48, 32, 1.0, 1.0, 0.45, 2.5, 5.5, 80.0).bundle);
-    sim::LoadOptions lo;
-    lo.geometry_only = true;
-    const sim::SimModel m = sim::load_model(bundle.string(), lo);
-    fs::remove_all(dir);
+    const sim::SimModel m = wide_neck_tube("tandem");
     auto scene_of = [](const std::string& text) {
         std::string body;
         std::istringstream in(text);
