@@ -79,4 +79,9 @@ fields = [
     "max_lag_to_thickness=%s" % ("%.2f" % p["max_lag_to_thickness"] if p.get("max_lag_to_thickness") is not None else "-"),
     "scene_t=%.3f run_s=%d" % (report.get("total_time_s", float("nan")), secs),
 ]
+# tandem clips: the further clips at the end (opening, grip, the force at the label point); the peaks above are the patch's,
+# over all its clips
+for c in (report.get("clips") or [])[1:]:
+    fields.append("clip%d: state=%s held_deg=%.3f grip_n=%.3f label_n=%.3f" % (
+        c.get("id", -1), c.get("state", "?"), c.get("opening_deg", float("nan")), c.get("grip_force_n", float("nan")), c.get("label_force_n", float("nan"))))
 print("\t".join(fields))

@@ -1019,6 +1019,37 @@ TEST(SimulatorPatch, TandemClipsOnTheSameTissueShareOnePatchAndBothGripAsMirrorI
     }
 }
 
+TEST(SimulatorPatch, OnTheNewtonFramesTandemClipsGetAPatchEachAndAreWarnedUncoupled) {
+    // The Newton frames take one clip (fem::ClipBody): the tandem pair of the test above with patch_solver "newton" gets
+    // a patch per clip, and the simulator says, once, that they share tissue and are not coupled, naming both.
+    test::TempDir d("patchtwonewton");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    json two = flattening_scene(bundle, "patch", false);
+    two["duration_s"] = 0.09;  // (the patches are made as the jaws close on the tube, by t = 0.08 s)
+    json second = two["instruments"][0];
+    second["name"] = "applier 2";
+    for (json& k : two["instruments"][0]["keyframes"]) k["position"][2] = k["position"][2].get<double>() - 1.0;
+    for (json& k : second["keyframes"]) k["position"][2] = k["position"][2].get<double>() + 1.0;
+    two["instruments"].push_back(second);
+    sim::Simulator s = make(two, d.file(""), "two.json");
+    int shared = 0, joined = 0;
+    std::string said;
+    sim::RunOptions ro;
+    ro.on_message = [&](const std::string& m) {
+        joined += m.find("joins") != std::string::npos;
+        if (m.find("nonlinear patch shares") != std::string::npos) {
+            ++shared;
+            said = m;
+        }
+    };
+    const sim::Assessment a = sim::run_scene(s, ro);
+    EXPECT_EQ(a.patches.size(), 2u);
+    EXPECT_EQ(joined, 0);
+    EXPECT_EQ(shared, 1) << said;
+    EXPECT_NE(said.find("clip 1's nonlinear patch shares"), std::string::npos) << said;
+    EXPECT_NE(said.find("with clip 0's"), std::string::npos) << said;
+}
+
 TEST(SimulatorPatch, ATandemClipThatLetsGoLeavesThePatchToTheOtherWhichGripsAsIfAlone) {
     // The tandem pair of the test above (linearised once: the frames are the linear problem about rest), then one
     // applier opens its clip to 40 deg (no spring: the clip opens with it) and releases it gripping nothing: it falls
