@@ -27,6 +27,8 @@ usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring
   --tandem-mm D     a second applier beside the first (tandem clips: the same clip model, the same timeline), its path
                     D mm across the blades (along axis x up; the sign picks the side: the plan's header's neck normal
                     is printed with the side it lands on); an experiment until `aneusim plan` plans tandem clips
+                    (a plan made with `aneusim plan --tandem` has its second applier already; --shift-mm, --hinge-back-mm,
+                    --turn-deg, --across-mm, --hold and --slow move or retime the first applier only)
   --slow D          the applier approaches as planned, then closes 60 -> 30 deg by 30 s and on towards 0 deg at
                     600 s; the scene lasts D s (a real-time run that covers the patch's build and first frames)
 """
