@@ -1,5 +1,5 @@
 # Renders a planned scene (aneusim plan) on the case's lumen: the closed clip's two jaws (blue, green) on the
-# lumen (sac orange, vessel grey), along the closing and down the jaws. System python3 with python3-vtk9 (apt-get install python3-vtk9; bench only):
+# lumen (sac orange, vessel grey), along the closing and down the jaws (a tandem plan: both clips' jaws). System python3 with python3-vtk9 (apt-get install python3-vtk9; bench only):
 #   aneuprep export CASE/surface.h5 --format vtp --surface lumen -o lumen.vtp
 #   bash scripts/xvfb.sh /usr/bin/python3 bench/render_plan.py lumen.vtp SCENE.json OUT.png "TITLE"
 import json, re, sys
@@ -19,8 +19,11 @@ j = json.loads(t[t.index("{"):])
 nrm = V([float(x) for x in re.search(r"normal towards the sac \(([^)]*)\)", head).group(1).split(",")])
 ctr = V([float(x) for x in re.search(r"neck centre \(([^)]*)\)", head).group(1).split(",")])
 cm = list(j["clip_models"].values())[0]
-k = j["instruments"][0]["keyframes"]
+# every clip applier's jaws (a tandem plan, aneusim plan --tandem: two), where it closes (its third keyframe)
+appliers = [i for i in j["instruments"] if i["kind"] == "clip_applier"]
+k = appliers[0]["keyframes"]
 hinge = V(k[2]["position"]); axis = V(k[0]["axis"]); up = V(k[0]["up"])
+hinges = [V(a["keyframes"][2]["position"]) for a in appliers]
 side = cross(axis, up)
 L, W, T = cm["jaw_length_mm"], cm["jaw_width_mm"], cm["jaw_thickness_mm"]
 r = vtk.vtkXMLPolyDataReader(); r.SetFileName(vtp); r.Update()
@@ -30,7 +33,7 @@ cols = vtk.vtkUnsignedCharArray(); cols.SetNumberOfComponents(3); cols.SetName("
 for i in range(poly.GetNumberOfCells()):
     cols.InsertNextTuple3(*((235, 150, 60) if reg.GetValue(i) == 1 else (200, 200, 200)))
 poly.GetCellData().SetScalars(cols)
-def blade(sgn):
+def blade(sgn, hinge=hinge):
     pts = vtk.vtkPoints()
     for a in (0, L):
         for b in (-W / 2, W / 2):
@@ -50,7 +53,9 @@ for vi, (dirn, vup) in enumerate([(up, nrm), (-axis, nrm)]):
     ren = vtk.vtkRenderer(); ren.SetViewport(0.5 * vi, 0, 0.5 * vi + 0.5, 1); ren.SetBackground(1, 1, 1)
     m = vtk.vtkPolyDataMapper(); m.SetInputData(poly); m.SetScalarModeToUseCellData()
     a = vtk.vtkActor(); a.SetMapper(m); a.GetProperty().SetOpacity(0.75)
-    ren.AddActor(a); ren.AddActor(blade(1)); ren.AddActor(blade(-1))
+    ren.AddActor(a)
+    for h in hinges:
+        ren.AddActor(blade(1, h)); ren.AddActor(blade(-1, h))
     cam = ren.GetActiveCamera(); focus = ctr
     cam.SetFocalPoint(*focus); cam.SetPosition(*(focus + 40 * dirn)); cam.SetViewUp(*vup); cam.SetViewAngle(30)
     txt = vtk.vtkTextActor(); txt.SetInput(title + (" - along the closing" if vi == 0 else " - down the jaws")); txt.GetTextProperty().SetColor(0, 0, 0); txt.GetTextProperty().SetFontSize(14)
