@@ -937,6 +937,48 @@ TEST(SimulatorPatch, AClipFlatteningTheTubeMatchesTheNeoHookeanReferenceAndTheWa
                 ref_min, p.wall_pairs_touching, p.mean_iterations, p.mean_solve_ms);
 }
 
+namespace {
+/// The tandem pair on the tube: scene `one`'s applier moved 1 mm down the tube (z = 3 mm) and a copy of it, "applier 2",
+/// 1 mm up (z = 5 mm): mirror images about the tube's middle.
+json tandem_pair(const json& one) {
+    json two = one;
+    json second = one["instruments"][0];
+    second["name"] = "applier 2";
+    for (json& k : two["instruments"][0]["keyframes"]) k["position"][2] = k["position"][2].get<double>() - 1.0;
+    for (json& k : second["keyframes"]) k["position"][2] = k["position"][2].get<double>() + 1.0;
+    two["instruments"].push_back(second);
+    return two;
+}
+/// Run options counting the simulator's messages that a clip joined another's patch and that two patches share nodes
+/// (the last of those in `said`).
+struct PatchSays {
+    int shared = 0, joined = 0;
+    std::string said;
+    sim::RunOptions options() {
+        sim::RunOptions ro;
+        ro.on_message = [this](const std::string& m) {
+            joined += m.find("clip 1 joins clip 0's nonlinear patch") != std::string::npos;
+            if (m.find("nonlinear patch shares") != std::string::npos) {
+                ++shared;
+                said = m;
+            }
+        };
+        return ro;
+    }
+};
+/// Both clips of the tandem pair at the applier's end opening, the first gripping, the second gripping as it does
+/// within `share` of its grip.
+void expect_tandem_held(const sim::Simulator& s, double share) {
+    ASSERT_EQ(s.clips().size(), 2u);
+    const sim::Clip& c0 = s.clips().at(0);
+    const sim::Clip& c1 = s.clips().at(1);
+    EXPECT_NEAR(c0.opening_deg, FLAT_END_DEG, 1e-9);
+    EXPECT_NEAR(c1.opening_deg, FLAT_END_DEG, 1e-9);
+    EXPECT_GT(c0.grip_force_n, 0.1);
+    EXPECT_NEAR(c1.grip_force_n, c0.grip_force_n, share * c0.grip_force_n);
+}
+}  // namespace
+
 TEST(SimulatorPatch, TandemClipsOnTheSameTissueShareOnePatchAndBothGripAsMirrorImages) {
     // Two appliers close the flattening clip model side by side on the compliance frames, at z = 3 and z = 5 (0.8 mm
     // between the 1.2 mm blades), mirror images of each other about the tube's middle (z = 4; the tube, its sac region
@@ -968,25 +1010,11 @@ TEST(SimulatorPatch, TandemClipsOnTheSameTissueShareOnePatchAndBothGripAsMirrorI
             sim::run_scene(s, sim::RunOptions{});
             alone[c] = s.clips().at(0).grip_force_n;
         }
-        json two = one;
-        two["instruments"][0] = moved(one["instruments"][0], -1.0);
-        json second = moved(one["instruments"][0], 1.0);
-        second["name"] = "applier 2";
-        two["instruments"].push_back(second);
-        sim::Simulator s = make(two, d.file(""), "two.json");
-        int shared = 0, joined = 0;
-        std::string said;
-        sim::RunOptions ro;
-        ro.on_message = [&](const std::string& m) {
-            shared += m.find("nonlinear patch shares") != std::string::npos;
-            if (m.find("clip 1 joins clip 0's nonlinear patch") != std::string::npos) {
-                ++joined;
-                said = m;
-            }
-        };
-        const sim::Assessment a = sim::run_scene(s, ro);
-        EXPECT_EQ(shared, 0);
-        EXPECT_EQ(joined, 1) << said;
+        sim::Simulator s = make(tandem_pair(one), d.file(""), "two.json");
+        PatchSays says;
+        const sim::Assessment a = sim::run_scene(s, says.options());
+        EXPECT_EQ(says.shared, 0) << says.said;
+        EXPECT_EQ(says.joined, 1);
         ASSERT_EQ(a.patches.size(), 1u);
         const auto& p = a.patches[0];
         EXPECT_EQ(p.clip, 0);
@@ -997,13 +1025,9 @@ TEST(SimulatorPatch, TandemClipsOnTheSameTissueShareOnePatchAndBothGripAsMirrorI
         }
         EXPECT_GT(p.min_wall_distance_mm, -0.02);
         EXPECT_LT(p.min_wall_distance_mm, 0.01);
-        ASSERT_EQ(s.clips().size(), 2u);
+        expect_tandem_held(s, 0.05);
         const sim::Clip& c0 = s.clips().at(0);
         const sim::Clip& c1 = s.clips().at(1);
-        EXPECT_NEAR(c0.opening_deg, FLAT_END_DEG, 1e-9);
-        EXPECT_NEAR(c1.opening_deg, FLAT_END_DEG, 1e-9);
-        EXPECT_GT(c0.grip_force_n, 0.1);
-        EXPECT_NEAR(c1.grip_force_n, c0.grip_force_n, 0.05 * c0.grip_force_n);
         EXPECT_LT(c0.grip_force_n, 0.95 * alone[0]);
         EXPECT_LT(c1.grip_force_n, 0.95 * alone[1]);
         // Neither clip's blades have surface vertices behind their inner faces (by more than the contact's 0.02 mm;
@@ -1024,30 +1048,16 @@ TEST(SimulatorPatch, OnTheNewtonFramesTandemClipsGetAPatchEachAndAreWarnedUncoup
     // a patch per clip, and the simulator says, once, that they share tissue and are not coupled, naming both.
     test::TempDir d("patchtwonewton");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
-    json two = flattening_scene(bundle, "patch", false);
-    two["duration_s"] = 0.09;  // (the patches are made as the jaws close on the tube, by t = 0.08 s)
-    json second = two["instruments"][0];
-    second["name"] = "applier 2";
-    for (json& k : two["instruments"][0]["keyframes"]) k["position"][2] = k["position"][2].get<double>() - 1.0;
-    for (json& k : second["keyframes"]) k["position"][2] = k["position"][2].get<double>() + 1.0;
-    two["instruments"].push_back(second);
-    sim::Simulator s = make(two, d.file(""), "two.json");
-    int shared = 0, joined = 0;
-    std::string said;
-    sim::RunOptions ro;
-    ro.on_message = [&](const std::string& m) {
-        joined += m.find("joins") != std::string::npos;
-        if (m.find("nonlinear patch shares") != std::string::npos) {
-            ++shared;
-            said = m;
-        }
-    };
-    const sim::Assessment a = sim::run_scene(s, ro);
+    json one = flattening_scene(bundle, "patch", false);
+    one["duration_s"] = 0.09;  // (the patches are made as the jaws close on the tube, by t = 0.08 s)
+    sim::Simulator s = make(tandem_pair(one), d.file(""), "two.json");
+    PatchSays says;
+    const sim::Assessment a = sim::run_scene(s, says.options());
     EXPECT_EQ(a.patches.size(), 2u);
-    EXPECT_EQ(joined, 0);
-    EXPECT_EQ(shared, 1) << said;
-    EXPECT_NE(said.find("clip 1's nonlinear patch shares"), std::string::npos) << said;
-    EXPECT_NE(said.find("with clip 0's"), std::string::npos) << said;
+    EXPECT_EQ(says.joined, 0);
+    EXPECT_EQ(says.shared, 1) << says.said;
+    EXPECT_NE(says.said.find("clip 1's nonlinear patch shares"), std::string::npos) << says.said;
+    EXPECT_NE(says.said.find("with clip 0's"), std::string::npos) << says.said;
 }
 
 TEST(SimulatorPatch, ATandemClipThatLetsGoLeavesThePatchToTheOtherWhichGripsAsIfAlone) {
@@ -1243,14 +1253,9 @@ TEST(SimulatorPatch, InRealTimeTandemClipsShareThePatchAndItsRefreshesOnAnotherT
     // the linearisation at rest: 0.97 / 0.98 N.)
     test::TempDir d("patchtworeal");
     const std::string bundle = tube_bundle(Precision::FLOAT64);
-    json two = compliance_flattening_scene(bundle, 1, 4.30);
-    two["outputs"] = {{"log", "rt2_log.csv"}, {"report", "rt2_report.json"}};
-    json second = two["instruments"][0];
-    second["name"] = "applier 2";
-    for (json& k : two["instruments"][0]["keyframes"]) k["position"][2] = k["position"][2].get<double>() - 1.0;
-    for (json& k : second["keyframes"]) k["position"][2] = k["position"][2].get<double>() + 1.0;
-    two["instruments"].push_back(second);
-    sim::Simulator s = make(two, d.file(""), "tworeal.json");
+    json one = compliance_flattening_scene(bundle, 1, 4.30);
+    one["outputs"] = {{"log", "rt2_log.csv"}, {"report", "rt2_report.json"}};
+    sim::Simulator s = make(tandem_pair(one), d.file(""), "tworeal.json");
     sim::RunOptions opt;
     opt.deterministic = false;
     const sim::Assessment a = sim::run_scene(s, opt);
@@ -1261,14 +1266,11 @@ TEST(SimulatorPatch, InRealTimeTandemClipsShareThePatchAndItsRefreshesOnAnotherT
     EXPECT_GE(p.linearisations, 2);
     EXPECT_EQ(p.unconverged_frames, 0);
     EXPECT_GT(p.min_wall_distance_mm, -0.02);
-    const sim::Clip& c0 = s.clips().at(0);
-    const sim::Clip& c1 = s.clips().at(1);
-    EXPECT_NEAR(c0.opening_deg, FLAT_END_DEG, 1e-9);
-    EXPECT_NEAR(c1.opening_deg, FLAT_END_DEG, 1e-9);
-    EXPECT_GT(c0.grip_force_n, 0.1);
     // Measured 0.5073 / 0.5446 N after 5 linearisations (deterministic, relinearised every frame: 0.5619 / 0.5539 N);
     // in real time each clip's last frames lie on whatever refresh came last, so 15 % between them is allowed.
-    EXPECT_NEAR(c1.grip_force_n, c0.grip_force_n, 0.15 * c0.grip_force_n);
+    expect_tandem_held(s, 0.15);
+    const sim::Clip& c0 = s.clips().at(0);
+    const sim::Clip& c1 = s.clips().at(1);
     std::printf("real time, tandem: %ld frames, %d linearisations; grip %.4f / %.4f N; walls %.4f mm apart at the closest\n", p.frames, p.linearisations,
                 c0.grip_force_n, c1.grip_force_n, p.min_wall_distance_mm);
 }
