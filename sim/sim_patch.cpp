@@ -1290,8 +1290,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         }
         // A frame whose solve did not converge leaves the balance's estimate as it was (its reaction is not the
         // tissue's; a held clip goes on following the applier).
-        if (cm.spring && r.reaction.size() && r.converged) {
-            const double R = r.reaction[0], th = r.u[nb];
+        // One spring clip's balance step from this frame's opening th and reaction R = τ − M (`turn`: its
+        // ClipModel::turn_per_heel_turn, `clip`: for the trace, −1 the first): the next opening its frames approach.
+        auto balance = [&](PatchRun::Course& q, double R, double th, const fem::ClipSpring& sp, double turn, bool held_q, bool pressed, int clip) {
             // The secant over the last step that moved the opening by at least SECANT_MIN_DEG (at the heel's turn): with
             // the patch relinearised the tissue's moment also changes at a fixed opening, and over a step of a
             // thousandth of a degree that change is the secant. (Taken over every step, the sample's held clip with its
@@ -1299,19 +1300,19 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // the full cap closed every fourth frame and back: 2.65-3.2 deg, a 3.23 N blade peak over a 2.4 N hold.)
             // A secant below the spring's own k (R grows with θ: the spring alone gives at least that) keeps the last
             // estimate.
-            double k = std::max(P.course.tissue_k, spring.k_nmm_per_rad);
-            const double min_step = SECANT_MIN_DEG * DEG * cm.turn_per_heel_turn();
-            if (P.course.prev_theta < 0 || std::abs(th - P.course.prev_theta) >= min_step) {
-                if (P.course.prev_theta >= 0) {
-                    const double secant = (R - P.course.prev_R) / (th - P.course.prev_theta);
-                    if (secant > spring.k_nmm_per_rad) k = secant;
+            double k = std::max(q.tissue_k, sp.k_nmm_per_rad);
+            const double min_step = SECANT_MIN_DEG * DEG * turn;
+            if (q.prev_theta < 0 || std::abs(th - q.prev_theta) >= min_step) {
+                if (q.prev_theta >= 0) {
+                    const double secant = (R - q.prev_R) / (th - q.prev_theta);
+                    if (secant > sp.k_nmm_per_rad) k = secant;
                 }
-                P.course.tissue_k = k;
-                P.course.prev_theta = th;
-                P.course.prev_R = R;
+                q.tissue_k = k;
+                q.prev_theta = th;
+                q.prev_R = R;
             }
             // (Held, the applier bounds it from below anyway.)
-            P.course.theta_bal = fem::next_spring_opening(th, R, k, held, loads.contacts[0] + loads.contacts[1] > 0);
+            q.theta_bal = fem::next_spring_opening(th, R, k, held_q, pressed);
             // On the compliance frames, with the blades pressing, at most 125°/s (0.5° a frame at 250 Hz): a refresh
             // changes the tissue's moment at the same opening, and the secant step on that jump overshoots (the sample's
             // clip refreshed every 10 frames went 3.47 -> 1.73 deg in one frame, a 6.4 N grip and walls 0.31 mm through
@@ -1320,38 +1321,24 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // fulcrum lies behind the heel (ClipModel::fulcrum_mm) turns proportionally less (20 mm behind a 13 mm
             // blade's heel, 0.5° a frame would be 0.23 mm of travel at the blade's middle instead of 0.06 mm). So is
             // the real-time mode's step above.
-            if (compliance && loads.contacts[0] + loads.contacts[1] > 0) {
-                const double cap = 125.0 * DEG / scene.physics_hz * cm.turn_per_heel_turn();
-                P.course.theta_bal = std::clamp(P.course.theta_bal, th - cap, th + cap);
-            }
-            if (std::getenv("ANEU_PATCH_TRACE"))
-                std::fprintf(stderr, "balance t=%.4f theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, th / DEG, R, k, P.course.theta_bal / DEG);
-        }
-        // The further clips' balances, each on its own R = τ − M from its blades' loads, as the first's.
-        for (MemberFrame& g : mf) {
-            if (!g.has_spring || !r.converged) continue;
-            PatchRun::Course& q = g.course;
-            const double R = g.loads.spring_torque_nmm - 0.5 * (g.loads.moment_nmm[0] + g.loads.moment_nmm[1]), th = g.theta_kept;
-            double k = std::max(q.tissue_k, g.spring.k_nmm_per_rad);
-            const double min_step = SECANT_MIN_DEG * DEG * g.turn;
-            if (q.prev_theta < 0 || std::abs(th - q.prev_theta) >= min_step) {
-                if (q.prev_theta >= 0) {
-                    const double secant = (R - q.prev_R) / (th - q.prev_theta);
-                    if (secant > g.spring.k_nmm_per_rad) k = secant;
-                }
-                q.tissue_k = k;
-                q.prev_theta = th;
-                q.prev_R = R;
-            }
-            const bool pressed = g.loads.contacts[0] + g.loads.contacts[1] > 0;
-            q.theta_bal = fem::next_spring_opening(th, R, k, g.held, pressed);
             if (compliance && pressed) {
-                const double cap = 125.0 * DEG / scene.physics_hz * g.turn;
+                const double cap = 125.0 * DEG / scene.physics_hz * turn;
                 q.theta_bal = std::clamp(q.theta_bal, th - cap, th + cap);
             }
-            if (std::getenv("ANEU_PATCH_TRACE"))
-                std::fprintf(stderr, "balance t=%.4f clip %d theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, g.clip, th / DEG, R, k, q.theta_bal / DEG);
-        }
+            if (std::getenv("ANEU_PATCH_TRACE")) {
+                if (clip < 0)
+                    std::fprintf(stderr, "balance t=%.4f theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, th / DEG, R, k, q.theta_bal / DEG);
+                else
+                    std::fprintf(stderr, "balance t=%.4f clip %d theta %.4f deg R %.4g N mm k %.4g N mm/rad next %.4f deg\n", fr.t, clip, th / DEG, R, k, q.theta_bal / DEG);
+            }
+        };
+        if (cm.spring && r.reaction.size() && r.converged)
+            balance(P.course, r.reaction[0], r.u[nb], spring, cm.turn_per_heel_turn(), held, loads.contacts[0] + loads.contacts[1] > 0, -1);
+        // The further clips' balances, each on its own R = τ − M from its blades' loads.
+        for (MemberFrame& g : mf)
+            if (g.has_spring && r.converged)
+                balance(g.course, g.loads.spring_torque_nmm - 0.5 * (g.loads.moment_nmm[0] + g.loads.moment_nmm[1]), g.theta_kept, g.spring, g.turn, g.held,
+                        g.loads.contacts[0] + g.loads.contacts[1] > 0, g.clip);
         const double t_solve = sw.seconds();
         const Eigen::Vector3d net = loads.net_force;  // the tissue's on the blades
         const double ms = 1e3 * sw.seconds();
