@@ -4,10 +4,11 @@
 (model.wall = "patch", 40 Newton iterations a frame), for bench/run_patch_case.sh and bench/run_patch_realtime.sh.
 
 usage: patch_scene.py PLAN.json SCENE.json BUNDLE [--log L --report R] [--spring-scale S] [--slow DURATION_S]
-                      [--solver newton|compliance] [--refresh-frames N] [--friction-cell MM] [--duration S]
+                      [--solver newton|compliance] [--refresh-frames N] [--compliance-reuse N] [--friction-cell MM] [--duration S]
   --spring-scale S  multiplies the planned clip's two spring forces (an experiment; its source says so)
   --solver          model.patch_solver: the Newton frames [newton] or contact on the patch's compliance
   --refresh-frames  model.refresh_frames for the compliance frames [0: linearised once, where the patch starts]
+  --compliance-reuse N  model.compliance_reuse: linearisations that borrow the last one's W, at most N in a row [0]
   --friction-cell   model.friction_cell_mm for the compliance frames [0: two friction rows a pressed node]
   --duration S      the scene's duration_s (1.40: the sample's planned clip held, before its release at 1.5 s)
   --shift-mm D      moves the applier's path D mm along the neck's normal (the plan's header; towards the sac
@@ -45,6 +46,7 @@ ap.add_argument("--spring-scale", type=float, default=1.0)
 ap.add_argument("--slow", type=float, default=0.0)
 ap.add_argument("--solver", choices=["newton", "compliance"], default="newton")
 ap.add_argument("--refresh-frames", type=int, default=0)
+ap.add_argument("--compliance-reuse", type=int, default=0)
 ap.add_argument("--friction-cell", type=float, default=0.0)
 ap.add_argument("--duration", type=float, default=0.0)
 ap.add_argument("--shift-mm", type=float, default=0.0)
@@ -67,6 +69,8 @@ s["bundle"] = a.bundle
 s["model"] = {"wall": "patch", "newton_per_frame": 40}
 if a.solver == "compliance":
     s["model"].update(patch_solver="compliance", refresh_frames=a.refresh_frames)
+    if a.compliance_reuse > 0:
+        s["model"]["compliance_reuse"] = a.compliance_reuse
     if a.friction_cell > 0:
         s["model"]["friction_cell_mm"] = a.friction_cell
 if a.blade_friction >= 0:

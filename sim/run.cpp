@@ -591,6 +591,8 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["linearise_s"] = p.linearise_s;
                 j["patches"][k]["linearisations_failed"] = p.linearisations_failed;
                 j["patches"][k]["range_refreshes"] = p.range_refreshes;
+                j["patches"][k]["linearisations_borrowed"] = p.linearisations_borrowed;
+                j["patches"][k]["borrow_fallbacks"] = p.borrow_fallbacks;
                 j["patches"][k]["range_earlier_kept"] = p.range_earlier_kept;
                 j["patches"][k]["max_frame_resolves"] = p.max_frame_resolves;
                 j["patches"][k]["range_splits"] = p.range_splits;

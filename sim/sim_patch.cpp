@@ -108,9 +108,19 @@ Reach surface_reach(const SimSurface& sf, const std::vector<int>& cand_vertex, c
 /// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
 /// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
 /// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
+/// Passes a frame on a borrowed W may take before the next linearisation makes its own W (each pass a back
+/// substitution; the tube's frames on a W up to 3 frames old took 3-16).
+constexpr int BORROW_SLOW_PASSES = 8;
+
+/// With `borrow`, on its candidates, borrowing its W (fem::Linearisation's borrowing constructor; `cand` unused).
 std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, const Eigen::MatrixX3d& X, const Eigen::VectorXd& u,
-                                                    const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back) {
+                                                    const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back,
+                                                    const fem::Linearisation* borrow = nullptr) {
     back = 1;
+    auto make = [&](const Eigen::VectorXd& at) {
+        return borrow ? std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, *borrow)
+                      : std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand);
+    };
     if (valid && valid->size() == u.size() && !(pm.min_jacobian(u) > 0)) {
         // (Before: the sample refreshed every frame had 42 of its 67 refreshes refused, an element inverted at the
         // state reached, and the frames stayed on the last one; the real-time mode's, once refused, never recovered.)
@@ -118,11 +128,11 @@ std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, c
             const Eigen::VectorXd ub = *valid + b * (u - *valid);
             if (pm.min_jacobian(ub) > 0) {
                 back = b;
-                return std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), ub, cand);
+                return make(ub);
             }
         }
     }
-    return std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), u, cand);
+    return make(u);
 }
 
 }  // namespace
@@ -966,12 +976,20 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             }
             // A linearisation made here, inline, at the patch's state `at`: the first, a refresh due, or one for a frame
             // that went beyond the linear range of the last (below).
-            auto refresh_at = [&](const Eigen::VectorXd& at) {
+            // With PatchSpec::compliance_reuse it borrows the last one's W while it may (the same candidates: the jaws
+            // within their selection's wedge), unless `own` (a frame whose passes on a borrowed W did not converge).
+            auto refresh_at = [&](const Eigen::VectorXd& at, bool own = false) {
                 const Stopwatch lw;
                 bool made = true;
                 try {
                     double back = 1;
-                    if (C->lin && reselect) {
+                    const bool borrow = !own && C->lin && reselect && !left_wedge && C->borrowed < scene.patch.compliance_reuse;
+                    if (borrow) {
+                        std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, at, &C->lin->u0(), C->cand, back, C->lin.get());
+                        C->lin = std::move(lin);
+                        ++C->borrowed;
+                        ++P.stats.linearisations_borrowed;
+                    } else if (C->lin && reselect) {
                         auto [cs, th] = select(at);
                         std::unique_ptr<fem::Linearisation> lin = linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back);
                         take_setup(std::move(cs), th, blades.hinge, more_sel, more_hinges, at);
@@ -979,12 +997,17 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     } else {
                         C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
                     }
+                    if (!borrow) C->borrowed = 0;
                     ++P.stats.linearisations;
                     if (P.stats.first_candidates == 0) P.stats.first_candidates = static_cast<int>(C->cand.size());
                     P.stats.last_candidates = static_cast<int>(C->cand.size());
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
-                    if (std::getenv("ANEU_PATCH_TRACE"))
+                    if (borrow && std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates, borrowing the compliance of the last made (%d in a row): tangent %.2f s, factorised %.2f s%s; free step %.4g of Newton's\n",
+                                     fr.t, C->cand.size(), C->borrowed, C->lin->tangent_s, C->lin->factorise_s,
+                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->free_step);
+                    else if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws, %lld of them the outer surface's): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
                                      " (%.0f free DOFs, %.0f kept, nnz(L) %.3g, factor %.3g GFLOP, W %.3g GFLOP at %.1f GFLOP/s)\n",
                                      fr.t, C->cand.size(), static_cast<long long>(C->faces.rows()), C->approach_faces,
@@ -1083,6 +1106,21 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     c_nrows = static_cast<int>(f.constraint.size());
                     c_pivots = f.pivots;
                     c_sweeps = f.sweeps;
+                    // Passes on a borrowed W that did not converge to this tangent's frame: solved again, as it started,
+                    // on a linearisation at the same state with its own W (not counted as a re-solve for the range).
+                    if (C->lin->borrowed() && f.compliance_mismatch_mm > co.borrow_tolerance_mm) {
+                        ++P.stats.borrow_fallbacks;
+                        if (std::getenv("ANEU_PATCH_TRACE"))
+                            std::fprintf(stderr, "patch t=%.4f: the frame's passes on the borrowed compliance ended %.3g mm from the tangent's (%d passes): solved again on a linearisation with its own\n",
+                                         fr.t, f.compliance_mismatch_mm, f.passes);
+                        const Eigen::VectorXd at = C->lin->u0();
+                        if (refresh_at(at, true)) {
+                            --range_again;
+                            continue;
+                        }
+                    }
+                    // Passes that converged slowly (W has drifted from the tangents): the next linearisation makes its own.
+                    if (C->lin->borrowed() && f.passes > BORROW_SLOW_PASSES) C->borrowed = scene.patch.compliance_reuse;
                     const Stopwatch dw;
                     res.u.head(nb) = C->lin->displacement(f.candidate_forces);
                     c_disp = dw.seconds();

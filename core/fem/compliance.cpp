@@ -38,7 +38,12 @@ struct Linearisation::Impl {
     std::vector<int> cand;
     std::vector<int> free_index;  // per body DOF: its index among the free ones, −1 fixed
     Eigen::Index nfree = 0;
-    std::vector<double> Wb;  // W in 3 x 3 blocks: block (a, b) at 9 (b |C| + a), column-major
+    // W in 3 x 3 blocks: block (a, b) at 9 (b |C| + a), column-major; shared with the linearisations that borrow it
+    std::shared_ptr<std::vector<double>> Wb = std::make_shared<std::vector<double>>();
+    std::shared_ptr<const Eigen::VectorXd> w_u0;  // the state W was made at
+    bool borrowed = false;
+    void init(Linearisation& self, const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+              const std::vector<int>& candidates, const Linearisation* from);
     std::unique_ptr<CondenseFactor> factor;  // the tangent's factor, condense's (with candidates)
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;  // without candidates
     Eigen::VectorXd solve(const Eigen::VectorXd& b) const { return factor ? factor->solve(b) : Eigen::VectorXd(llt.solve(b)); }
@@ -49,6 +54,32 @@ struct Linearisation::Impl {
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                              const std::vector<int>& candidates)
     : m(std::make_unique<Impl>()) {
+    m->init(*this, body, X, fixed_dofs, u0, candidates, nullptr);
+}
+
+Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                             const Linearisation& from)
+    : m(std::make_unique<Impl>()) {
+    if (from.m->u0.size() != body.dofs())
+        throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
+                         std::to_string(body.dofs()));
+    m->init(*this, body, X, fixed_dofs, u0, from.m->cand, &from);
+}
+
+void Linearisation::Impl::init(Linearisation& self, const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs,
+                               const Eigen::VectorXd& u0, const std::vector<int>& candidates, const Linearisation* from) {
+    Impl* m = this;
+    double& tangent_s = self.tangent_s;
+    double& factorise_s = self.factorise_s;
+    double& compliance_s = self.compliance_s;
+    double& free_dofs = self.free_dofs;
+    double& kept_dofs = self.kept_dofs;
+    double& nnz_L = self.nnz_L;
+    double& factor_flops = self.factor_flops;
+    double& w_flops = self.w_flops;
+    double& w_gflops_per_s = self.w_gflops_per_s;
+    bool& projected = self.projected;
+    double& free_step = self.free_step;
     const Eigen::Index n = body.dofs();
     if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
     if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
@@ -88,7 +119,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     double w_s = 0;
     auto factorise = [&]() {
         if (mf == 0) return true;
-        if (!kept.empty()) {
+        if (!kept.empty() && !from) {
             CondenseParams cp;
             cp.precision = Precision::FLOAT64;
             cp.residual_columns = 0;  // checked by the tests instead
@@ -166,7 +197,17 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     // DOFs: compliance 12.7 -> 7.3 s, factorisation included, by condense instead of 3|C| substitutions; W equal to the
     // substitutions' (the test compares them column by column).)
     const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size()), ncand = static_cast<Eigen::Index>(candidates.size());
-    m->Wb.assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
+    if (from) {  // borrowed: the other linearisation's W, shared
+        free_dofs = static_cast<double>(mf);
+        kept_dofs = static_cast<double>(kept.size());
+        m->Wb = from->m->Wb;
+        m->w_u0 = from->m->w_u0;
+        m->borrowed = true;
+        compliance_s += sw.lap();
+        return;
+    }
+    m->w_u0 = std::make_shared<const Eigen::VectorXd>(u0);
+    m->Wb->assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
     if (!kept.empty() && mf > 0) {
         std::vector<Eigen::Index> slot(static_cast<size_t>(X.rows()), -1);
         for (size_t k = 0; k < candidates.size(); ++k) slot[static_cast<size_t>(candidates[k])] = static_cast<Eigen::Index>(k);
@@ -175,7 +216,7 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
         for (Eigen::Index r = 0; r < M; ++r) at[static_cast<size_t>(r)] = 3 * slot[static_cast<size_t>(cd.dof_node[r])] + cd.dof_axis[r];
         for (Eigen::Index c = 0; c < M; ++c) {
             const Eigen::Index j = at[static_cast<size_t>(c)];
-            double* col = m->Wb.data() + 9 * (j / 3) * ncand + 3 * (j % 3);
+            double* col = m->Wb->data() + 9 * (j / 3) * ncand + 3 * (j % 3);
             for (Eigen::Index r = 0; r < M; ++r) {
                 const Eigen::Index i = at[static_cast<size_t>(r)];
                 col[9 * (i / 3) + i % 3] = cd.W64(r, c);
@@ -289,9 +330,18 @@ Eigen::Matrix3d Linearisation::compliance(int a, int b) const {
     const int n = static_cast<int>(m->cand.size());
     if (a < 0 || a >= n || b < 0 || b >= n)
         throw InputError("linearisation: compliance block (" + std::to_string(a) + ", " + std::to_string(b) + ") of " + std::to_string(n) + " candidates");
-    return Eigen::Map<const Eigen::Matrix3d>(m->Wb.data() + 9 * (static_cast<size_t>(b) * static_cast<size_t>(n) + static_cast<size_t>(a)));
+    return Eigen::Map<const Eigen::Matrix3d>(m->Wb->data() + 9 * (static_cast<size_t>(b) * static_cast<size_t>(n) + static_cast<size_t>(a)));
 }
-const double* Linearisation::compliance_blocks() const { return m->Wb.data(); }
+const double* Linearisation::compliance_blocks() const { return m->Wb->data(); }
+bool Linearisation::borrowed() const { return m->borrowed; }
+const Eigen::VectorXd& Linearisation::compliance_u0() const { return *m->w_u0; }
+Eigen::VectorXd Linearisation::candidate_displacement(const Eigen::VectorXd& f) const {
+    if (f.size() == 3 * static_cast<Eigen::Index>(m->cand.size()) && f.isZero(0.0)) return m->free_u;
+    const Eigen::VectorXd u = displacement(f);
+    Eigen::VectorXd out(3 * static_cast<Eigen::Index>(m->cand.size()));
+    for (size_t k = 0; k < m->cand.size(); ++k) out.segment<3>(3 * static_cast<Eigen::Index>(k)) = u.segment<3>(3 * static_cast<Eigen::Index>(m->cand[k]));
+    return out;
+}
 
 Eigen::VectorXd Linearisation::displacement(const Eigen::VectorXd& f) const {
     if (f.size() != 3 * static_cast<Eigen::Index>(m->cand.size()))
@@ -664,12 +714,19 @@ bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::
 /// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
 CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
                           double theta_start, const CompliantFrame* warm, const CompliantOptions& opt, const CompliantWalls* walls,
-                          const Eigen::VectorXd& start, const std::vector<CompliantClip>* more) {
+                          const Eigen::VectorXd& start, const std::vector<CompliantClip>* more, const Eigen::VectorXd* free_u = nullptr) {
     const Stopwatch sw;
     if (!(spring.k_nmm_per_rad > 0) || !(spring.preload_rad >= 0)) throw InputError("compliant clip: the spring needs k > 0 and a preload >= 0");
     if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
     const double theta_ref = theta_held ? *theta_held : std::max(theta_start, 0.0);
-    const Eigen::MatrixX3d& Xf = lin.free_positions();
+    // The free state: the linearisation's, or (a borrowed W's later passes) the one that puts the last pass's exact end
+    // at its forces on this W: what the passes' gaps are linearised from (free_u, else lin.free_candidate_u()).
+    Eigen::MatrixX3d Xf_moved;
+    if (free_u) {
+        Xf_moved = lin.free_positions();
+        for (Eigen::Index k = 0; k < Xf_moved.rows(); ++k) Xf_moved.row(k) += (free_u->segment<3>(3 * k) - lin.free_candidate_u().segment<3>(3 * k)).transpose();
+    }
+    const Eigen::MatrixX3d& Xf = free_u ? Xf_moved : lin.free_positions();
     const Eigen::Index nc = Xf.rows();
     const double* Wb = lin.compliance_blocks();
     auto Wblock = [&](int a, int b) {
@@ -715,7 +772,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     // an older one), else at the free state. A candidate's position for forces f is free + W f, so a gap is
     // d(x_last) + Σ g · (free + W f − x_last).
     const bool from_last = warm && warm->candidate_u.size() == 3 * nc;
-    const Eigen::VectorXd& fu = lin.free_candidate_u();
+    const Eigen::VectorXd& fu = free_u ? *free_u : lin.free_candidate_u();
     Eigen::MatrixX3d Xl = Xf;  // where the gaps are linearised
     if (from_last)
         for (Eigen::Index k = 0; k < nc; ++k) Xl.row(k) += (warm->candidate_u.segment<3>(3 * k) - fu.segment<3>(3 * k)).transpose();
@@ -1060,7 +1117,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
         out.theta = std::max(theta_lo, (bl + z[m]) / k - th0);
     }
     // The candidates' displacement: the free state's plus the compliance's columns of the pressed candidates only.
-    out.candidate_u = lin.free_candidate_u();
+    out.candidate_u = fu;
     {
         std::vector<char> done(static_cast<size_t>(nc), 0);
         for (const Row& r : rows)
@@ -1206,13 +1263,56 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // The gaps are linear in the candidates' motion only to first order (a blade's or a face's normal turns as it
     // moves): passes re-linearise them where the last pass ended, on the same compliance, until the candidates
     // move less than the sweeps' tolerance.
-    CompliantFrame f = solve_pass(lin, blades, spring, theta_held, theta_start, warm, opt, walls, start, more);
+    //
+    // On a borrowed W (another state's: Linearisation::borrowed) a pass's end free + W f is this tangent's only
+    // approximately: each pass's end is made exact (its forces' displacement by one back substitution), and the next
+    // pass starts from the free state that puts that exact end at those forces on W (free' = exact − W f), so that its
+    // rows are linearised where the candidates really are and W predicts only the change (an approximate Jacobian:
+    // the passes converge to the exact frame while W is near this tangent's inverse). They go on until a pass's
+    // predicted end is within opt.borrow_tolerance_mm of its exact one.
+    const bool borrowed = lin.borrowed();
+    Eigen::VectorXd free_eff;
+    double mismatch = 0;
+    auto pass = [&](const CompliantFrame* from) {
+        const Eigen::VectorXd* fu = borrowed && free_eff.size() == 3 * nc ? &free_eff : nullptr;
+        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, from, opt, walls, start, more, fu);
+        if (borrowed) {
+            const Stopwatch bw;
+            const Eigen::VectorXd exact = lin.candidate_displacement(g.candidate_forces);
+            const Eigen::VectorXd& used = fu ? *fu : lin.free_candidate_u();
+            mismatch = (exact - g.candidate_u).lpNorm<Eigen::Infinity>();
+            free_eff = exact - (g.candidate_u - used);
+            g.candidate_u = exact;
+            g.compliance_mismatch_mm = mismatch;
+            g.lcp_s += bw.seconds();
+        }
+        return g;
+    };
+    // The first pass too predicts only the change from the last frame's forces: the free state that puts their exact
+    // displacement on this tangent at them on W (from the tangent's own free state, W predicts the whole rebound of
+    // the gripped tissue, and on the tube 3 frames' old W was 0.1-0.17 mm off there: the passes' rows came and went,
+    // and the frames diverged as the tube flattened).
+    if (borrowed && warm && warm->candidate_forces.size() == 3 * nc && !warm->candidate_forces.isZero(0.0)) {
+        const Eigen::VectorXd& fw = warm->candidate_forces;
+        const double* Wb = lin.compliance_blocks();
+        Eigen::VectorXd Wf = Eigen::VectorXd::Zero(3 * nc);
+        for (Eigen::Index c = 0; c < nc; ++c) {
+            const Eigen::Vector3d fc = fw.segment<3>(3 * c);
+            if (fc.squaredNorm() == 0) continue;
+            for (Eigen::Index a = 0; a < nc; ++a)
+                Wf.segment<3>(3 * a).noalias() += Eigen::Map<const Eigen::Matrix3d>(Wb + 9 * (static_cast<size_t>(c) * static_cast<size_t>(nc) + static_cast<size_t>(a))) * fc;
+        }
+        free_eff = lin.candidate_displacement(fw) - Wf;
+    }
+    const int max_passes = borrowed ? std::max(opt.geometry_passes, opt.borrow_passes) : opt.geometry_passes;
+    CompliantFrame f = pass(warm);
     static const bool wall_trace = std::getenv("ANEU_WALL_TRACE") != nullptr;
     std::vector<CompliantFrame> pass_ends;  // ANEU_WALL_TRACE: each pass's end, for the worst crossing's history
     if (wall_trace && walls) pass_ends.push_back(f);
     int passes = 1;
-    for (; passes < opt.geometry_passes; ++passes) {
-        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start, more);
+    for (; passes < max_passes; ++passes) {
+        if (borrowed && passes >= opt.geometry_passes && mismatch <= opt.borrow_tolerance_mm) break;
+        CompliantFrame g = pass(&f);
         if (wall_trace && walls) pass_ends.push_back(g);
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
@@ -1229,7 +1329,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
                          passes + 1, moved, static_cast<long>(worst / 3), dw.dot(t), dw.dot(w), dw.dot(n), g.lambda.size(), 0.5 * (g.loads.force_n[0] + g.loads.force_n[1]));
         }
         f = std::move(g);
-        if (moved <= 1e3 * opt.tolerance_mm) {
+        if (moved <= 1e3 * opt.tolerance_mm && (!borrowed || mismatch <= opt.borrow_tolerance_mm)) {
             ++passes;
             break;
         }
@@ -1243,7 +1343,7 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // face its rows left out) takes more passes, from there, while they do: the next has that face's row.
     if (walls)
         for (int extra = 0; extra < opt.wall_extra_passes && f.wall_min_distance_mm < -opt.wall_crossed_mm; ++extra) {
-            CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, &f, opt, walls, start, more);
+            CompliantFrame g = pass(&f);
             g.rows_s += f.rows_s;
             g.delassus_s += f.delassus_s;
             g.lcp_s += f.lcp_s;

@@ -344,6 +344,101 @@ TEST(CompliantClip, ATubeFlattenedByTheBladesHasItsInnerWallsTouchingNotThrough)
                 without.f.loads.force_n[0]);
 }
 
+TEST(CompliantClip, FramesOnABorrowedComplianceSolveTheNewTangentsProblem) {
+    // The tube flattened with the walls' contact (the test above), linearised every frame at the state reached: with
+    // every linearisation making its own W, and with three in four borrowing the last one's W (only the tangent
+    // factorised at the new state; each pass's end corrected on it by a back substitution). The frames solved are the
+    // same problems: where they end agrees to the passes' tolerance, and so do the blades' forces.
+    const BladesOnATube tube(24);
+    const fem::ClipSpring spring = test_spring();
+    struct End {
+        fem::CompliantFrame f;
+        Eigen::VectorXd u;
+        int borrowed = 0, corrected = 0, most_passes = 0, unconverged = 0;
+        double worst_mismatch = 0;
+    };
+    auto run = [&](int reuse) {
+        fem::CompliantWallSearch ws;
+        End e;
+        e.u = Eigen::VectorXd::Zero(tube.solid.dofs());
+        e.f.theta = tube.theta_touch;
+        std::unique_ptr<fem::Linearisation> lin;
+        int in_row = 0;
+        for (int frame = 0; frame < 30; ++frame) {
+            const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * std::min(1.0, (frame + 1) / 20.0);
+            if (lin && in_row < reuse) {
+                lin = std::make_unique<fem::Linearisation>(tube.solid, tube.m.V, tube.fixed, e.u, *lin);
+                ++in_row;
+                ++e.borrowed;
+            } else {
+                lin = std::make_unique<fem::Linearisation>(tube.solid, tube.m.V, tube.fixed, e.u, tube.cand);
+                in_row = 0;
+            }
+            const fem::CompliantFrame last = e.f;
+            e.f = fem::solve_compliant_clip_walls(*lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, frame ? &last : nullptr);
+            EXPECT_EQ(lin->borrowed(), in_row > 0);
+            if (lin->borrowed()) {
+                e.worst_mismatch = std::max(e.worst_mismatch, e.f.compliance_mismatch_mm);
+                e.most_passes = std::max(e.most_passes, e.f.passes);
+                if (e.f.passes > 3) ++e.corrected;
+                if (e.f.compliance_mismatch_mm > fem::CompliantOptions{}.borrow_tolerance_mm) ++e.unconverged;
+            } else {
+                EXPECT_EQ(e.f.compliance_mismatch_mm, 0.0);
+            }
+            e.u = lin->displacement(e.f.candidate_forces);
+            // A frame's end is its forces' displacement on the linearisation's own tangent, borrowed W or not.
+            const Eigen::VectorXd cu = lin->candidate_displacement(e.f.candidate_forces);
+            for (size_t k = 0; k < tube.cand.size(); ++k)
+                EXPECT_LE((cu.segment<3>(3 * static_cast<Eigen::Index>(k)) - e.u.segment<3>(3 * tube.cand[k])).cwiseAbs().maxCoeff(), 1e-12);
+            EXPECT_LE((cu - e.f.candidate_u).cwiseAbs().maxCoeff(), 1e-12);
+        }
+        return e;
+    };
+    const End own = run(0), lent = run(3);
+    EXPECT_EQ(own.borrowed, 0);
+    EXPECT_EQ(lent.borrowed, 22);  // frames 1-3, 5-7, ... of 30
+    EXPECT_GT(lent.corrected, 0);  // W from up to three frames back is not the tangent's: passes were needed
+    for (int side = 0; side < 2; ++side)
+        EXPECT_NEAR(lent.f.loads.force_n[side], own.f.loads.force_n[side], 5e-3 * own.f.loads.force_n[side]);
+    EXPECT_LE((lent.u - own.u).cwiseAbs().maxCoeff(), 1e-3);
+    EXPECT_GT(lent.f.wall_contacts, 20);
+    EXPECT_LT(lent.f.wall_crossed_mm, 1e-3);
+    EXPECT_LE(lent.worst_mismatch, 1e-3);
+    EXPECT_LE(lent.unconverged, 1);
+    // A W from a state near the frame's: the passes converge on the tangent's frame (one pass alone is off); from one
+    // far from it (0.6 of the way from rest to the flattened tube) they do not, and the frame says so (the simulator
+    // then solves it again on a linearisation with its own W).
+    for (const double from : {0.95, 0.6}) {
+        const fem::Linearisation first(tube.solid, tube.m.V, tube.fixed, own.u * from, tube.cand);
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, own.u, first);
+        EXPECT_TRUE(lin.borrowed());
+        EXPECT_EQ(lin.compliance_u0(), first.u0());
+        EXPECT_EQ(lin.compliance(3, 5), first.compliance(3, 5));
+        EXPECT_EQ(lin.candidates(), first.candidates());
+        fem::CompliantOptions opt;
+        opt.geometry_passes = 1;
+        opt.borrow_passes = 1;
+        const fem::CompliantFrame one = fem::solve_compliant_clip(lin, tube.blades, spring, tube.theta_end, tube.theta_end, &own.f, opt);
+        EXPECT_GT(one.compliance_mismatch_mm, opt.borrow_tolerance_mm);
+        const fem::CompliantFrame full = fem::solve_compliant_clip(lin, tube.blades, spring, tube.theta_end, tube.theta_end, &own.f);
+        if (from > 0.9) {
+            EXPECT_LE(full.compliance_mismatch_mm, opt.borrow_tolerance_mm);
+        } else {
+            EXPECT_GT(full.compliance_mismatch_mm, 100 * opt.borrow_tolerance_mm);
+        }
+        std::printf("W borrowed from %.2f of the way: one pass %.3g mm off the tangent's end, %d passes %.3g mm\n", from, one.compliance_mismatch_mm, full.passes,
+                    full.compliance_mismatch_mm);
+    }
+    // A linearisation of another body cannot lend its W.
+    const Block b;
+    const fem::Linearisation other(*b.body, b.X, b.fixed, Eigen::VectorXd::Zero(12), {2, 3});
+    EXPECT_THROW(fem::Linearisation(tube.solid, tube.m.V, tube.fixed, own.u, other), InputError);
+    std::printf("tube walls, linearised every frame: blades %.4f / %.4f N with its own W each time, %.4f / %.4f N with %d of 30 borrowing (%d took more "
+                "than 3 passes, at most %d; %d not within 1e-4 mm, worst %.2e mm); ends %.2e mm apart\n",
+                own.f.loads.force_n[0], own.f.loads.force_n[1], lent.f.loads.force_n[0], lent.f.loads.force_n[1], lent.borrowed, lent.corrected,
+                lent.most_passes, lent.unconverged, lent.worst_mismatch, (lent.u - own.u).cwiseAbs().maxCoeff());
+}
+
 TEST(CompliantClip, RowKindsNameTheClipTheSideAndTheDirection) {
     for (int clip = 0; clip < 4; ++clip)
         for (int side = 0; side < 2; ++side) {

@@ -1204,6 +1204,52 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
     EXPECT_GT(grip[0], 1.5 * f_ref);
 }
 
+TEST(SimulatorPatch, RefreshesThatBorrowTheLastCompliancesWFlattenTheTubeAsThoseThatMakeTheirOwn) {
+    // The test above's scene relinearised every frame, with model.compliance_reuse 3: three refreshes in four (and
+    // the frames' re-solves for the linear range) borrow the last W (the tangent factorised at the new state, W kept;
+    // each frame's passes corrected on the new tangent). The frames solve the same problems as with W made each time:
+    // the blades end at the same force, within the linear range, the walls apart.
+    test::TempDir d("borrow");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    const auto [ref, ref_min] = flattening_reference(bundle, FLAT_END_DEG);
+    const double f_ref = 0.5 * (ref.force_n[0] + ref.force_n[1]);
+    struct End {
+        sim::Assessment::PatchEnd p;
+        double grip = 0;
+        int warnings = 0;
+    };
+    auto run = [&](int reuse) {
+        json j = compliance_flattening_scene(bundle, 1, 0.30);
+        if (reuse > 0) j["model"]["compliance_reuse"] = reuse;
+        sim::Simulator s = make(j, d.file(""), "borrow" + std::to_string(reuse) + ".json");
+        End e;
+        const sim::RunOptions ro = counting_range_warnings(e.warnings);
+        const sim::Assessment a = sim::run_scene(s, ro);
+        EXPECT_EQ(a.patches.size(), 1u);
+        if (a.patches.size() != 1) return e;
+        e.p = a.patches[0];
+        e.grip = s.clips().at(0).grip_force_n;
+        EXPECT_EQ(e.p.unconverged_frames, 0);
+        EXPECT_LE(e.p.max_lag_to_thickness, 0.3);
+        EXPECT_EQ(e.warnings, 0);
+        EXPECT_GT(e.p.min_wall_distance_mm, -0.02);
+        EXPECT_LE(a.lumen_crossing_mm, 0.02);
+        EXPECT_NEAR(s.clips().at(0).opening_deg, FLAT_END_DEG, 1e-9);
+        return e;
+    };
+    const End own = run(0), lent = run(3);
+    EXPECT_EQ(own.p.linearisations_borrowed, 0);
+    EXPECT_EQ(own.p.borrow_fallbacks, 0);
+    EXPECT_GT(lent.p.linearisations_borrowed, lent.p.linearisations / 2);
+    EXPECT_LE(lent.p.linearisations_borrowed, 3 * lent.p.linearisations / 4 + 1);
+    EXPECT_NEAR(lent.grip, own.grip, 0.01 * own.grip);
+    EXPECT_NEAR(lent.grip, f_ref, 0.05 * f_ref);
+    std::printf("tube relinearised every frame: W made every time %.4f N (%d linearisations, %.2f s); %d of %d borrowing W %.4f N (%.2f s, %d frames "
+                "solved again with their own W); neo-Hookean %.4f N; reach %.3f / %.3f x\n",
+                own.grip, own.p.linearisations, own.p.linearise_s, lent.p.linearisations_borrowed, lent.p.linearisations, lent.grip, lent.p.linearise_s,
+                lent.p.borrow_fallbacks, f_ref, own.p.max_lag_to_thickness, lent.p.max_lag_to_thickness);
+}
+
 TEST(SimulatorPatch, InRealTimeTheComplianceFramesRefreshOnAnotherThreadAndConvergeOnTheNeoHookeanReference) {
     // The threaded (real-time) mode makes a compliance patch's refreshes on another thread, from the state of the frame
     // that asked for one, while the frames go on with the linearisation they have; a frame takes a refresh once it is

@@ -46,6 +46,15 @@ public:
     ///         projected onto positive semidefinite element tangents
     Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                   const std::vector<int>& candidates);
+    /// A linearisation at u0 that borrows its compliance from `from` (made at another state, on the same candidates):
+    /// the tangent is assembled and factorised (by CHOLMOD alone, no condensation), the free step made, and W is
+    /// `from`'s, shared. A frame on it (solve_compliant_clip) takes W for an approximation of this tangent's and corrects
+    /// every pass's end by one back substitution with this factor, until the ends agree (CompliantOptions::
+    /// borrow_tolerance_mm): a quasi-Newton step on the contact problem whose fixed point is the exact one's. Costs
+    /// the factorisation (C0001's joined patch: ~7 s) instead of factorisation and W (~37 s; W is ~80 % of a refresh).
+    /// @throws InputError `from` on other candidates, or with another body's DOFs; NumericalError as above
+    Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                  const Linearisation& from);
     ~Linearisation();
     Linearisation(const Linearisation&) = delete;
     Linearisation& operator=(const Linearisation&) = delete;
@@ -63,6 +72,12 @@ public:
     /// The body's displacement (all DOFs) for forces f on the candidates' DOFs (3|C|): u0 + K0⁻¹ (r0 + Hᵀ f). One
     /// back substitution; none for f = 0 (the free state, kept).
     Eigen::VectorXd displacement(const Eigen::VectorXd& candidate_forces) const;
+    /// The candidates' part of displacement(f) (3|C|): exact on this tangent, whatever W is (one back substitution).
+    Eigen::VectorXd candidate_displacement(const Eigen::VectorXd& candidate_forces) const;
+    /// W is another linearisation's (the borrowing constructor), not this tangent's inverse
+    bool borrowed() const;
+    /// Where W was made: the state of the linearisation that computed it (this one's u0 unless borrowed)
+    const Eigen::VectorXd& compliance_u0() const;
     /// Seconds spent: tangent assembly, the factorisation (fem::condense's ordering, analysis and numeric factorisation,
     /// the one factor the free step and the frames' displacements use too), the compliance (condense's forward solve and
     /// SYRK, the free step, W's blocks).
@@ -127,6 +142,12 @@ struct CompliantOptions {
     /// where the two faces' planes differ by more than 10° (a valley's sides). Either way a face a vertex had a row
     /// on in the last pass keeps it while the vertex lies within 0.5 of the face beyond its edges (others: 0.1).
     bool wall_one_face = false;
+    /// On a linearisation whose W is borrowed (Linearisation::borrowed): the passes go on, each from the exact end of
+    /// the last (its forces' displacement on this tangent), until a pass's predicted end and its exact one differ by
+    /// no more than borrow_tolerance_mm at any candidate, at most borrow_passes passes in all (then the frame reports
+    /// its mismatch, CompliantFrame::compliance_mismatch_mm, and the caller may make W anew).
+    double borrow_tolerance_mm = 1e-4;
+    int borrow_passes = 16;
 };
 
 /// A further clip in the same frames (tandem clips over one neck on one patch: a neck line spread wider than one
@@ -256,6 +277,9 @@ struct CompliantFrame {
     double rows_s = 0, delassus_s = 0, lcp_s = 0, search_s = 0;
     int pair_nodes = 0;                ///< the candidates the last pass's rows touch (its Delassus matrix reads W on their pairs)
     int refactors = 0;                 ///< LcpResult::refactors of the last pass
+    /// On a borrowed W: the largest difference at a candidate between the last pass's end on W and its exact end on
+    /// the tangent (the frame's gaps are off by up to this); 0 on a linearisation's own W
+    double compliance_mismatch_mm = 0;
 };
 
 /// The clip's blades (at their pose; `theta_held` the forceps' opening, or none: released, θ free on its spring

@@ -180,6 +180,9 @@ struct Assessment {
         /// Frames solved again on a linearisation made where they got to, having gone past Scene::linear_limit from
         /// theirs (inline mode; each is one of the linearisations)
         int range_refreshes = 0;
+        /// PatchSpec::compliance_reuse: of the linearisations, those that borrowed the last one's W; frames on a
+        /// borrowed W whose passes did not converge to the tangent's (solved again on a linearisation with its own W)
+        int linearisations_borrowed = 0, borrow_fallbacks = 0;
         /// ... of those frames, the ones that ended with an earlier attempt than their last, the last having gone further
         /// from its linearisation (the re-solves diverging; halfway re-solves damp them)
         int range_earlier_kept = 0;
