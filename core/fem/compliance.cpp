@@ -1309,10 +1309,15 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     static const bool wall_trace = std::getenv("ANEU_WALL_TRACE") != nullptr;
     std::vector<CompliantFrame> pass_ends;  // ANEU_WALL_TRACE: each pass's end, for the worst crossing's history
     if (wall_trace && walls) pass_ends.push_back(f);
-    int passes = 1;
+    int passes = 1, growing = 0;
     for (; passes < max_passes; ++passes) {
         if (borrowed && passes >= opt.geometry_passes && mismatch <= opt.borrow_tolerance_mm) break;
+        // Passes whose mismatch has grown twice in a row diverge (W too far from this tangent: C0001's tandem had one
+        // end 1.69 mm off after 16): the frame stops there, reporting it.
+        if (borrowed && growing >= 2) break;
+        const double mismatch_before = mismatch;
         CompliantFrame g = pass(&f);
+        growing = borrowed && mismatch > opt.borrow_tolerance_mm && mismatch > mismatch_before ? growing + 1 : 0;
         if (wall_trace && walls) pass_ends.push_back(g);
         g.rows_s += f.rows_s;
         g.delassus_s += f.delassus_s;
