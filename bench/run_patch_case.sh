@@ -9,7 +9,8 @@
 #   CASE.toml: built with `aneuprep run` into OUT_DIR; CASE_DIR: a directory holding case.h5 and fem.h5.
 #   SPRING_SCALE: multiplies the planned clip's two spring forces (an experiment; the line says so) [1].
 #   SOLVER=compliance [REFRESH=N] in the environment: the patch's frames on the compliance solver (model.patch_solver,
-#   refresh_frames; minutes a case instead of an hour).
+#   refresh_frames; minutes a case instead of an hour); REUSE=N: model.compliance_reuse (refreshes borrowing the last
+#   W, 2-3x faster on the real cases, compliance.md session 56).
 # Build first (bash scripts/build.sh); the picture needs Xvfb and the system python3 with python3-vtk9.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -25,7 +26,7 @@ else
 fi
 "$sim" plan "$case_dir/case.h5" -o "$out/plan.json" 2> "$out/plan.err"
 python3 "$root/bench/patch_scene.py" "$out/plan.json" "$out/scene.json" "$case_dir/case.h5" --spring-scale "$scale" \
-  --solver "${SOLVER:-newton}" --refresh-frames "${REFRESH:-0}"
+  --solver "${SOLVER:-newton}" --refresh-frames "${REFRESH:-0}" --compliance-reuse "${REUSE:-0}"
 cp "$sim" "$out/aneusim"  # the run keeps its own binary: a rebuild during the hour does not change it
 start=$(date +%s)
 (cd "$out" && OMP_THREAD_LIMIT=1 OPENBLAS_NUM_THREADS=1 ANEU_PATCH_TRACE=1 ANEU_LUMEN_OBJ=lumen_end.obj \
