@@ -104,14 +104,14 @@ Reach surface_reach(const SimSurface& sf, const std::vector<int>& cand_vertex, c
     return r;
 }
 
-/// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
-/// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
-/// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
-/// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
 /// Passes a frame on a borrowed W may take before the next linearisation makes its own W (each pass a back
 /// substitution; the tube's frames on a W up to 3 frames old took 3-16).
 constexpr int BORROW_SLOW_PASSES = 8;
 
+/// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
+/// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
+/// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
+/// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
 /// With `borrow`, on its candidates, borrowing its W (fem::Linearisation's borrowing constructor; `cand` unused).
 std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, const Eigen::MatrixX3d& X, const Eigen::VectorXd& u,
                                                     const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back,
@@ -976,8 +976,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             }
             // A linearisation made here, inline, at the patch's state `at`: the first, a refresh due, or one for a frame
             // that went beyond the linear range of the last (below).
-            // With PatchSpec::compliance_reuse it borrows the last one's W while it may (the same candidates: the jaws
-            // within their selection's wedge), unless `own` (a frame whose passes on a borrowed W did not converge).
+            // With PatchSpec::compliance_reuse it borrows the last one's W where the candidates it selects are all among
+            // W's, unless `own` (a frame whose passes on a borrowed W did not converge).
             auto refresh_at = [&](const Eigen::VectorXd& at, bool own = false) {
                 const Stopwatch lw;
                 bool made = true;
