@@ -12,6 +12,7 @@
 #include <iterator>
 #include <limits>
 #include <map>
+#include <numeric>
 #include <string>
 
 #include <Eigen/Cholesky>
@@ -42,8 +43,6 @@ struct Linearisation::Impl {
     std::shared_ptr<std::vector<double>> Wb = std::make_shared<std::vector<double>>();
     std::shared_ptr<const Eigen::VectorXd> w_u0;  // the state W was made at
     bool borrowed = false;
-    void init(Linearisation& self, const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-              const std::vector<int>& candidates, const Linearisation* from);
     std::unique_ptr<CondenseFactor> factor;  // the tangent's factor, condense's (with candidates)
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;  // without candidates
     Eigen::VectorXd solve(const Eigen::VectorXd& b) const { return factor ? factor->solve(b) : Eigen::VectorXd(llt.solve(b)); }
@@ -54,7 +53,7 @@ struct Linearisation::Impl {
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                              const std::vector<int>& candidates)
     : m(std::make_unique<Impl>()) {
-    m->init(*this, body, X, fixed_dofs, u0, candidates, nullptr);
+    init(body, X, fixed_dofs, u0, candidates, nullptr);
 }
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
@@ -63,23 +62,11 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
     if (from.m->u0.size() != body.dofs())
         throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
                          std::to_string(body.dofs()));
-    m->init(*this, body, X, fixed_dofs, u0, from.m->cand, &from);
+    init(body, X, fixed_dofs, u0, from.m->cand, &from);
 }
 
-void Linearisation::Impl::init(Linearisation& self, const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs,
-                               const Eigen::VectorXd& u0, const std::vector<int>& candidates, const Linearisation* from) {
-    Impl* m = this;
-    double& tangent_s = self.tangent_s;
-    double& factorise_s = self.factorise_s;
-    double& compliance_s = self.compliance_s;
-    double& free_dofs = self.free_dofs;
-    double& kept_dofs = self.kept_dofs;
-    double& nnz_L = self.nnz_L;
-    double& factor_flops = self.factor_flops;
-    double& w_flops = self.w_flops;
-    double& w_gflops_per_s = self.w_gflops_per_s;
-    bool& projected = self.projected;
-    double& free_step = self.free_step;
+void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                         const std::vector<int>& candidates, const Linearisation* from) {
     const Eigen::Index n = body.dofs();
     if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
     if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
@@ -710,6 +697,18 @@ bool over_face(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::
     return o.b0 >= OVER && o.b1 >= OVER && o.b2 >= OVER;
 }
 
+/// u += W f, over the candidates `which` (each once; their order is the sums' order).
+void add_compliance_times(const Linearisation& lin, const Eigen::VectorXd& f, const std::vector<int>& which, Eigen::VectorXd& u) {
+    const double* Wb = lin.compliance_blocks();
+    const auto nc = static_cast<size_t>(lin.candidates().size());
+    for (const int c : which) {
+        const Eigen::Vector3d fc = f.segment<3>(3 * c);
+        if (fc.squaredNorm() == 0) continue;
+        for (size_t a = 0; a < nc; ++a)
+            u.segment<3>(3 * static_cast<Eigen::Index>(a)).noalias() += Eigen::Map<const Eigen::Matrix3d>(Wb + 9 * (static_cast<size_t>(c) * nc + a)) * fc;
+    }
+}
+
 /// One pass of a frame: the constraints linearised where `warm` left the candidates (else at the free state), those
 /// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
 CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
@@ -1120,14 +1119,11 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
     out.candidate_u = fu;
     {
         std::vector<char> done(static_cast<size_t>(nc), 0);
+        std::vector<int> which;
         for (const Row& r : rows)
-            for (int a = 0; a < r.n; ++a) {
-                const int c = r.cand(a);
-                if (done[static_cast<size_t>(c)]++) continue;
-                const Eigen::Vector3d fk = out.candidate_forces.segment<3>(3 * c);
-                if (fk.squaredNorm() > 0)
-                    for (Eigen::Index a = 0; a < nc; ++a) out.candidate_u.segment<3>(3 * a).noalias() += Wblock(static_cast<int>(a), c) * fk;
-            }
+            for (int a = 0; a < r.n; ++a)
+                if (!done[static_cast<size_t>(r.cand(a))]++) which.push_back(r.cand(a));
+        add_compliance_times(lin, out.candidate_forces, which, out.candidate_u);
     }
     out.loads.opening_rad = out.theta;
     out.loads.spring_torque_nmm = spring.torque(out.theta);
@@ -1294,14 +1290,10 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     // and the frames diverged as the tube flattened).
     if (borrowed && warm && warm->candidate_forces.size() == 3 * nc && !warm->candidate_forces.isZero(0.0)) {
         const Eigen::VectorXd& fw = warm->candidate_forces;
-        const double* Wb = lin.compliance_blocks();
+        std::vector<int> all(static_cast<size_t>(nc));
+        std::iota(all.begin(), all.end(), 0);
         Eigen::VectorXd Wf = Eigen::VectorXd::Zero(3 * nc);
-        for (Eigen::Index c = 0; c < nc; ++c) {
-            const Eigen::Vector3d fc = fw.segment<3>(3 * c);
-            if (fc.squaredNorm() == 0) continue;
-            for (Eigen::Index a = 0; a < nc; ++a)
-                Wf.segment<3>(3 * a).noalias() += Eigen::Map<const Eigen::Matrix3d>(Wb + 9 * (static_cast<size_t>(c) * static_cast<size_t>(nc) + static_cast<size_t>(a))) * fc;
-        }
+        add_compliance_times(lin, fw, all, Wf);
         free_eff = lin.candidate_displacement(fw) - Wf;
     }
     const int max_passes = borrowed ? std::max(opt.geometry_passes, opt.borrow_passes) : opt.geometry_passes;

@@ -95,6 +95,8 @@ public:
 private:
     struct Impl;
     std::unique_ptr<Impl> m;
+    void init(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+              const std::vector<int>& candidates, const Linearisation* from);
 };
 
 struct CompliantOptions {
