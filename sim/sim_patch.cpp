@@ -112,13 +112,14 @@ constexpr int BORROW_SLOW_PASSES = 8;
 /// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
 /// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
 /// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
-/// With `borrow`, on its candidates, borrowing its W (fem::Linearisation's borrowing constructor; `cand` unused).
+/// With `borrow`, on `cand`, borrowing its W (fem::Linearisation's borrowing constructor: the added candidates' columns
+/// made on the tangent that W was made on).
 std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, const Eigen::MatrixX3d& X, const Eigen::VectorXd& u,
                                                     const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back,
                                                     const fem::Linearisation* borrow = nullptr) {
     back = 1;
     auto make = [&](const Eigen::VectorXd& at) {
-        return borrow ? std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, *borrow)
+        return borrow ? std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand, *borrow)
                       : std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand);
     };
     if (valid && valid->size() == u.size() && !(pm.min_jacobian(u) > 0)) {
@@ -986,21 +987,20 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     bool borrow = false;
                     if (C->lin && reselect) {
                         auto [cs, th] = select(at);
-                        // Borrowing keeps the lin's candidates: only where the new selection's are all among them (its
-                        // faces, the walls where they now are, renumbered onto them). Selected anew and kept, the first
-                        // selection missed the outer surface about to meet itself: C0024's tissue ended 0.19 mm inside
-                        // itself, against 0.012 mm.
+                        // Borrowing takes the new selection: W's blocks between the candidates it shares with the
+                        // last W are that W's, the added ones' columns made on the tangent it was made on
+                        // (fem::Linearisation's borrowing constructor on other candidates), where at most a quarter of
+                        // the selection is new. (Session 56 borrowed only where the new selection lay within W's
+                        // candidates: C0024's planned clip then borrowed 7 of 176 times. Keeping the old selection
+                        // instead missed the outer surface about to meet itself: its tissue ended 0.19 mm inside
+                        // itself, against 0.012 mm.)
                         if (!own && C->borrowed < scene.patch.compliance_reuse && C->lin->candidates() == C->cand) {
-                            std::vector<int> slot(static_cast<size_t>(P.X.rows()), -1);
-                            for (size_t k = 0; k < C->cand.size(); ++k) slot[static_cast<size_t>(C->cand[k])] = static_cast<int>(k);
-                            borrow = std::all_of(cs.candidates.begin(), cs.candidates.end(), [&](int c) { return slot[static_cast<size_t>(c)] >= 0; });
-                            if (borrow) {
-                                for (Eigen::Index f = 0; f < cs.faces.rows(); ++f)
-                                    for (int k = 0; k < 3; ++k) cs.faces(f, k) = slot[static_cast<size_t>(cs.candidates[static_cast<size_t>(cs.faces(f, k))])];
-                                cs.candidates = C->cand;
-                            }
+                            std::vector<char> in_w(static_cast<size_t>(P.X.rows()), 0);
+                            for (int c : C->cand) in_w[static_cast<size_t>(c)] = 1;
+                            const auto added = std::count_if(cs.candidates.begin(), cs.candidates.end(), [&](int c) { return !in_w[static_cast<size_t>(c)]; });
+                            borrow = 4 * static_cast<size_t>(added) <= cs.candidates.size();
                         }
-                        std::unique_ptr<fem::Linearisation> lin = borrow ? linearise_patch(pm, P.X, at, &C->lin->u0(), C->cand, back, C->lin.get())
+                        std::unique_ptr<fem::Linearisation> lin = borrow ? linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back, C->lin.get())
                                                                          : linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back);
                         take_setup(std::move(cs), th, blades.hinge, more_sel, more_hinges, at);
                         C->lin = std::move(lin);
@@ -1018,8 +1018,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (back < 1 && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: an element is inverted at the state reached: linearised %.4g of the way there from the last linearisation\n", fr.t, back);
                     if (borrow && std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates, borrowing the compliance of the last made (%d in a row): tangent %.2f s, factorised %.2f s%s; free step %.4g of Newton's\n",
-                                     fr.t, C->cand.size(), C->borrowed, C->lin->tangent_s, C->lin->factorise_s,
+                        std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates, borrowing the compliance of the last made (%d in a row; %d candidates added, their columns %.2f s): tangent %.2f s, factorised %.2f s%s; free step %.4g of Newton's\n",
+                                     fr.t, C->cand.size(), C->borrowed, C->lin->added_candidates, C->lin->compliance_s, C->lin->tangent_s, C->lin->factorise_s,
                                      C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->free_step);
                     else if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws, %lld of them the outer surface's): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"

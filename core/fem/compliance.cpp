@@ -43,7 +43,10 @@ struct Linearisation::Impl {
     std::shared_ptr<std::vector<double>> Wb = std::make_shared<std::vector<double>>();
     std::shared_ptr<const Eigen::VectorXd> w_u0;  // the state W was made at
     bool borrowed = false;
-    std::unique_ptr<CondenseFactor> factor;  // the tangent's factor, condense's (with candidates)
+    std::shared_ptr<CondenseFactor> factor;  // the tangent's factor, condense's (with candidates)
+    // The factor of the tangent W was made on (this one's, or the lender's): a borrowing linearisation on other
+    // candidates makes the added ones' columns on it, so that W stays one tangent's inverse (positive definite)
+    std::shared_ptr<const CondenseFactor> w_factor;
     Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper> llt;  // without candidates
     Eigen::VectorXd solve(const Eigen::VectorXd& b) const { return factor ? factor->solve(b) : Eigen::VectorXd(llt.solve(b)); }
 };
@@ -63,6 +66,15 @@ Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X,
         throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
                          std::to_string(body.dofs()));
     init(body, X, fixed_dofs, u0, from.m->cand, &from);
+}
+
+Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                             const std::vector<int>& candidates, const Linearisation& from)
+    : m(std::make_unique<Impl>()) {
+    if (from.m->u0.size() != body.dofs())
+        throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
+                         std::to_string(body.dofs()));
+    init(body, X, fixed_dofs, u0, candidates, &from);
 }
 
 void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
@@ -110,12 +122,14 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
             CondenseParams cp;
             cp.precision = Precision::FLOAT64;
             cp.residual_columns = 0;  // checked by the tests instead
+            std::unique_ptr<CondenseFactor> made;
             try {
                 cd = condense(Kt, fixed_dofs, Eigen::Map<const Eigen::VectorXi>(kept.data(), static_cast<Eigen::Index>(kept.size())), cp,
-                              null_reporter(), &m->factor);
+                              null_reporter(), &made);
             } catch (const NumericalError&) {
                 return false;
             }
+            m->factor = std::move(made);
             for (const auto& [k, v] : cd.diagnostics) {
                 if (k == "w_s") w_s = v;
                 if (k == "n_free_dofs") free_dofs = v;
@@ -184,16 +198,75 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     // DOFs: compliance 12.7 -> 7.3 s, factorisation included, by condense instead of 3|C| substitutions; W equal to the
     // substitutions' (the test compares them column by column).)
     const Eigen::Index nc = 3 * static_cast<Eigen::Index>(candidates.size()), ncand = static_cast<Eigen::Index>(candidates.size());
-    if (from) {  // borrowed: the other linearisation's W, shared
+    if (from) {  // borrowed: the other linearisation's W, shared where the candidates are its own
         free_dofs = static_cast<double>(mf);
         kept_dofs = static_cast<double>(kept.size());
-        m->Wb = from->m->Wb;
         m->w_u0 = from->m->w_u0;
+        m->w_factor = from->m->w_factor;
         m->borrowed = true;
+        if (candidates == from->m->cand) {
+            m->Wb = from->m->Wb;
+        } else {
+            // W's blocks between the candidates `from` has are its own; the columns of the others are made on the
+            // tangent W was made on (K_W⁻¹ E_a, its rows at every candidate), their rows by symmetry: W stays that
+            // tangent's inverse on the new candidates, positive definite. (Made on this tangent instead, the added
+            // columns next to the old ones' made W indefinite: the tube's LCP failed on it.)
+            if (!m->w_factor || from->m->nfree != mf)
+                throw InputError("linearisation: borrowing a compliance on other candidates from a linearisation without its W's factor or with other fixed DOFs");
+            const Eigen::Index nf = static_cast<Eigen::Index>(from->m->cand.size());
+            std::vector<Eigen::Index> fslot(static_cast<size_t>(X.rows()), -1);
+            for (Eigen::Index k = 0; k < nf; ++k) fslot[static_cast<size_t>(from->m->cand[static_cast<size_t>(k)])] = k;
+            std::vector<Eigen::Index> old_at(static_cast<size_t>(ncand));
+            std::vector<Eigen::Index> added;
+            for (Eigen::Index k = 0; k < ncand; ++k) {
+                old_at[static_cast<size_t>(k)] = fslot[static_cast<size_t>(candidates[static_cast<size_t>(k)])];
+                if (old_at[static_cast<size_t>(k)] < 0) added.push_back(k);
+            }
+            added_candidates = static_cast<int>(added.size());
+            auto Wb = std::make_shared<std::vector<double>>(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
+            const double* Wf = from->m->Wb->data();
+            for (Eigen::Index b = 0; b < ncand; ++b) {
+                const Eigen::Index fb = old_at[static_cast<size_t>(b)];
+                if (fb < 0) continue;
+                for (Eigen::Index a = 0; a < ncand; ++a) {
+                    const Eigen::Index fa = old_at[static_cast<size_t>(a)];
+                    if (fa < 0) continue;
+                    std::copy_n(Wf + 9 * (static_cast<size_t>(fb) * static_cast<size_t>(nf) + static_cast<size_t>(fa)), 9,
+                                Wb->data() + 9 * (static_cast<size_t>(b) * static_cast<size_t>(ncand) + static_cast<size_t>(a)));
+                }
+            }
+            // The added DOFs' columns in blocks of 64 right-hand sides (a fixed DOF's column stays zero, as condense's)
+            std::vector<std::pair<Eigen::Index, int>> cols;  // (candidate slot, axis) of each free added DOF
+            for (Eigen::Index k : added)
+                for (int ax = 0; ax < 3; ++ax)
+                    if (m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(k)] + ax)] >= 0) cols.emplace_back(k, ax);
+            constexpr Eigen::Index BLOCK = 64;
+            for (size_t c0 = 0; c0 < cols.size() && mf > 0; c0 += BLOCK) {
+                const Eigen::Index nb = static_cast<Eigen::Index>(std::min<size_t>(BLOCK, cols.size() - c0));
+                Eigen::MatrixXd B = Eigen::MatrixXd::Zero(mf, nb);
+                for (Eigen::Index j = 0; j < nb; ++j) {
+                    const auto [k, ax] = cols[c0 + static_cast<size_t>(j)];
+                    B(m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(k)] + ax)], j) = 1;
+                }
+                const Eigen::MatrixXd Y = m->w_factor->solve_columns(B);
+                for (Eigen::Index j = 0; j < nb; ++j) {
+                    const auto [k, ax] = cols[c0 + static_cast<size_t>(j)];
+                    for (Eigen::Index a = 0; a < ncand; ++a)
+                        for (int ai = 0; ai < 3; ++ai) {
+                            const int fi = m->free_index[static_cast<size_t>(3 * candidates[static_cast<size_t>(a)] + ai)];
+                            const double v = fi >= 0 ? Y(fi, j) : 0.0;
+                            (*Wb)[9 * (static_cast<size_t>(k) * static_cast<size_t>(ncand) + static_cast<size_t>(a)) + 3 * static_cast<size_t>(ax) + static_cast<size_t>(ai)] = v;
+                            (*Wb)[9 * (static_cast<size_t>(a) * static_cast<size_t>(ncand) + static_cast<size_t>(k)) + 3 * static_cast<size_t>(ai) + static_cast<size_t>(ax)] = v;
+                        }
+                }
+            }
+            m->Wb = std::move(Wb);
+        }
         compliance_s += sw.lap();
         return;
     }
     m->w_u0 = std::make_shared<const Eigen::VectorXd>(u0);
+    m->w_factor = m->factor;
     m->Wb->assign(static_cast<size_t>(nc) * static_cast<size_t>(nc), 0.0);
     if (!kept.empty() && mf > 0) {
         std::vector<Eigen::Index> slot(static_cast<size_t>(X.rows()), -1);

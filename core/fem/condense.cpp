@@ -463,6 +463,25 @@ Eigen::VectorXd CondenseFactor::solve(const Eigen::VectorXd& b) const {
     return x;
 }
 
+Eigen::MatrixXd CondenseFactor::solve_columns(const Eigen::MatrixXd& b) const {
+    if (b.rows() != m->n) throw InputError("condense factor: right-hand sides of " + std::to_string(b.rows()) + " entries, expected " + std::to_string(m->n));
+    Eigen::MatrixXd x(m->n, b.cols());
+    if (m->n == 0 || b.cols() == 0) return x;
+    Cholmod& ch = *m->ch;
+    cholmod_dense B{};
+    B.nrow = B.d = static_cast<size_t>(m->n);
+    B.ncol = static_cast<size_t>(b.cols());
+    B.nzmax = static_cast<size_t>(m->n) * static_cast<size_t>(b.cols());
+    B.x = const_cast<double*>(b.data());
+    B.xtype = CHOLMOD_REAL;
+    B.dtype = CHOLMOD_DOUBLE;
+    cholmod_dense* X = cholmod_solve(CHOLMOD_A, ch.L, &B, &ch.c);
+    if (!X) throw NumericalError("condense factor: CHOLMOD solve failed: " + g_cholmod_error);
+    std::copy_n(static_cast<const double*>(X->x), x.size(), x.data());
+    cholmod_free_dense(&X, &ch.c);
+    return x;
+}
+
 CondensedData condense(const Eigen::SparseMatrix<double, Eigen::RowMajor>& K, const Eigen::VectorXi& fixed_dofs,
                        const Eigen::VectorXi& kept_dofs, const CondenseParams& p, Reporter& rep, std::unique_ptr<CondenseFactor>* factor) {
     validate(p);

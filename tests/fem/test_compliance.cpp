@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <memory>
 #include <vector>
 
@@ -437,6 +438,75 @@ TEST(CompliantClip, FramesOnABorrowedComplianceSolveTheNewTangentsProblem) {
                 "than 3 passes, at most %d; %d not within 1e-4 mm, worst %.2e mm); ends %.2e mm apart\n",
                 own.f.loads.force_n[0], own.f.loads.force_n[1], lent.f.loads.force_n[0], lent.f.loads.force_n[1], lent.borrowed, lent.corrected,
                 lent.most_passes, lent.unconverged, lent.worst_mismatch, (lent.u - own.u).cwiseAbs().maxCoeff());
+}
+
+TEST(CompliantClip, ABorrowedComplianceOnOtherCandidatesMakesTheAddedOnesColumnsOnTheNewTangent) {
+    // A refresh selects its candidates anew; borrowing only where they all were the last W's, C0024's planned clip
+    // borrowed 7 of 176 times. Borrowed on other candidates, W's blocks between the old candidates are the old W's, the
+    // added candidates' columns (and rows) those of the tangent the old W was made on (W is one tangent's inverse on
+    // the new candidates), and the dropped candidates are gone. The frames then correct W to the new tangent.
+    const BladesOnATube tube(24);
+    const fem::ClipSpring spring = test_spring();
+    fem::CompliantWallSearch ws;
+    fem::CompliantFrame f;
+    f.theta = tube.theta_touch;
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(tube.solid.dofs()), u_last = u;
+    for (int frame = 0; frame < 16; ++frame) {  // part of the way to the flattened tube, each frame on its own W
+        u_last = u;
+        const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * (frame + 1) / 20.0;
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
+        const fem::CompliantFrame last = f;
+        f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, frame ? &last : nullptr);
+        u = lin.displacement(f.candidate_forces);
+    }
+    ASSERT_GT(f.loads.force_n[0], 0.05);
+    // The old W on three in four of the candidates, in the reverse order, made where the last frame started
+    std::vector<int> old_cand;
+    for (size_t k = tube.cand.size(); k-- > 0;)
+        if (k % 4 != 1) old_cand.push_back(tube.cand[k]);
+    const fem::Linearisation first(tube.solid, tube.m.V, tube.fixed, u_last, old_cand);
+    const fem::Linearisation first_all(tube.solid, tube.m.V, tube.fixed, u_last, tube.cand);  // first's tangent on all
+    const fem::Linearisation own(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
+    const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand, first);
+    EXPECT_TRUE(lin.borrowed());
+    EXPECT_EQ(lin.candidates(), tube.cand);
+    const int n = static_cast<int>(tube.cand.size());
+    EXPECT_EQ(lin.added_candidates, n - static_cast<int>(old_cand.size()));
+    EXPECT_GT(lin.added_candidates, 10);
+    std::map<int, int> old_slot;
+    for (size_t k = 0; k < old_cand.size(); ++k) old_slot[old_cand[k]] = static_cast<int>(k);
+    double scale = 0, added_err = 0, asym = 0;
+    for (int a = 0; a < n; ++a) scale = std::max(scale, own.compliance(a, a).cwiseAbs().maxCoeff());
+    for (int a = 0; a < n; ++a)
+        for (int b = 0; b < n; ++b) {
+            const auto ia = old_slot.find(tube.cand[static_cast<size_t>(a)]), ib = old_slot.find(tube.cand[static_cast<size_t>(b)]);
+            if (ia != old_slot.end() && ib != old_slot.end()) {
+                EXPECT_EQ(lin.compliance(a, b), first.compliance(ia->second, ib->second));  // the old W's, bit for bit
+            } else {
+                added_err = std::max(added_err, (lin.compliance(a, b) - first_all.compliance(a, b)).cwiseAbs().maxCoeff());
+            }
+            asym = std::max(asym, (lin.compliance(a, b) - lin.compliance(b, a).transpose()).cwiseAbs().maxCoeff());
+        }
+    EXPECT_LE(added_err, 1e-9 * scale);  // the old tangent's, as its W on all the candidates has them
+    EXPECT_LE(asym, 1e-9 * scale);
+    // A frame on it solves the new tangent's problem, as one on the tangent's own W does
+    const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * 17 / 20.0;  // the next frame
+    fem::CompliantWallSearch ws_own = ws;
+    const fem::CompliantFrame next_own = fem::solve_compliant_clip_walls(own, tube.Xc, tube.faces, ws_own, tube.blades, spring, th, f.theta, &f);
+    const fem::CompliantFrame next = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, f.theta, &f);
+    EXPECT_LE(next.compliance_mismatch_mm, fem::CompliantOptions{}.borrow_tolerance_mm);
+    for (int side = 0; side < 2; ++side) EXPECT_NEAR(next.loads.force_n[side], next_own.loads.force_n[side], 1e-3 * next_own.loads.force_n[side]);
+    EXPECT_LE((next.candidate_u - next_own.candidate_u).cwiseAbs().maxCoeff(), 1e-3);
+    // Fewer candidates than the lender: its blocks, nothing made
+    std::vector<int> fewer(tube.cand.begin(), tube.cand.begin() + n / 2);
+    const fem::Linearisation less(tube.solid, tube.m.V, tube.fixed, u, fewer, own);
+    EXPECT_EQ(less.added_candidates, 0);
+    EXPECT_EQ(less.candidates(), fewer);
+    for (int a = 0; a < n / 2; ++a) EXPECT_EQ(less.compliance(a, n / 2 - 1 - a), own.compliance(a, n / 2 - 1 - a));
+    std::printf("W borrowed on %d candidates, %d of them added: added columns %.2e of W's scale off the old tangent's; a frame on it %d passes, %.2e mm "
+                "from the tangent's end; blades %.4f / %.4f N (own W %.4f / %.4f N)\n",
+                n, lin.added_candidates, added_err / scale, next.passes, next.compliance_mismatch_mm, next.loads.force_n[0], next.loads.force_n[1],
+                next_own.loads.force_n[0], next_own.loads.force_n[1]);
 }
 
 TEST(CompliantClip, RowKindsNameTheClipTheSideAndTheDirection) {

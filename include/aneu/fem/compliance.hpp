@@ -55,6 +55,16 @@ public:
     /// @throws InputError `from` on other candidates, or with another body's DOFs; NumericalError as above
     Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
                   const Linearisation& from);
+    /// The same on other candidates: W's blocks between candidates that `from` has are `from`'s; the columns of the
+    /// candidates it lacks (added_candidates of them) are made on the tangent `from`'s W was made on (its factor is
+    /// kept while W is lent), 3 per added node, one CHOLMOD solve per 64, their rows by symmetry: W is that tangent's
+    /// inverse on the new candidates (made on this tangent instead, W next to the old columns is indefinite).
+    /// Candidates of `from` not among `candidates` are left out. On `from`'s candidates in `from`'s order W is shared,
+    /// as above. A refresh whose selection adds a few nodes to the last W's (C0024: 169 of 176 did) then costs the
+    /// factorisation and those columns, not a new W.
+    /// @throws as the constructors above
+    Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
+                  const std::vector<int>& candidates, const Linearisation& from);
     ~Linearisation();
     Linearisation(const Linearisation&) = delete;
     Linearisation& operator=(const Linearisation&) = delete;
@@ -88,6 +98,8 @@ public:
     /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
     /// projected onto positive semidefinite ones (factorise_s counts both factorisations).
     bool projected = false;
+    /// Borrowed on other candidates: how many of them `from` lacked (W's columns made for them on this factor)
+    int added_candidates = 0;
     /// The free step's length as a fraction of the Newton step from u0 (1: the full step; shorter where the full step
     /// would invert an element: the residual is scaled with it, so displacement() is the damped step's).
     double free_step = 1;

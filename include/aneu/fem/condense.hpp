@@ -61,6 +61,8 @@ public:
     CondenseFactor& operator=(const CondenseFactor&) = delete;
     /// K_ff⁻¹ b, b on the free DOFs (those not fixed, in increasing order). One caller at a time (CHOLMOD's workspace).
     Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
+    /// K_ff⁻¹ B for the columns of B, one CHOLMOD solve
+    Eigen::MatrixXd solve_columns(const Eigen::MatrixXd& B) const;
     struct Impl;
     std::unique_ptr<Impl> m;
 };

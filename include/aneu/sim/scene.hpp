@@ -172,7 +172,8 @@ struct PatchSpec {
     /// COMPLIANCE, refreshed: a linearisation made for a refresh due or for a frame's re-solve beyond the linear range
     /// borrows the compliance W of the last that made one (fem::Linearisation's borrowing constructor: the tangent
     /// factorised at the new state, W kept; the frames correct every pass's end on the new tangent), at most this many
-    /// in a row, where the candidates the refresh selects are all among W's (its wall faces renumbered onto them). A frame
+    /// in a row, where at most a quarter of the candidates the refresh selects are not among W's (their columns made on the
+    /// tangent W was made on, so W stays one tangent's inverse). A frame
     /// whose passes do not bring W's prediction within fem::CompliantOptions::borrow_tolerance_mm of the tangent's is
     /// solved again on a linearisation with its own W. 0: every linearisation makes its W.
     int compliance_reuse = 0;
