@@ -928,6 +928,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 } else if (q.lin) {
                     take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel, q.more_theta_sel, q.more_hinge_sel, u0);
                     C->lin = std::move(q.lin);
+                    C->borrowed = 0;
+                    C->own_w_flops = C->lin->w_flops;
+                    C->own_factor_flops = C->lin->factor_flops;
                     ++P.stats.linearisations;
                     P.stats.last_candidates = static_cast<int>(C->cand.size());
                     if (std::getenv("ANEU_PATCH_TRACE"))
@@ -993,8 +996,17 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                         // the selection is new. (Session 56 borrowed only where the new selection lay within W's
                         // candidates: C0024's planned clip then borrowed 7 of 176 times. Keeping the old selection
                         // instead missed the outer surface about to meet itself: its tissue ended 0.19 mm inside
-                        // itself, against 0.012 mm.)
-                        if (!own && C->borrowed < scene.patch.compliance_reuse && C->lin->candidates() == C->cand) {
+                        // itself, against 0.012 mm.) While borrowing pays: a borrowed W saves making W, and a frame
+                        // that does not converge on it costs another factorisation (and W). So the run borrows while its
+                        // fallbacks' factorisations cost no more than the Ws its converged borrowings (two more, to
+                        // start) saved, the two weighed by the last own linearisation's floating-point operations (not
+                        // seconds: the run stays deterministic), W's at half weight, its SYRK running at ~2x the
+                        // factorisation's rate. (C0024: W 147 against 174 GFLOP, 44 against 29 GFLOP/s, and 18 of
+                        // 43 borrowing frames fell back, slower than making W each time; C0001's tandem: W 703 against
+                        // 99 GFLOP, 4 of 66 fell back.)
+                        const double ok = P.stats.linearisations_borrowed - P.stats.borrow_fallbacks;
+                        const bool pays = P.stats.borrow_fallbacks * C->own_factor_flops <= (ok + 2) * 0.5 * C->own_w_flops;
+                        if (!own && C->borrowed < scene.patch.compliance_reuse && C->lin->candidates() == C->cand && pays) {
                             std::vector<char> in_w(static_cast<size_t>(P.X.rows()), 0);
                             for (int c : C->cand) in_w[static_cast<size_t>(c)] = 1;
                             const auto added = std::count_if(cs.candidates.begin(), cs.candidates.end(), [&](int c) { return !in_w[static_cast<size_t>(c)]; });
@@ -1011,7 +1023,11 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     } else {
                         C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
                     }
-                    if (!borrow) C->borrowed = 0;
+                    if (!borrow) {
+                        C->borrowed = 0;
+                        C->own_w_flops = C->lin->w_flops;
+                        C->own_factor_flops = C->lin->factor_flops;
+                    }
                     ++P.stats.linearisations;
                     if (P.stats.first_candidates == 0) P.stats.first_candidates = static_cast<int>(C->cand.size());
                     P.stats.last_candidates = static_cast<int>(C->cand.size());

@@ -225,6 +225,7 @@ struct Simulator::Impl {
             std::vector<Eigen::Vector3d> more_hinge_sel;
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
             int borrowed = 0;                 // linearisations in a row that borrowed W (PatchSpec::compliance_reuse)
+            double own_w_flops = 0, own_factor_flops = 0;  // the last linearisation that made its W: W's and the factorisation's work
             bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
             /// Threaded mode: a refresh being made on another thread (the second core) while the frames go on with lin;
             /// the first frame after it is done takes it (null: none under way).
