@@ -1136,9 +1136,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     c_nrows = static_cast<int>(f.constraint.size());
                     c_pivots = f.pivots;
                     c_sweeps = f.sweeps;
-                    // Passes on a borrowed W that did not converge to this tangent's frame: solved again, as it started,
+                    // Passes on a borrowed W that ended further than borrow_accept_mm from this tangent's frame: solved again, as it started,
                     // on a linearisation at the same state with its own W (not counted as a re-solve for the range).
-                    if (C->lin->borrowed() && f.compliance_mismatch_mm > co.borrow_tolerance_mm) {
+                    if (C->lin->borrowed() && f.compliance_mismatch_mm > co.borrow_accept_mm) {
                         ++P.stats.borrow_fallbacks;
                         if (std::getenv("ANEU_PATCH_TRACE"))
                             std::fprintf(stderr, "patch t=%.4f: the frame's passes on the borrowed compliance ended %.3g mm from the tangent's (%d passes): solved again on a linearisation with its own\n",

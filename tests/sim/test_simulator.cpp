@@ -1242,7 +1242,7 @@ TEST(SimulatorPatch, RefreshesThatBorrowTheLastCompliancesWFlattenTheTubeAsThose
     EXPECT_EQ(own.p.borrow_fallbacks, 0);
     EXPECT_GT(lent.p.linearisations_borrowed, lent.p.linearisations / 2);
     EXPECT_LE(lent.p.linearisations_borrowed, 3 * lent.p.linearisations / 4 + 1);
-    EXPECT_GT(lent.p.borrow_fallbacks, 0);  // the path exercised: frames whose passes did not converge on W (measured 7)
+    EXPECT_GT(lent.p.borrow_fallbacks, 0);  // the path exercised: frames whose passes ended beyond borrow_accept_mm on W (measured 6)
     EXPECT_LT(lent.p.borrow_fallbacks, lent.p.linearisations_borrowed / 2);
     EXPECT_NEAR(lent.grip, own.grip, 0.01 * own.grip);
     EXPECT_NEAR(lent.grip, f_ref, 0.05 * f_ref);

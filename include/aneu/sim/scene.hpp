@@ -175,7 +175,7 @@ struct PatchSpec {
     /// in a row, where at most a quarter of the candidates the refresh selects are not among W's (their columns made on the
     /// tangent W was made on, so W stays one tangent's inverse), and while borrowing pays (the factorisations of the
     /// frames that fell back weigh no more than the Ws the converged ones saved, by their operations). A frame
-    /// whose passes do not bring W's prediction within fem::CompliantOptions::borrow_tolerance_mm of the tangent's is
+    /// whose passes end with W's prediction further than fem::CompliantOptions::borrow_accept_mm from the tangent's is
     /// solved again on a linearisation with its own W. 0: every linearisation makes its W.
     int compliance_reuse = 0;
 };
