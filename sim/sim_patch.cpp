@@ -108,19 +108,29 @@ Reach surface_reach(const SimSurface& sf, const std::vector<int>& cand_vertex, c
 /// substitution; the tube's frames on a W up to 3 frames old took 3-16).
 constexpr int BORROW_SLOW_PASSES = 8;
 
+/// After a linearisation whose tangent was not positive definite, the next this many project its element tangents
+/// from the start, and the one after them tries the tangent itself again. A buckled patch stays buckled: the failed
+/// attempt is a whole factorisation (CHOLMOD fails at the top separator, after nearly all its work), and it failed on
+/// 148 of C0024's 208 linearisations and 90 of the sample's 146, every one from the first that failed to the run's end
+/// but for a few early runs of 2-3 (session 57's planned runs; C0024's patch 6 of a projected linearisation's 13 s).
+/// Where the tangent would have been positive definite again within those, the frames take the projected one, as
+/// they take it wherever the tangent is not.
+constexpr int PROJECTED_RUN = 3;
+
 /// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
 /// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
 /// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
 /// `back` gets β (1: u itself). Throws what the Linearisation throws where no such state is found or another fault.
 /// With `borrow`, on `cand`, borrowing its W (fem::Linearisation's borrowing constructor: the added candidates' columns
-/// made on the tangent that W was made on).
+/// made on the tangent that W was made on). `project_first`: the element tangents projected without the tangent
+/// tried first (fem::Linearisation's project_first; see PROJECTED_RUN).
 std::unique_ptr<fem::Linearisation> linearise_patch(const fem::PatchModel& pm, const Eigen::MatrixX3d& X, const Eigen::VectorXd& u,
                                                     const Eigen::VectorXd* valid, const std::vector<int>& cand, double& back,
-                                                    const fem::Linearisation* borrow = nullptr) {
+                                                    const fem::Linearisation* borrow = nullptr, bool project_first = false) {
     back = 1;
     auto make = [&](const Eigen::VectorXd& at) {
-        return borrow ? std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand, *borrow)
-                      : std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand);
+        return borrow ? std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand, *borrow, project_first)
+                      : std::make_unique<fem::Linearisation>(pm, X, pm.fixed_dofs(), at, cand, project_first);
     };
     if (valid && valid->size() == u.size() && !(pm.min_jacobian(u) > 0)) {
         // (Before: the sample refreshed every frame had 42 of its 67 refreshes refused, an element inverted at the
@@ -928,6 +938,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 } else if (q.lin) {
                     take_setup(std::move(q.setup), q.theta_sel, q.hinge_sel, q.more_theta_sel, q.more_hinge_sel, u0);
                     C->lin = std::move(q.lin);
+                    C->note_projection(PROJECTED_RUN);
                     C->borrowed = 0;
                     C->own_w_flops = C->lin->w_flops;
                     C->own_factor_flops = C->lin->factor_flops;
@@ -965,11 +976,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 q->more_theta_sel = more_sel;
                 q->more_hinge_sel = more_hinges;
                 C->pending = q;
-                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = q->setup.candidates] {
+                refresh_jobs.emplace_back(q, std::thread([q, hold, X = P.X, u0, valid = Eigen::VectorXd(C->lin->u0()), cand = q->setup.candidates,
+                                                          pf = C->project_next > 0] {
                     omp_set_num_threads(1);  // the tangent's assembly beside the physics thread, not across its core
                     const Stopwatch lw;
                     try {
-                        q->lin = linearise_patch(*hold, X, u0, &valid, cand, q->back);
+                        q->lin = linearise_patch(*hold, X, u0, &valid, cand, q->back, nullptr, pf);
                     } catch (const std::exception& e) {  // NumericalError: an element inverted at that state
                         q->lin.reset();
                         q->failed = e.what();
@@ -1012,8 +1024,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                             const auto added = std::count_if(cs.candidates.begin(), cs.candidates.end(), [&](int c) { return !in_w[static_cast<size_t>(c)]; });
                             borrow = 4 * static_cast<size_t>(added) <= cs.candidates.size();
                         }
-                        std::unique_ptr<fem::Linearisation> lin = borrow ? linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back, C->lin.get())
-                                                                         : linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back);
+                        const bool pf = C->project_next > 0;
+                        std::unique_ptr<fem::Linearisation> lin = borrow ? linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back, C->lin.get(), pf)
+                                                                         : linearise_patch(pm, P.X, at, &C->lin->u0(), cs.candidates, back, nullptr, pf);
                         take_setup(std::move(cs), th, blades.hinge, more_sel, more_hinges, at);
                         C->lin = std::move(lin);
                         if (borrow) {
@@ -1021,8 +1034,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                             ++P.stats.linearisations_borrowed;
                         }
                     } else {
-                        C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back);
+                        C->lin = linearise_patch(pm, P.X, at, C->lin ? &C->lin->u0() : nullptr, C->cand, back, nullptr, C->project_next > 0);
                     }
+                    C->note_projection(PROJECTED_RUN);
                     if (!borrow) {
                         C->borrowed = 0;
                         C->own_w_flops = C->lin->w_flops;

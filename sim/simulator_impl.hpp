@@ -226,6 +226,10 @@ struct Simulator::Impl {
             int since = 0;                    // frames on lin that pressed something (refresh_frames counts these)
             int borrowed = 0;                 // linearisations in a row that borrowed W (PatchSpec::compliance_reuse)
             double own_w_flops = 0, own_factor_flops = 0;  // the last linearisation that made its W: W's and the factorisation's work
+            /// Linearisations still to project their element tangents from the start (sim_patch.cpp, PROJECTED_RUN),
+            /// counted by note_projection from the linearisation just taken
+            int project_next = 0;
+            void note_projection(int run) { project_next = !lin->projected ? 0 : lin->projected_first ? project_next - 1 : run; }
             bool warned_lag = false;          // the frames' reach from their linearisation past Scene::linear_limit was warned
             /// Threaded mode: a refresh being made on another thread (the second core) while the frames go on with lin;
             /// the first frame after it is done takes it (null: none under way).

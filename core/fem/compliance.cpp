@@ -54,31 +54,31 @@ struct Linearisation::Impl {
 
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                             const std::vector<int>& candidates)
+                             const std::vector<int>& candidates, bool project_first)
     : m(std::make_unique<Impl>()) {
-    init(body, X, fixed_dofs, u0, candidates, nullptr);
+    init(body, X, fixed_dofs, u0, candidates, nullptr, project_first);
 }
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                             const Linearisation& from)
+                             const Linearisation& from, bool project_first)
     : m(std::make_unique<Impl>()) {
     if (from.m->u0.size() != body.dofs())
         throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
                          std::to_string(body.dofs()));
-    init(body, X, fixed_dofs, u0, from.m->cand, &from);
+    init(body, X, fixed_dofs, u0, from.m->cand, &from, project_first);
 }
 
 Linearisation::Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                             const std::vector<int>& candidates, const Linearisation& from)
+                             const std::vector<int>& candidates, const Linearisation& from, bool project_first)
     : m(std::make_unique<Impl>()) {
     if (from.m->u0.size() != body.dofs())
         throw InputError("linearisation: borrowing the compliance of a linearisation of " + std::to_string(from.m->u0.size()) + " DOFs for a body of " +
                          std::to_string(body.dofs()));
-    init(body, X, fixed_dofs, u0, candidates, &from);
+    init(body, X, fixed_dofs, u0, candidates, &from, project_first);
 }
 
 void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                         const std::vector<int>& candidates, const Linearisation* from) {
+                         const std::vector<int>& candidates, const Linearisation* from, bool project_first) {
     const Eigen::Index n = body.dofs();
     if (u0.size() != n) throw InputError("linearisation: the state has " + std::to_string(u0.size()) + " entries, expected " + std::to_string(n));
     if (3 * X.rows() != n) throw InputError("linearisation: " + std::to_string(X.rows()) + " nodes for a body of " + std::to_string(n) + " DOFs");
@@ -104,7 +104,10 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     m->r0 = Eigen::VectorXd::Zero(mf);
     for (Eigen::Index i = 0; i < n; ++i)
         if (const int a = m->free_index[static_cast<size_t>(i)]; a >= 0) m->r0[a] = -g[i];
-    Eigen::SparseMatrix<double, Eigen::RowMajor> Kt = body.tangent(u0);
+    // project_first: the element tangents projected from the start (the caller expects this tangent to be indefinite,
+    // the last one having been: its failed factorisation is not made)
+    Eigen::SparseMatrix<double, Eigen::RowMajor> Kt = body.tangent(u0, project_first);
+    projected = projected_first = project_first;
     tangent_s = sw.lap();
     // The tangent is factorised once: by the condensation that makes W (fem::condense: METIS on the node graph, the
     // forward solve L⁻¹ P E_C from the candidates' pivots, W = YᵀY by SYRK per supernode), its factor kept for the free
@@ -147,6 +150,8 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     };
     double failed_s = 0;
     if (!factorise()) {  // buckling: the element tangents projected onto PSD ones
+        if (project_first)
+            throw NumericalError("linearisation: the tangent is not positive definite, even projected (" + std::to_string(mf) + " free DOFs)");
         failed_s = sw.lap();
         projected = true;
         Kt = body.tangent(u0, true);

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <limits>
 #include <map>
@@ -1301,6 +1302,42 @@ TEST(CompliantClip, TheLinearisationsComplianceIsItsTangentsInverseOnTheCandidat
         for (Eigen::Index b = 0; b < nc; b += 3)
             EXPECT_LE((lin.compliance(static_cast<int>(a), static_cast<int>(b)) - lin.compliance(static_cast<int>(b), static_cast<int>(a)).transpose()).cwiseAbs().maxCoeff(),
                       1e-12 * wmax);
+}
+
+TEST(CompliantClip, ALinearisationAskedToProjectFirstIsTheOneThatFellBackToTheProjectedTangent) {
+    // The neo-Hookean block dilated 1.5x each way (J = 3.4 > e: its volumetric energy concave, the tangent indefinite):
+    // the linearisation fails to factorise the tangent and projects the element tangents. Asked to project first, it
+    // makes the same matrix without the failed attempt: the same W and free state, bit for bit. On a state whose tangent
+    // is positive definite, asked to project first it projects all the same (and says so).
+    const aneu::test::HeldBlock hb;
+    Eigen::VectorXd u0(hb.solid->dofs());
+    for (Eigen::Index i = 0; i < hb.X.rows(); ++i) u0.segment<3>(3 * i) = 0.5 * (hb.X.row(i).transpose() - Eigen::Vector3d(5.0, 0.0, 0.0));
+    const std::vector<int>& cand = hb.surface;
+    const fem::Linearisation fell(*hb.solid, hb.X, hb.fixed, u0, cand);
+    ASSERT_TRUE(fell.projected);
+    EXPECT_FALSE(fell.projected_first);
+    const fem::Linearisation first(*hb.solid, hb.X, hb.fixed, u0, cand, true);
+    EXPECT_TRUE(first.projected);
+    EXPECT_TRUE(first.projected_first);
+    const Eigen::Index nc = static_cast<Eigen::Index>(cand.size());
+    EXPECT_EQ(0, std::memcmp(fell.compliance_blocks(), first.compliance_blocks(), sizeof(double) * 9 * static_cast<size_t>(nc * nc)));
+    EXPECT_EQ(fell.free_candidate_u(), first.free_candidate_u());
+    EXPECT_EQ(fell.free_step, first.free_step);
+    // Borrowing (the tangent factorised by CHOLMOD alone): the same.
+    const fem::Linearisation fell_b(*hb.solid, hb.X, hb.fixed, u0, fell), first_b(*hb.solid, hb.X, hb.fixed, u0, fell, true);
+    EXPECT_TRUE(fell_b.projected && !fell_b.projected_first && first_b.projected && first_b.projected_first);
+    EXPECT_EQ(fell_b.free_candidate_u(), first_b.free_candidate_u());
+    // At rest the tangent is positive definite: not projected unless asked.
+    const Eigen::VectorXd rest = Eigen::VectorXd::Zero(hb.solid->dofs());
+    const fem::Linearisation exact(*hb.solid, hb.X, hb.fixed, rest, cand), asked(*hb.solid, hb.X, hb.fixed, rest, cand, true);
+    EXPECT_FALSE(exact.projected);
+    EXPECT_TRUE(asked.projected && asked.projected_first);
+    double wmax = 0, dw = 0;
+    for (Eigen::Index k = 0; k < 9 * nc * nc; ++k) {
+        wmax = std::max(wmax, std::abs(exact.compliance_blocks()[k]));
+        dw = std::max(dw, std::abs(exact.compliance_blocks()[k] - asked.compliance_blocks()[k]));
+    }
+    EXPECT_LE(dw, 1e-9 * wmax);  // at rest every element tangent is positive semidefinite: projecting leaves it as it is
 }
 
 TEST(CompliantClip, TheSetupTakesTheNodesNearTheJawsAndTheWallFacesBetweenThem) {

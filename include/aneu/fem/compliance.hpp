@@ -44,8 +44,11 @@ public:
     /// @param candidates body nodes that can touch (their compliance is kept); distinct
     /// @throws InputError bad sizes or indices; NumericalError a tangent that is not positive definite even
     ///         projected onto positive semidefinite element tangents
+    /// @param project_first the element tangents projected from the start, without trying the tangent itself first:
+    ///        for a caller that expects it to be indefinite (the last linearisation's was; a failed attempt costs a whole
+    ///        factorisation, CHOLMOD failing at the top separator's pivots: C0024's patch 6 of its 13 s)
     Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                  const std::vector<int>& candidates);
+                  const std::vector<int>& candidates, bool project_first = false);
     /// A linearisation at u0 that borrows its compliance from `from` (made at another state, on the same candidates):
     /// the tangent is assembled and factorised (by CHOLMOD alone, no condensation), the free step made, and W is
     /// `from`'s, shared. A frame on it (solve_compliant_clip) takes W for an approximation of this tangent's and corrects
@@ -54,7 +57,7 @@ public:
     /// the factorisation (C0001's joined patch: ~7 s) instead of factorisation and W (~37 s; W is ~80 % of a refresh).
     /// @throws InputError `from` on other candidates, or with another body's DOFs; NumericalError as above
     Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                  const Linearisation& from);
+                  const Linearisation& from, bool project_first = false);
     /// The same on other candidates: W's blocks between candidates that `from` has are `from`'s; the columns of the
     /// candidates it lacks (added_candidates of them) are made on the tangent `from`'s W was made on (its factor is
     /// kept while W is lent), 3 per added node, one CHOLMOD solve per 64, their rows by symmetry: W is that tangent's
@@ -64,7 +67,7 @@ public:
     /// factorisation and those columns, not a new W.
     /// @throws as the constructors above
     Linearisation(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-                  const std::vector<int>& candidates, const Linearisation& from);
+                  const std::vector<int>& candidates, const Linearisation& from, bool project_first = false);
     ~Linearisation();
     Linearisation(const Linearisation&) = delete;
     Linearisation& operator=(const Linearisation&) = delete;
@@ -98,6 +101,8 @@ public:
     /// The tangent was not positive definite (a buckling patch) and was factorised again with its element tangents
     /// projected onto positive semidefinite ones (factorise_s counts both factorisations).
     bool projected = false;
+    /// Made with project_first: projected without the tangent itself tried (whether it was indefinite is not known)
+    bool projected_first = false;
     /// Borrowed on other candidates: how many of them `from` lacked (W's columns made for them on this factor)
     int added_candidates = 0;
     /// The free step's length as a fraction of the Newton step from u0 (1: the full step; shorter where the full step
@@ -108,7 +113,7 @@ private:
     struct Impl;
     std::unique_ptr<Impl> m;
     void init(const ElasticBody& body, const Eigen::MatrixX3d& X, const Eigen::VectorXi& fixed_dofs, const Eigen::VectorXd& u0,
-              const std::vector<int>& candidates, const Linearisation* from);
+              const std::vector<int>& candidates, const Linearisation* from, bool project_first);
 };
 
 struct CompliantOptions {
