@@ -946,7 +946,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     P.stats.last_candidates = static_cast<int>(C->cand.size());
                     if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: the linearisation at t=%.4f made on another thread (%.2f s: tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g; %.4g of the way to that state) taken\n",
-                                     fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected ? " (projected)" : "", C->lin->compliance_s,
+                                     fr.t, q.t, q.seconds, C->lin->tangent_s, C->lin->factorise_s, C->lin->projected_first ? " (projected from the start)" : C->lin->projected ? " (projected)" : "", C->lin->compliance_s,
                                      C->lin->free_step, q.back);
                 } else {
                     ++P.stats.linearisations_failed;
@@ -1050,13 +1050,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     if (borrow && std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates, borrowing the compliance of the last made (%d in a row; %d candidates added, their columns %.2f s): tangent %.2f s, factorised %.2f s%s; free step %.4g of Newton's\n",
                                      fr.t, C->cand.size(), C->borrowed, C->lin->added_candidates, C->lin->compliance_s, C->lin->tangent_s, C->lin->factorise_s,
-                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->free_step);
+                                     C->lin->projected_first ? " (element tangents projected from the start)" : C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->free_step);
                     else if (std::getenv("ANEU_PATCH_TRACE"))
                         std::fprintf(stderr, "patch t=%.4f: linearised on %zu candidates (%lld wall faces, %zu where walls are about to meet away from the jaws, %lld of them the outer surface's): tangent %.2f s, factorised %.2f s%s, compliance %.2f s; free step %.4g of Newton's"
                                      " (%.0f free DOFs, %.0f kept, nnz(L) %.3g, factor %.3g GFLOP, W %.3g GFLOP at %.1f GFLOP/s)\n",
                                      fr.t, C->cand.size(), static_cast<long long>(C->faces.rows()), C->approach_faces,
                                      static_cast<long long>(std::count(C->search.params.face_surface.begin(), C->search.params.face_surface.end(), 1)), C->lin->tangent_s, C->lin->factorise_s,
-                                     C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
+                                     C->lin->projected_first ? " (element tangents projected from the start)" : C->lin->projected ? " (not positive definite: again with the element tangents projected)" : "", C->lin->compliance_s,
                                      C->lin->free_step, C->lin->free_dofs, C->lin->kept_dofs, C->lin->nnz_L, C->lin->factor_flops / 1e9,
                                      C->lin->w_flops / 1e9, C->lin->w_gflops_per_s);
                 } catch (const NumericalError&) {
