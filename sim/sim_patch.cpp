@@ -852,10 +852,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 static const bool outer = !std::getenv("ANEU_NO_OUTER_CONTACT");
                 const Eigen::MatrixX3i inner = scene.patch.wall_contact ? P.inner : Eigen::MatrixX3i();
                 const Eigen::MatrixX3i outer_faces = scene.patch.wall_contact && outer ? P.outer : Eigen::MatrixX3i();
-                if (mf.empty()) return fem::compliant_setup(blades, th, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces);
+                if (mf.empty()) return fem::compliant_setup(blades, th, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces, &P.X);
                 std::vector<fem::CompliantClip> all{fem::CompliantClip{blades, th, th, spring}};
                 for (size_t j = 0; j < mf.size(); ++j) all.push_back(fem::CompliantClip{mf[j].blades, th_more[j], th_more[j], mf[j].spring});
-                return fem::compliant_setup(all, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces);
+                return fem::compliant_setup(all, x, P.cand, inner, fem::COMPLIANT_WALL_APPROACH_MM, outer_faces, &P.X);
             };
             std::vector<double> more_from, more_kept;
             std::vector<Eigen::Vector3d> more_hinges;

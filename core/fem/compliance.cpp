@@ -292,16 +292,18 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
 }
 
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer) {
+                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer, const Eigen::MatrixX3d* rest) {
     CompliantClip one;
     one.blades = blades;
     one.theta = theta;
-    return compliant_setup(std::vector<CompliantClip>{one}, x, reach, inner, approach_mm, outer);
+    return compliant_setup(std::vector<CompliantClip>{one}, x, reach, inner, approach_mm, outer, rest);
 }
 
 CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
-                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer) {
+                               const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer, const Eigen::MatrixX3d* rest) {
     if (clips.empty()) throw InputError("compliant setup: no clip");
+    if (rest && rest->rows() != x.rows())
+        throw InputError("compliant setup: a rest shape of " + std::to_string(rest->rows()) + " nodes for " + std::to_string(x.rows()));
     auto near_any = [&](const Eigen::Vector3d& p, double margin) {
         for (const CompliantClip& c : clips)
             if (c.blades.near_wedge(c.theta, p, margin)) return true;
@@ -341,13 +343,18 @@ CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Ei
             ContactParams cp;
             cp.search_mm = approach_mm;
             cp.exclude_rings = 1;
-            const std::vector<std::array<int, 2>> pairs = contact_pairs(x, surface, Eigen::VectorXd::Zero(3 * n), cp, APPROACH_BEHIND_MM);
+            // (With the rest shape, deeper too where the vertex came from the face's front: through it.)
+            const std::vector<std::array<int, 2>> pairs = contact_pairs(x, surface, Eigen::VectorXd::Zero(3 * n), cp, rest ? APPROACH_THROUGH_MM : APPROACH_BEHIND_MM);
             std::vector<char> take(static_cast<size_t>(surface.rows()), 0), vert(static_cast<size_t>(n), 0);
             for (Eigen::Index f : near) take[static_cast<size_t>(f)] = 1;
+            auto row = [](const Eigen::MatrixX3d& m, int a) { return Eigen::Vector3d(m.row(a).transpose()); };
             for (const auto& [v, f] : pairs) {
-                const double d = signed_vertex_face_distance(x.row(v).transpose(), x.row(surface(f, 0)).transpose(), x.row(surface(f, 1)).transpose(),
-                                                             x.row(surface(f, 2)).transpose());
+                const double d = signed_vertex_face_distance(row(x, v), row(x, surface(f, 0)), row(x, surface(f, 1)), row(x, surface(f, 2)));
                 if (d > approach_mm) continue;
+                if (d <= -APPROACH_BEHIND_MM) {  // (rest known) through the face only if in front of its plane at rest
+                    const Eigen::Vector3d a = row(*rest, surface(f, 0));
+                    if ((row(*rest, v) - a).dot((row(*rest, surface(f, 1)) - a).cross(row(*rest, surface(f, 2)) - a)) <= 0) continue;
+                }
                 take[static_cast<size_t>(f)] = 1;
                 vert[static_cast<size_t>(v)] = 1;
             }

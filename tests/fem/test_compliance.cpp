@@ -676,11 +676,17 @@ TEST(CompliantClip, TandemClipsSideBySideFlattenTheTubeUnderBothInOneContactProb
                 swapped.f.loads.force_n[0], swapped.f.more_loads[0].force_n[0], one.f.loads.force_n[0], span_pair, span_one);
 }
 
-TEST(CompliantClip, WallsThatStartAFrameALittleThroughEachOtherArePushedBackOutNotTakenForACrease) {
-    // The tube closed without the walls' contact until its walls are 0.01-0.05 mm through each other (as C0024's crept
-    // 0.004 -> 0.022 mm, session 46), then held there with it. The walls were not through each other at rest: the frames
-    // push them back out. With the old rule (every vertex more than wall_behind_mm behind its face's plane where the
-    // frame starts is a crease) the crossing stays.
+namespace {
+
+/// The tube (BladesOnATube, 24 nodes round) closed without the walls' contact until its walls are at least
+/// `through_mm` through each other, then held there five frames with it, the frames' crease limit `limit_mm`
+/// (CompliantOptions::wall_through_mm). Where it started, and how deep the walls end through each other with the frame
+/// that ended.
+struct HeldThrough {
+    double start_mm = 0, end_mm = 0;
+    fem::CompliantFrame f;
+};
+HeldThrough hold_tube_through(double through_mm, double limit_mm) {
     const BladesOnATube tube(24);
     const fem::ClipSpring spring = test_spring();
     auto deepest = [&](const Eigen::VectorXd& u) {
@@ -692,39 +698,64 @@ TEST(CompliantClip, WallsThatStartAFrameALittleThroughEachOtherArePushedBackOutN
     fem::CompliantFrame f0;
     f0.theta = tube.theta_touch;
     double th = tube.theta_touch;
-    for (int frame = 0; frame < 40 && deepest(u0) < 0.01; ++frame) {
+    for (int frame = 0; frame < 40 && deepest(u0) < through_mm; ++frame) {
         th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * (frame + 1) / 40.0;
         const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u0, tube.cand);
         const fem::CompliantFrame last = f0;
         f0 = fem::solve_compliant_clip(lin, tube.blades, spring, th, last.theta, frame ? &last : nullptr);
         u0 = lin.displacement(f0.candidate_forces);
     }
-    const double through = deepest(u0);
-    ASSERT_GT(through, 0.01);
-    ASSERT_LT(through, 0.05);
-    auto hold = [&](double through_mm) {
-        fem::CompliantOptions opt;
-        opt.wall_through_mm = through_mm;
-        fem::CompliantWallSearch ws;
-        Eigen::VectorXd u = u0;
-        fem::CompliantFrame f = f0;
-        for (int frame = 0; frame < 5; ++frame) {
-            const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
-            const fem::CompliantFrame last = f;
-            f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, &last, opt);
-            u = lin.displacement(f.candidate_forces);
-        }
-        return std::make_pair(deepest(u), f);
-    };
-    const auto [out, f] = hold(fem::CompliantOptions{}.wall_through_mm);
-    EXPECT_LT(out, 1e-3) << "started " << through << " mm through";
-    EXPECT_LT(f.wall_crossed_mm, 1e-3);
-    EXPECT_GT(f.wall_contacts, 0);
-    EXPECT_LE(f.complementarity_mm, 1e-9);
-    const double kept = hold(0.0).first;
-    EXPECT_GT(kept, 0.5 * through) << "the old rule kept the crossing";
+    HeldThrough out;
+    out.start_mm = deepest(u0);
+    fem::CompliantOptions opt;
+    opt.wall_through_mm = limit_mm;
+    fem::CompliantWallSearch ws;
+    Eigen::VectorXd u = u0;
+    out.f = f0;
+    for (int frame = 0; frame < 5; ++frame) {
+        const fem::Linearisation lin(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
+        const fem::CompliantFrame last = out.f;
+        out.f = fem::solve_compliant_clip_walls(lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, &last, opt);
+        u = lin.displacement(out.f.candidate_forces);
+    }
+    out.end_mm = deepest(u);
+    return out;
+}
+
+}  // namespace
+
+TEST(CompliantClip, WallsThatStartAFrameALittleThroughEachOtherArePushedBackOutNotTakenForACrease) {
+    // Closed until its walls are 0.01-0.05 mm through each other (as C0024's crept 0.004 -> 0.022 mm, session 46). The
+    // walls were not through each other at rest: the frames push them back out. With the old rule (every vertex more
+    // than wall_behind_mm behind its face's plane where the frame starts is a crease) the crossing stays.
+    const HeldThrough with = hold_tube_through(0.01, fem::CompliantOptions{}.wall_through_mm);
+    ASSERT_GT(with.start_mm, 0.01);
+    ASSERT_LT(with.start_mm, 0.05);
+    EXPECT_LT(with.end_mm, 1e-3) << "started " << with.start_mm << " mm through";
+    EXPECT_LT(with.f.wall_crossed_mm, 1e-3);
+    EXPECT_GT(with.f.wall_contacts, 0);
+    EXPECT_LE(with.f.complementarity_mm, 1e-9);
+    const double kept = hold_tube_through(0.01, 0.0).end_mm;
+    EXPECT_GT(kept, 0.5 * with.start_mm) << "the old rule kept the crossing";
     std::printf("tube walls %.4f mm through each other: %.5f mm after five frames with the walls' contact (%.4f mm with every start crossing a crease)\n",
-                through, out, kept);
+                with.start_mm, with.end_mm, kept);
+}
+
+TEST(CompliantClip, WallsThatStartAFrameDeeperThroughEachOtherThanSession46sLimitArePushedBackOutToo) {
+    // Closed until its walls are more than 0.05 mm through each other (session 59: C0001's vertex slid 0.23 mm under a
+    // face in one frame, and from the next frame on was a crease at session 46's 0.05 mm limit). Within the frames'
+    // crossing depth (0.25 mm) the frames push it back out; with the 0.05 mm limit the vertices within it are pushed
+    // out and the deeper stay (0.088 -> 0.030 mm).
+    const HeldThrough with = hold_tube_through(0.06, fem::CompliantOptions{}.wall_through_mm);
+    ASSERT_GT(with.start_mm, 0.05);
+    ASSERT_LT(with.start_mm, 0.25);
+    EXPECT_LT(with.end_mm, 1e-3) << "started " << with.start_mm << " mm through";
+    EXPECT_LT(with.f.wall_crossed_mm, 1e-3);
+    EXPECT_GT(with.f.wall_contacts, 0);
+    const HeldThrough old = hold_tube_through(0.06, 0.05);
+    EXPECT_GT(old.end_mm, 0.02) << "the 0.05 mm limit kept the deeper crossings (the issue's limit 0.02 mm)";
+    std::printf("tube walls %.4f mm through each other: %.5f mm after five frames (%.4f mm with session 46's 0.05 mm limit)\n", with.start_mm, with.end_mm,
+                old.end_mm);
 }
 
 TEST(CompliantClip, HeldOnOneLinearisationAVertexOverAnEdgeKeepsItsFaceAndThePassesSettle) {
@@ -1385,6 +1416,17 @@ TEST(CompliantClip, TheSetupTakesTheWallsAboutToMeetPastTheTipsToo) {
     EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(0.5), {}, inner).faces.rows(), 0);
     EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(-0.1), {}, inner).faces.rows(), 0);
     EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(0.2), {}, inner, 0.0).faces.rows(), 0);
+    // With the rest shape: walls 0.1 or 0.2 mm through each other that were 0.2 mm apart at rest came through each
+    // other (session 59: C0001's vertex 0.23 mm under a face); at rest already so, they are a crease; 0.3 mm through,
+    // beyond the frames' crossing depth, the far side.
+    const Eigen::MatrixX3d apart = walls(0.2), through = walls(-0.1);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, through, {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &apart).faces.rows(), 4);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(-0.2), {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &apart).faces.rows(), 4);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, through, {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &through).faces.rows(), 0);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(-0.3), {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &apart).faces.rows(), 0);
+    EXPECT_EQ(fem::compliant_setup(b, 0.4, walls(0.2), {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &apart).faces.rows(), 4);
+    const Eigen::MatrixX3d fewer = apart.topRows(7);
+    EXPECT_THROW(fem::compliant_setup(b, 0.4, through, {}, inner, fem::COMPLIANT_WALL_APPROACH_MM, Eigen::MatrixX3i(), &fewer), InputError);
     // Only the walls that meet: a third face of the lower wall 2 mm away joins only with its vertex's ring.
     Eigen::MatrixX3d x = walls(0.2);
     x.conservativeResize(10, 3);

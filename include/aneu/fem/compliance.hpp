@@ -133,9 +133,12 @@ struct CompliantOptions {
     /// constraint (a crease of the wall, the far side of a fold); nearer, the frame pushes it back out. With the walls'
     /// rest shape (CompliantWalls::rest), a vertex that was not behind the plane at rest is a crossing, and pushed
     /// back out, up to wall_through_mm behind (session 46: C0024's walls crept 0.004 -> 0.022 mm through each other
-    /// over five frames, each frame taking the last one's crossing for a crease).
+    /// over five frames, each frame taking the last one's crossing for a crease). wall_through_mm is the frames' own
+    /// crossing depth (ContactParams::depth_mm's 0.25 mm): what a frame's check counts as through a face, its rows push
+    /// back out (session 59: at 0.05 mm, C0001's lumen vertex that slid 0.23 mm under a face in one frame was a crease
+    /// from the next frame on, and went 0.42 mm through).
     double wall_behind_mm = 0.005;
-    double wall_through_mm = 0.05;
+    double wall_through_mm = 0.25;
     /// Wall pairs nearer than this where the frame starts are constraints: more than the two walls' approach in a
     /// frame (each moves as far as a blade)
     double wall_reach_mm = 0.15;
@@ -246,6 +249,9 @@ constexpr double COMPLIANT_WALL_APPROACH_MM = 0.3;
 /// ... and a vertex this far behind an opposite face counts as meeting it (hard contact leaves a pressed vertex a hair
 /// behind; deeper, the frames take it for a crease, CompliantOptions::wall_behind_mm, and the pair would add nothing).
 constexpr double APPROACH_BEHIND_MM = 0.05;
+/// ... and, with the rest shape known, one up to this far behind it that lay in front of the face's plane at rest (it
+/// came through the face: the frames' rows push it back out, CompliantOptions::wall_through_mm)
+constexpr double APPROACH_THROUGH_MM = 0.25;
 /// The candidates and wall faces for a clip at opening θ, where the body's nodes stand at `x` (one row a node): of
 /// `reach` (the nodes a blade can touch: the outer surface's) those within 0.1 mm of the jaws' wedge, and of
 /// `inner` (the lumen's triangles, body nodes, normals into the lumen) those whose three corners lie within 0.3 mm
@@ -258,16 +264,19 @@ constexpr double APPROACH_BEHIND_MM = 0.05;
 /// the same rule (with approach_mm > 0), after the lumen's, their corners candidates too (session 48: C0001's outer
 /// surface, squeezed along the jaws, folded 0.11 mm into its own wall, through faces no frame had). Under the blades
 /// the outer surface meets the blades, so it has no wedge rule.
-/// @throws InputError a node outside x
+/// `rest` (the nodes' rest positions, as x; null: not known): a vertex up to APPROACH_THROUGH_MM behind an opposite
+/// face that lay in front of its plane at rest meets it too (session 59: C0001's vertex 0.23 mm under a face was
+/// beyond the 0.05 mm, no candidate, and no frame saw it go on to 0.42 mm).
+/// @throws InputError a node outside x, a rest shape of another size
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
                                const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM,
-                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i());
+                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i(), const Eigen::MatrixX3d* rest = nullptr);
 /// The same for several clips on one patch (tandem clips: CompliantClip's blades at `theta`): a node or face near any
 /// clip's wedge is taken, once. The first clip alone gives the single clip's setup.
 /// @throws InputError no clip, or a node outside x
 CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
                                const Eigen::MatrixX3i& inner, double approach_mm = COMPLIANT_WALL_APPROACH_MM,
-                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i());
+                               const Eigen::MatrixX3i& outer = Eigen::MatrixX3i(), const Eigen::MatrixX3d* rest = nullptr);
 
 /// One clip frame on a linearisation.
 struct CompliantFrame {
