@@ -291,6 +291,18 @@ void Linearisation::init(const ElasticBody& body, const Eigen::MatrixX3d& X, con
     compliance_s += sw.lap();
 }
 
+namespace {
+
+/// The signed distance of p from the plane of triangle abc, positive on its normal's side ((b − a) × (c − a)); 0 for
+/// a degenerate triangle.
+double plane_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    const double l = n.norm();
+    return l > 0 ? n.dot(p - a) / l : 0.0;
+}
+
+}  // namespace
+
 CompliantSetup compliant_setup(const ClipBlades& blades, double theta, const Eigen::MatrixX3d& x, const std::vector<int>& reach,
                                const Eigen::MatrixX3i& inner, double approach_mm, const Eigen::MatrixX3i& outer, const Eigen::MatrixX3d* rest) {
     CompliantClip one;
@@ -344,17 +356,16 @@ CompliantSetup compliant_setup(const std::vector<CompliantClip>& clips, const Ei
             cp.search_mm = approach_mm;
             cp.exclude_rings = 1;
             // (With the rest shape, deeper too where the vertex came from the face's front: through it.)
-            const std::vector<std::array<int, 2>> pairs = contact_pairs(x, surface, Eigen::VectorXd::Zero(3 * n), cp, rest ? APPROACH_THROUGH_MM : APPROACH_BEHIND_MM);
+            const std::vector<std::array<int, 2>> pairs = contact_pairs(x, surface, Eigen::VectorXd::Zero(3 * n), cp, rest ? WALL_THROUGH_MM : APPROACH_BEHIND_MM);
             std::vector<char> take(static_cast<size_t>(surface.rows()), 0), vert(static_cast<size_t>(n), 0);
             for (Eigen::Index f : near) take[static_cast<size_t>(f)] = 1;
             auto row = [](const Eigen::MatrixX3d& m, int a) { return Eigen::Vector3d(m.row(a).transpose()); };
             for (const auto& [v, f] : pairs) {
                 const double d = signed_vertex_face_distance(row(x, v), row(x, surface(f, 0)), row(x, surface(f, 1)), row(x, surface(f, 2)));
                 if (d > approach_mm) continue;
-                if (d <= -APPROACH_BEHIND_MM) {  // (rest known) through the face only if in front of its plane at rest
-                    const Eigen::Vector3d a = row(*rest, surface(f, 0));
-                    if ((row(*rest, v) - a).dot((row(*rest, surface(f, 1)) - a).cross(row(*rest, surface(f, 2)) - a)) <= 0) continue;
-                }
+                // (Rest known) through the face only if in front of its plane at rest.
+                if (d <= -APPROACH_BEHIND_MM && plane_distance(row(*rest, v), row(*rest, surface(f, 0)), row(*rest, surface(f, 1)), row(*rest, surface(f, 2))) <= 0)
+                    continue;
                 take[static_cast<size_t>(f)] = 1;
                 vert[static_cast<size_t>(v)] = 1;
             }
@@ -737,13 +748,6 @@ LcpResult solve_lcp(const Eigen::Ref<const Eigen::MatrixXd>& A, const Eigen::Vec
 
 namespace {
 
-/// The signed distance of p from the plane of triangle abc, positive on its normal's side ((b − a) × (c − a)); 0 for
-/// a degenerate triangle.
-double plane_distance(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
-    const Eigen::Vector3d n = (b - a).cross(c - a);
-    const double l = n.norm();
-    return l > 0 ? n.dot(p - a) / l : 0.0;
-}
 
 /// Whether a wall pair (vertex, then its face's corners, candidate numbering) whose vertex stands `start_d` from its
 /// face's plane where the frame starts is a crease, no constraint: behind that plane by more than wall_behind_mm, and

@@ -116,6 +116,11 @@ private:
               const std::vector<int>& candidates, const Linearisation* from, bool project_first);
 };
 
+/// How deep a wall vertex may lie behind an opposite face, over it, and still have come through it (when it lay in
+/// front of the face's plane at rest): the frames' crossing depth (ContactParams::depth_mm's 0.25 mm). Deeper it is on
+/// the face's far side. CompliantOptions::wall_through_mm's default and compliant_setup's limit with the rest shape.
+constexpr double WALL_THROUGH_MM = 0.25;
+
 struct CompliantOptions {
     double reach_mm = 0.05;      ///< candidates nearer a blade than this (where the last frame left them) are constraints:
                                  ///< more than a frame's blade travel (0.384° a frame at 250 Hz moves a 13 mm blade's tip 0.044 mm)
@@ -138,7 +143,7 @@ struct CompliantOptions {
     /// back out (session 59: at 0.05 mm, C0001's lumen vertex that slid 0.23 mm under a face in one frame was a crease
     /// from the next frame on, and went 0.42 mm through).
     double wall_behind_mm = 0.005;
-    double wall_through_mm = 0.25;
+    double wall_through_mm = WALL_THROUGH_MM;
     /// Wall pairs nearer than this where the frame starts are constraints: more than the two walls' approach in a
     /// frame (each moves as far as a blade)
     double wall_reach_mm = 0.15;
@@ -249,9 +254,8 @@ constexpr double COMPLIANT_WALL_APPROACH_MM = 0.3;
 /// ... and a vertex this far behind an opposite face counts as meeting it (hard contact leaves a pressed vertex a hair
 /// behind; deeper, the frames take it for a crease, CompliantOptions::wall_behind_mm, and the pair would add nothing).
 constexpr double APPROACH_BEHIND_MM = 0.05;
-/// ... and, with the rest shape known, one up to this far behind it that lay in front of the face's plane at rest (it
-/// came through the face: the frames' rows push it back out, CompliantOptions::wall_through_mm)
-constexpr double APPROACH_THROUGH_MM = 0.25;
+/// ... and, with the rest shape known, one up to WALL_THROUGH_MM behind it that lay in front of the face's plane at
+/// rest (it came through the face: the frames' rows push it back out, CompliantOptions::wall_through_mm).
 /// The candidates and wall faces for a clip at opening θ, where the body's nodes stand at `x` (one row a node): of
 /// `reach` (the nodes a blade can touch: the outer surface's) those within 0.1 mm of the jaws' wedge, and of
 /// `inner` (the lumen's triangles, body nodes, normals into the lumen) those whose three corners lie within 0.3 mm
@@ -264,7 +268,7 @@ constexpr double APPROACH_THROUGH_MM = 0.25;
 /// the same rule (with approach_mm > 0), after the lumen's, their corners candidates too (session 48: C0001's outer
 /// surface, squeezed along the jaws, folded 0.11 mm into its own wall, through faces no frame had). Under the blades
 /// the outer surface meets the blades, so it has no wedge rule.
-/// `rest` (the nodes' rest positions, as x; null: not known): a vertex up to APPROACH_THROUGH_MM behind an opposite
+/// `rest` (the nodes' rest positions, as x; null: not known): a vertex up to WALL_THROUGH_MM behind an opposite
 /// face that lay in front of its plane at rest meets it too (session 59: C0001's vertex 0.23 mm under a face was
 /// beyond the 0.05 mm, no candidate, and no frame saw it go on to 0.42 mm).
 /// @throws InputError a node outside x, a rest shape of another size
