@@ -3,6 +3,7 @@
 #include "aneu/sim/assessment.hpp"
 #include "aneu/core/error.hpp"
 #include "aneu/fem/assembly.hpp"
+#include "aneu/fem/compliance.hpp"
 #include "aneu/fem/contact.hpp"
 #include "aneu/sim/shapes.hpp"
 #include "simulator_impl.hpp"
@@ -404,6 +405,39 @@ LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, i
     return out;
 }
 
+std::vector<int> lumen_meeting(const SimLumen& lumen, const Eigen::MatrixX3d& y, double approach_mm, double apart_mm, const std::vector<char>* outside) {
+    const Eigen::Index L = lumen.X.rows();
+    if (y.rows() != L) throw InputError("lumen_meeting: positions of " + std::to_string(y.rows()) + " vertices, the lumen has " + std::to_string(L));
+    if (outside && outside->size() != static_cast<size_t>(L))
+        throw InputError("lumen_meeting: outside for " + std::to_string(outside->size()) + " vertices, the lumen has " + std::to_string(L));
+    std::vector<int> out;
+    if (lumen.F.rows() == 0 || !(approach_mm > 0)) return out;
+    const Eigen::MatrixX3i inward = lumen.F(Eigen::all, std::vector<int>{0, 2, 1});
+    Eigen::VectorXd u(3 * L);
+    for (Eigen::Index v = 0; v < L; ++v) u.segment<3>(3 * v) = (y.row(v) - lumen.X.row(v)).transpose();
+    fem::ContactParams cp;
+    cp.search_mm = approach_mm;
+    cp.exclude_rings = LUMEN_CROSSING_RINGS;
+    auto at = [](const Eigen::MatrixX3d& m, int a) { return Eigen::Vector3d(m.row(a).transpose()); };
+    std::vector<char> take(static_cast<size_t>(L), 0);
+    for (const auto& [v, f] : fem::contact_pairs(lumen.X, inward, u, cp, fem::WALL_THROUGH_MM)) {
+        const int a = inward(f, 0), b = inward(f, 1), c = inward(f, 2);
+        if (outside && !(*outside)[static_cast<size_t>(v)] && !(*outside)[static_cast<size_t>(a)] && !(*outside)[static_cast<size_t>(b)] &&
+            !(*outside)[static_cast<size_t>(c)])
+            continue;
+        const double d = fem::signed_vertex_face_distance(at(y, v), at(y, a), at(y, b), at(y, c));
+        if (d > approach_mm) continue;
+        // Behind the face: through it only if it came from the face's front (in front of its plane at rest).
+        const Eigen::Vector3d n0 = (at(lumen.X, b) - at(lumen.X, a)).cross(at(lumen.X, c) - at(lumen.X, a));
+        if (d < 0 && !(n0.dot(at(lumen.X, v) - at(lumen.X, a)) > 0)) continue;
+        if (std::abs(fem::signed_vertex_face_distance(at(lumen.X, v), at(lumen.X, a), at(lumen.X, b), at(lumen.X, c))) <= apart_mm) continue;
+        take[static_cast<size_t>(v)] = take[static_cast<size_t>(a)] = take[static_cast<size_t>(b)] = take[static_cast<size_t>(c)] = 1;
+    }
+    for (Eigen::Index v = 0; v < L; ++v)
+        if (take[static_cast<size_t>(v)]) out.push_back(static_cast<int>(v));
+    return out;
+}
+
 double lumen_width(const SimLumen& lumen, const Eigen::MatrixX3d& y, int face, const Eigen::Vector3d& w, double cap_mm) {
     DeformedLumen balls(lumen.F, y, lumen.wall_mm);
     return balls.width(face, w, cap_mm);
@@ -681,6 +715,23 @@ bool write_lumen_obj(const std::string& path, const SimLumen& lumen, const Eigen
     return std::fclose(fo) == 0;
 }
 
+Eigen::MatrixX3d Simulator::Impl::lumen_now(const Eigen::MatrixX3d& x) const {
+    const SimLumen& lumen = model.surface.lumen;
+    Eigen::MatrixX3d y = lumen.deformed(x, model.surface.X);
+    // Inside a nonlinear patch the lumen's vertices are the patch's own nodes: their displacement (the wall's
+    // compression under the clip included), plus the linear solve's part at the vertex they are bound to.
+    for (const PatchRun& P : patches) {
+        if (!P.alive || !P.pm) continue;
+        for (Eigen::Index l = 0; l < y.rows(); ++l) {
+            const int p = P.pm->local(lumen.node[l]);
+            if (p < 0) continue;
+            const Eigen::Index b = lumen.bind[l];
+            y.row(l) = lumen.X.row(l) + P.v.segment<3>(3 * p).transpose() + (d.row(b) - d_patch.row(b));
+        }
+    }
+    return y;
+}
+
 Assessment Simulator::Impl::assess() {
     Assessment out = a;
     out.total_time_s = t_phys;
@@ -696,18 +747,7 @@ Assessment Simulator::Impl::assess() {
     }
     const Eigen::MatrixX3d x = deformed();
     const SimLumen& lumen = model.surface.lumen;
-    Eigen::MatrixX3d y = lumen.deformed(x, model.surface.X);
-    // Inside a nonlinear patch the lumen's vertices are the patch's own nodes: their displacement (the wall's
-    // compression under the clip included), plus the linear solve's part at the vertex they are bound to.
-    for (const PatchRun& P : patches) {
-        if (!P.alive) continue;
-        for (Eigen::Index l = 0; l < y.rows(); ++l) {
-            const int p = P.pm->local(lumen.node[l]);
-            if (p < 0) continue;
-            const Eigen::Index b = lumen.bind[l];
-            y.row(l) = lumen.X.row(l) + P.v.segment<3>(3 * p).transpose() + (d.row(b) - d_patch.row(b));
-        }
-    }
+    const Eigen::MatrixX3d y = lumen_now(x);
     // With a patch of 10-node elements the neck is measured on the quadratic surface (split_lumen): the walls touch
     // there, and on the corner triangles a flattened fold's channel reads about twice as wide (bench/bench_fold.cpp).
     // The mid-edge vertices take the patch's displacement where it has them, else the mean of their corners'.

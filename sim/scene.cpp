@@ -250,6 +250,7 @@ Scene read_scene(const std::string& path) {
         s.wall_model = o.choice("wall", {"linear", "patch"}) == 0 ? WallModel::LINEAR : WallModel::PATCH;
         s.patch.radius_mm = o.num("patch_radius_mm", s.patch.radius_mm, 0.1, 50);
         s.patch.trigger_mm = o.num("trigger_mm", s.patch.trigger_mm, 0, 20);
+        s.patch.grow = o.flag("patch_grow", s.patch.grow);
         s.patch.newton_per_frame = static_cast<int>(o.num("newton_per_frame", s.patch.newton_per_frame, 1, 1000));
         s.patch.tolerance = o.num("tolerance", s.patch.tolerance, 1e-14, 1e-1);
         s.patch.wall_contact = o.flag("wall_contact", s.patch.wall_contact);

@@ -262,14 +262,53 @@ void Simulator::Impl::make_patches(Frame& fr) {
                           (x_grid.row(uncovered).transpose() - x0).norm(), reach, b.near_wedge(theta, x0, reach) ? "within" : "not within");
             why = w;
         }
-        if ((have < 0 && near) || uncovered >= 0) build_patch(i, fr.jaws[i], fr.mx, why);
+        if ((have < 0 && near) || uncovered >= 0) {
+            build_patch(i, fr.jaws[i], fr.mx, why);
+            continue;
+        }
+        // Grown where the lumen meets itself beside the patch (PatchSpec::grow), once a frame for each patch (by its
+        // first clip).
+        if (have < 0 || !scene.patch.grow || sf.lumen.F.rows() == 0) continue;
+        std::vector<Eigen::Vector3d> spots;
+        {
+            std::unique_lock<std::mutex> lk;
+            if (fr.mx) lk = std::unique_lock<std::mutex>(*fr.mx);
+            const PatchRun& P = patches[static_cast<size_t>(have)];
+            if (!P.alive || P.pm != have_pm || P.clip != cid) continue;
+            const SimLumen& lumen = sf.lumen;
+            std::vector<char> outside(static_cast<size_t>(lumen.X.rows()), 1);
+            for (Eigen::Index l = 0; l < lumen.X.rows(); ++l) {
+                const int a = have_pm->local(lumen.node[l]);
+                outside[static_cast<size_t>(l)] = a < 0 || have_pm->on_interface(a) ? 1 : 0;
+            }
+            const Eigen::MatrixX3d y = lumen_now(sf.X + d);
+            const std::vector<int> meet = lumen_meeting(lumen, y, fem::COMPLIANT_WALL_APPROACH_MM, PATCH_GROW_APART_MM, &outside);
+            // (Those the patch grew for already and still lie outside, at its radius: not again.)
+            for (int l : meet) {
+                const Eigen::Vector3d x0 = lumen.X.row(l).transpose();
+                bool had = false;
+                for (const Eigen::Vector3d& g : P.grown) had = had || (g - x0).norm() < 1e-9;
+                if (!had) spots.push_back(x0);
+            }
+        }
+        if (spots.empty()) continue;
+        Eigen::Vector3d lo = spots[0], hi = spots[0];
+        for (const Eigen::Vector3d& p : spots) {
+            lo = lo.cwiseMin(p);
+            hi = hi.cwiseMax(p);
+        }
+        char w[300];
+        std::snprintf(w, sizeof w, "; grown where the lumen meets itself beside it: %zu lumen vertices within %.2f mm of the opposite wall (or through it), between (%.2f, %.2f, %.2f) and (%.2f, %.2f, %.2f) at rest",
+                      spots.size(), fem::COMPLIANT_WALL_APPROACH_MM, lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z());
+        build_patch(i, fr.jaws[i], fr.mx, w, -1, spots);
     }
 }
 
 // Made without the lock (the factorisation and interface solves take seconds); what the other threads read is
 // changed under it. In threaded mode the haptic thread may release the clip meanwhile (it is then deposited on
 // what the linear model holds, or falls away and drops the old patch): the new patch is then not used.
-void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why, int join) {
+void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why, int join,
+                                  const std::vector<Eigen::Vector3d>& grow) {
     const Stopwatch sw;
     const SimSurface& sf = model.surface;
     const VolumeData& vol = *model.volume;
@@ -283,6 +322,7 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
     // (their poses taken under the lock; the first clip's opening the patch's θ, the others' their own).
     std::vector<std::pair<fem::ClipBlades, double>> wedges;
     std::vector<int> members;  // the old patch's clips as they were (still so when the patch is taken: below)
+    std::vector<Eigen::Vector3d> grown;  // where it grew (PatchRun::grown): the old patch's, then `grow`
     auto clips_of = [](const PatchRun& O) {
         std::vector<int> c{O.clip};
         for (const PatchRun::Member& m : O.more) c.push_back(m.clip);
@@ -303,14 +343,19 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
             if (old_pm) {
                 add(O.clip, O.v[old_pm->dofs()]);
                 for (const PatchRun::Member& m : O.more) add(m.clip, m.theta);
+                grown = O.grown;
             }
         }
     }
     if (old >= 0 && !old_pm) return;  // dropped: its clip fell away
     wedges.emplace_back(blades, theta);
+    grown.insert(grown.end(), grow.begin(), grow.end());
+    const double r2 = scene.patch.radius_mm * scene.patch.radius_mm;
     auto near_any = [&](const Eigen::Vector3d& p) {
         for (const auto& [b, th] : wedges)
             if (b.near_wedge(th, p, scene.patch.radius_mm)) return true;
+        for (const Eigen::Vector3d& g : grown)
+            if ((p - g).squaredNorm() <= r2) return true;
         return false;
     };
     // The tetrahedra with a corner within radius_mm of the wedge, at rest or where it is now: the surface's vertices
@@ -380,6 +425,7 @@ void Simulator::Impl::build_patch(size_t instrument, const Jaws& jaws, std::mute
         }
     PatchRun P;
     P.clip = clip;
+    P.grown = grown;
     try {
         P.pm = std::make_shared<fem::PatchModel>(vol, fem, tets, map_nodes, &cancel_frames);
     } catch (const Cancelled&) {

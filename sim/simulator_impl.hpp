@@ -200,6 +200,9 @@ struct Simulator::Impl {
             int contacts = 0;                 // nodes pressing on its blades at the last solve
         };
         std::vector<Member> more;
+        /// Where the patch was grown (PatchSpec::grow): the rest positions of lumen vertices that met the opposite wall
+        /// outside it; a remade patch keeps them (the tetrahedra with a corner within radius_mm of one are its too).
+        std::vector<Eigen::Vector3d> grown;
         bool alive = true;                    // false once its clip fell away
         /// PatchSpec::Solver::COMPLIANCE: the linearisation the frames solve on and what they carry between frames
         /// (made at the first frame, again every refresh_frames frames and when the patch is remade).
@@ -313,7 +316,12 @@ struct Simulator::Impl {
     void make_patches(Frame& fr);
     // (join: the patch the clip joins, −1: its own, made or remade; a compliance patch's new clip whose tissue another
     // patch holds joins that one)
-    void build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why = {}, int join = -1);
+    // (grow: rest positions the remade patch covers too, besides its jaws and the old patch's grown ones)
+    void build_patch(size_t instrument, const Jaws& jaws, std::mutex* mx, const std::string& why = {}, int join = -1,
+                     const std::vector<Eigen::Vector3d>& grow = {});
+    // The lumen where it is now (one row a SimLumen vertex): a patch's own nodes where the patch holds them, the rest
+    // at the displacement of the surface vertex each is bound to (the assessment's, and make_patches' growth check).
+    Eigen::MatrixX3d lumen_now(const Eigen::MatrixX3d& x) const;
     // A clip of a patch gone (fallen away): a further clip leaves it, the first hands it to the next (none: dropped).
     void leave_patch(int clip);
     void solve_patches(Frame& fr);

@@ -167,6 +167,44 @@ TEST(NeckOcclusion, AStaircaseNeckLineIsMeasuredOnTheBorderItFollows) {
                 2 * (open.points[0][1] - open.points[0][0]).norm(), 1e-9);
 }
 
+TEST(LumenMeeting, WallsBroughtWithinReachOfEachOtherAreFoundTheLumensOwnWidthIsNot) {
+    const SimLumen s = tube();
+    // Open, and flattened to a 1 mm slit: no wall within 0.3 mm of the opposite one (the folds' own curvature is not
+    // a meeting: faces whose normals differ by more than 90 degrees round a 0.5 mm fold lie 0.7 mm apart).
+    EXPECT_TRUE(lumen_meeting(s, s.X, 0.3, 0.6).empty());
+    EXPECT_TRUE(lumen_meeting(s, pinched(s, 0.0, 1.0), 0.3, 0.6).empty());
+    // Flattened to 0.1 mm: both flat sides where the pinch is flat, none beyond the blend (|z| <= 3.5 mm).
+    const std::vector<int> near = lumen_meeting(s, pinched(s, 0.0, 0.1), 0.3, 0.6);
+    ASSERT_FALSE(near.empty());
+    EXPECT_TRUE(std::is_sorted(near.begin(), near.end()));
+    int up = 0, down = 0, mid = 0;
+    for (int v : near) {
+        EXPECT_LE(std::abs(s.X(v, 2)), 3.5 + 1e-9) << v;
+        if (std::abs(s.X(v, 2)) < 0.05) (s.X(v, 1) > 0 ? up : down) += 1;
+        mid += std::abs(s.X(v, 2)) < 1.5 ? 1 : 0;
+    }
+    EXPECT_GT(up, NT / 8) << "the flat side above";
+    EXPECT_GT(down, NT / 8) << "the flat side below";
+    // Pressed 0.1 mm through each other (they came from each other's front): found as well, and more of the blend.
+    EXPECT_GE(lumen_meeting(s, pinched(s, 0.0, -0.1), 0.3, 0.6).size(), near.size());
+    // Walls that lay within apart_mm at rest are the lumen's own width, not a meeting (the tube is 2.4 mm across).
+    EXPECT_TRUE(lumen_meeting(s, pinched(s, 0.0, 0.1), 0.3, 2.5).empty());
+    // Only where a side of the meeting lies outside: with |z| < 1 mm inside, the meetings deep inside are left out
+    // (a vertex at z = 0 meets faces within 0.3 mm of it), those reaching out are kept, and all inside: none.
+    std::vector<char> outside(static_cast<size_t>(s.X.rows()), 0);
+    for (Eigen::Index v = 0; v < s.X.rows(); ++v) outside[static_cast<size_t>(v)] = std::abs(s.X(v, 2)) > 1.0 ? 1 : 0;
+    const std::vector<int> out = lumen_meeting(s, pinched(s, 0.0, 0.1), 0.3, 0.6, &outside);
+    ASSERT_FALSE(out.empty());
+    EXPECT_LT(out.size(), near.size());
+    for (int v : out) EXPECT_GE(std::abs(s.X(v, 2)), 1.0 - 0.3 - 0.2 - 1e-9) << v << " lies deep inside";
+    EXPECT_TRUE(std::any_of(out.begin(), out.end(), [&](int v) { return std::abs(s.X(v, 2)) > 1.0; }));
+    std::fill(outside.begin(), outside.end(), 0);
+    EXPECT_TRUE(lumen_meeting(s, pinched(s, 0.0, 0.1), 0.3, 0.6, &outside).empty());
+    outside.pop_back();
+    EXPECT_THROW(lumen_meeting(s, s.X, 0.3, 0.6, &outside), aneu::InputError);
+    EXPECT_THROW(lumen_meeting(s, s.X.topRows(10), 0.3, 0.6), aneu::InputError);
+}
+
 TEST(LumenCrossing, WallsPressedThroughEachOtherAreCrossedByTheirDepthABulgeIsNot) {
     const SimLumen s = tube();
     // Open, flattened to a slit, pressed flat: nothing of the lumen lies behind a face of it.

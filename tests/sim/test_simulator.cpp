@@ -1252,6 +1252,47 @@ TEST(SimulatorPatch, RefreshesThatBorrowTheLastCompliancesWFlattenTheTubeAsThose
                 lent.p.borrow_fallbacks, f_ref, own.p.max_lag_to_thickness, lent.p.max_lag_to_thickness);
 }
 
+TEST(SimulatorPatch, APatchGrowsWhereTheLumenMeetsItselfBesideIt) {
+    // The compliance flattening with a patch of 0.1 mm round the jaws: the flattened lumen's walls come within 0.3 mm
+    // of each other beside the blades too (to 0.8 mm from the clip's middle), beyond the patch (its lumen 0.4 mm to
+    // either side), where the linear exterior has no wall contact. With model.patch_grow (the default) the patch is
+    // remade once to cover them (PatchRun::grown; measured 480 -> 595 nodes, its lumen to 0.8 mm); without it the
+    // patch stays as made.
+    test::TempDir d("grow");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    struct End {
+        sim::Assessment::PatchEnd p;
+        int grown = 0;
+        double crossing = 0, grip = 0;
+    };
+    auto run = [&](bool grow) {
+        json j = compliance_flattening_scene(bundle, 1, 0.30);
+        j["model"]["patch_radius_mm"] = 0.1;
+        j["model"]["patch_grow"] = grow;
+        sim::Simulator s = make(j, d.file(""), std::string("grow") + (grow ? "1" : "0") + ".json");
+        End e;
+        sim::RunOptions ro;
+        ro.on_message = [&e](const std::string& m) { e.grown += m.find("grown where the lumen meets itself beside it") != std::string::npos; };
+        const sim::Assessment a = sim::run_scene(s, ro);
+        EXPECT_EQ(a.patches.size(), 1u);
+        if (a.patches.size() != 1) return e;
+        e.p = a.patches[0];
+        e.crossing = a.lumen_crossing_mm;
+        e.grip = s.clips().at(0).grip_force_n;
+        EXPECT_NEAR(s.clips().at(0).opening_deg, FLAT_END_DEG, 1e-9);
+        return e;
+    };
+    const End fixed = run(false), grown = run(true);
+    EXPECT_EQ(fixed.grown, 0);
+    EXPECT_EQ(fixed.p.builds, 1);
+    EXPECT_GT(grown.grown, 0);
+    EXPECT_EQ(grown.p.builds, 1 + grown.grown);
+    EXPECT_GT(grown.p.nodes, fixed.p.nodes);
+    EXPECT_LE(grown.crossing, 0.02);
+    std::printf("patch 0.1 mm round the jaws: as made %d nodes, lumen through itself %.4f mm, grip %.4f N; grown %d times to %d nodes, %.4f mm, %.4f N\n",
+                fixed.p.nodes, fixed.crossing, fixed.grip, grown.grown, grown.p.nodes, grown.crossing, grown.grip);
+}
+
 TEST(SimulatorPatch, InRealTimeTheComplianceFramesRefreshOnAnotherThreadAndConvergeOnTheNeoHookeanReference) {
     // The threaded (real-time) mode makes a compliance patch's refreshes on another thread, from the state of the frame
     // that asked for one, while the frames go on with the linearisation they have; a frame takes a refresh once it is

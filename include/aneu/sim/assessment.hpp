@@ -73,6 +73,17 @@ constexpr double TISSUE_ROUNDOFF_MM = 1e-3;
 LumenCrossing lumen_crossing(const SimLumen& lumen, const Eigen::MatrixX3d& y, int exclude_rings = LUMEN_CROSSING_RINGS,
                              double depth_mm = LUMEN_CROSSING_DEPTH_MM, const LumenTissue* tissue = nullptr);
 
+/// Where the lumen is about to meet itself: the lumen vertices (and the corners of the faces they meet) within
+/// `approach_mm` in front of an opposite lumen face, or up to fem::WALL_THROUGH_MM behind it having lain in front of its
+/// plane at rest (fem::contact_pairs on the faces turned into the lumen, LUMEN_CROSSING_RINGS left out), that lay more
+/// than `apart_mm` from the face at rest (the distance to its closest point): walls the motion brought together, not
+/// the lumen's own narrow places. With `outside` (one entry a lumen vertex), only the pairs with the vertex or a corner
+/// of the face outside (aneusim: not a node of the nonlinear patch, or on its interface with the linear exterior).
+/// Each vertex once, ascending.
+/// @throws InputError positions or `outside` of another size than the lumen
+std::vector<int> lumen_meeting(const SimLumen& lumen, const Eigen::MatrixX3d& y, double approach_mm, double apart_mm,
+                               const std::vector<char>* outside = nullptr);
+
 /// The lumen's edge length round each face at rest: the mean, over the faces sharing a vertex with it, of their
 /// shortest edge (on a mesh of edge h, about h; across a stretched mesh, its fine direction: the resolution across
 /// a fold, which sets the channel a flattened fold keeps on the mesh: bench/bench_fold.cpp, patch_sim_notes.md).

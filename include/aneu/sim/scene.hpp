@@ -131,10 +131,20 @@ enum class WallModel {
 };
 
 /// How the patch is made and solved (Scene::wall_model = PATCH).
+/// PatchSpec::grow: walls nearer than this at rest are the lumen's own narrow places, not a meeting (twice the
+/// approach: they came at least as far again towards each other).
+constexpr double PATCH_GROW_APART_MM = 0.6;
 struct PatchSpec {
     double radius_mm = 1.5;      ///< the patch: tetrahedra with a corner within this of the clip's jaws (their wedge at the
                                  ///< opening it is made at, along the jaws' length and width)
     double trigger_mm = 1.0;     ///< a held clip's patch is made when its jaws close this near the wall
+    /// A patch grows where the lumen meets itself beside it: where opposite lumen walls that lay further apart than
+    /// PATCH_GROW_APART_MM at rest come within fem::COMPLIANT_WALL_APPROACH_MM of each other (or through each other)
+    /// with one side outside the patch or on its interface (sim::lumen_meeting), the patch is remade to cover the
+    /// tetrahedra within radius_mm of those vertices too, and keeps them when remade later. (Session 59: C0001's
+    /// lumen went 0.42 mm through itself in the linear exterior, 0.25 mm beyond the patch's interface, where no
+    /// contact of the patch reaches.) false: the patch covers the jaws only.
+    bool grow = true;
     int newton_per_frame = 12;   ///< Newton iterations a physics frame may take (warm-started from the last frame)
     double tolerance = 1e-6;     ///< relative residual of a converged frame
     bool wall_contact = true;    ///< inner walls touch and do not pass through each other (inside the patch)
