@@ -56,14 +56,17 @@ if __name__ == "__main__":
     rows, model, reach = neck_line_in_jaws(sys.argv[1], sc, 0, keep_order=True)
     more = [neck_line_in_jaws(sys.argv[1], sc, k, keep_order=True) for k in range(1, n_app)]
     half = 0.5 * model["jaw_width_mm"]
+    # the faces begin at the heel (fulcrum_mm out) unless the model's arms clamp too (arms_press)
+    heel = 0.0 if model.get("arms_press", False) else model.get("fulcrum_mm", 0.0)
     print("r_mm\tacross_mm\tup_mm\tgap_mm\twhere")
     out = []
     for i, (r, a, u, g) in enumerate(rows):
-        where = "past the jaws" if r < 0 or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
+        where = "past the jaws" if r < heel or r > reach else ("in the jaws" if abs(a) <= half else "beside the jaws")
         if where != "in the jaws":
             for k, (rk, mk, reach_k) in enumerate(more):
                 rr, aa = rk[i][0], rk[i][1]
-                if 0 <= rr <= reach_k and abs(aa) <= 0.5 * mk["jaw_width_mm"]:
+                heel_k = 0.0 if mk.get("arms_press", False) else mk.get("fulcrum_mm", 0.0)
+                if heel_k <= rr <= reach_k and abs(aa) <= 0.5 * mk["jaw_width_mm"]:
                     where = "in clip %d's jaws" % (k + 2)
                     break
         out.append((r, a, u, g, where))

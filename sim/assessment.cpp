@@ -674,7 +674,7 @@ std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vect
                 const Eigen::Vector3d r = mid - j.hinge, side = j.axis.cross(j.up).normalized();
                 const fem::ClipBlades::FaceCoords fc = bent[ji].face_coords(r.dot(j.axis), r.dot(side));
                 const double along = fc.s, wide = std::abs(fc.a) - 0.5 * j.width_mm - j.margin_mm;
-                if (r.dot(j.axis) < 0 || along > j.length_mm) continue;
+                if (r.dot(j.axis) < j.face_from_mm || along > j.length_mm) continue;
                 if (wide > 0) beside = std::max(beside, wide);
                 else if (std::abs(r.dot(j.up)) <= j.max_up_mm) inside = true;
             }
@@ -839,6 +839,7 @@ Assessment Simulator::Impl::assess() {
                 jaws.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.reach_mm(), cm.jaw_width_mm});
                 jaws.back().curve_radius_mm = cm.jaw_curve_radius_mm;
                 jaws.back().curve_from_mm = cm.fulcrum_mm;
+                jaws.back().face_from_mm = cm.blades(c.pose).face_from_mm;
             }
         std::tie(out.neck_in_jaws_fraction, out.neck_beside_jaws_mm) = neck_in_jaws(occ.points, jaws);
     }
@@ -884,7 +885,8 @@ Assessment Simulator::Impl::assess() {
             if (!c.model.empty() && c.opening_deg <= 1.0) {
                 const ClipModel& cm = scene.clip_models.at(c.model);
                 closed.push_back({c.pose.position, c.pose.axis.normalized(), c.pose.up.normalized(), cm.reach_mm(), cm.jaw_width_mm,
-                                  scene.neck_tolerance_mm, 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm, cm.jaw_curve_radius_mm, cm.fulcrum_mm});
+                                  scene.neck_tolerance_mm, 0.5 * cm.closed_gap_mm + scene.neck_tolerance_mm, cm.jaw_curve_radius_mm, cm.fulcrum_mm,
+                                  cm.blades(c.pose).face_from_mm});
             }
         const double f = neck_in_jaws(loops, closed).first;
         out.neck_between_jaws_fraction = std::isnan(f) ? 0.0 : f;

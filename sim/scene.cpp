@@ -127,6 +127,7 @@ void read_clip_keys(Obj& o, ClipModel& c, const std::string& dir) {
     c.closed_gap_mm = o.num("closed_gap_mm", c.closed_gap_mm, 0, 20);
     c.max_opening_deg = o.num("max_opening_deg", c.max_opening_deg, 0, 120);
     c.fulcrum_mm = o.num("fulcrum_mm", c.fulcrum_mm, 0, 100);
+    c.arms_press = o.flag("arms_press", c.arms_press);
     if (c.reach_mm() > 100) o.fail("\"fulcrum_mm\" + \"jaw_length_mm\" = " + std::to_string(c.reach_mm()) + ", expected at most 100 mm");
     const std::string mesh = o.str("jaw_mesh", "");
     if (!mesh.empty()) {

@@ -149,7 +149,7 @@ void Simulator::Impl::detect_contacts(Frame& fr) {
                     const Eigen::Vector3d rel = p - J.blades.hinge;
                     const fem::ClipBlades::FaceCoords fc = J.blades.face_coords(rel.dot(jt), rel.dot(jw));  // (a curved blade's)
                     const double dn = 0.5 * J.blades.closed_gap_mm + rel.dot(jn);
-                    if (rel.dot(jt) >= 0 && fc.s <= J.blades.length_mm && std::abs(fc.a) <= 0.5 * J.blades.width_mm && dn < 0) {
+                    if (rel.dot(jt) >= J.blades.face_from_mm && fc.s <= J.blades.length_mm && std::abs(fc.a) <= 0.5 * J.blades.width_mm && dn < 0) {
                         const bool was_between = 0.5 * J.blades.closed_gap_mm + rel.dot(jn_prev) >= 0;
                         const bool pushed_back = gap_seen[s] && owner_seen[s] == part &&
                                                  (st_seen[s] == NodeState::CONTACT || st_seen[s] == NodeState::NEIGHBOUR);

@@ -75,7 +75,7 @@ int nodes_in_blades(const fem::ClipBlades& b, double theta, const Eigen::MatrixX
         for (int a : nodes) {
             const Eigen::Vector3d rel = X.row(a).transpose() - b.hinge;
             const double r = rel.dot(t), across = rel.dot(w), p = 0.5 * b.closed_gap_mm + rel.dot(nn);
-            if (r >= 0 && r <= b.length_mm && std::abs(across) <= 0.5 * b.width_mm && p < gap && p > -b.thickness_mm) ++n;
+            if (r >= b.face_from_mm && r <= b.length_mm && std::abs(across) <= 0.5 * b.width_mm && p < gap && p > -b.thickness_mm) ++n;
         }
     }
     return n;

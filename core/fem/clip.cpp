@@ -134,6 +134,9 @@ ClipBody::ClipBody(const ElasticBody& body, const Eigen::MatrixX3d& X, const std
     if (std::abs(blades.axis.norm() - 1) > 1e-9 || std::abs(blades.up.norm() - 1) > 1e-9 || std::abs(blades.axis.dot(blades.up)) > 1e-9)
         throw InputError("clip: the blade axis and opening direction must be orthonormal");
     blades.check_curve();
+    if (!(blades.face_from_mm >= 0) || !(blades.face_from_mm < blades.length_mm))
+        throw InputError("clip: the blades' faces begin " + std::to_string(blades.face_from_mm) + " mm from the hinge; expected within the blade (0 to " +
+                         std::to_string(blades.length_mm) + " mm)");
     if (!(p.gap_mm > 0)) throw InputError("clip: the blades' barrier distance d̂ (gap) must be > 0 mm (got " + std::to_string(p.gap_mm) + ")");
     if (!(p.friction >= 0) || !std::isfinite(p.friction)) throw InputError("clip: the blades' friction coefficient must be >= 0 (got " + std::to_string(p.friction) + ")");
     if (!(p.stick_mm > 0)) throw InputError("clip: the friction's stick slip must be > 0 mm (got " + std::to_string(p.stick_mm) + ")");
@@ -219,7 +222,8 @@ std::array<ClipBody::Touch, 2> ClipBody::touches(const Eigen::VectorXd& v) const
 
 double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
     // In the blade's frame: r along it from the hinge, a across it, p = the plane distance in front of its face.
-    // The blade is the set within ρ of its core, the rectangle r ∈ [0, L − ρ], |a| ≤ W/2 − ρ at ρ behind the face:
+    // The blade is the set within ρ of its core, the rectangle r ∈ [0, L − ρ] (from F + ρ with its faces beginning
+    // at F, ClipBlades::face_from_mm), |a| ≤ W/2 − ρ at ρ behind the face:
     // a flat face of W − 2ρ with edges rounded to the radius ρ at the sides and the tip. Over the core the distance
     // is the plane's, however deep (a node that came through the face is pushed back out of it, not through it);
     // beside it the distance to the core's edge, the node's height above the core's plane counted only in front
@@ -237,7 +241,8 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
         along = c.fc.s;
         across = c.fc.a;
     }
-    const double vr = along - std::clamp(along, 0.0, tip), va = across - std::clamp(across, -half, half);
+    const double heel = m_blades.face_from_mm > 0 ? std::min(m_blades.face_from_mm + m_rho, tip) : 0.0;  // (ClipBlades::face_from_mm)
+    const double vr = along - std::clamp(along, heel, tip), va = across - std::clamp(across, -half, half);
     if (vr == 0 && va == 0) {
         c.u = Eigen::Vector3d(0, 0, 1);
         c.dist = 0;

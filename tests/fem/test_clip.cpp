@@ -140,6 +140,40 @@ TEST(ClipBody, ReleasedOnABlockItStopsAtTheAnalyticAngle) {
     EXPECT_NEAR(r.u[7], -r.u[10], 1e-12);
 }
 
+TEST(ClipBody, ReleasedOnABlockBeforeWhereItsFacesBeginItClosesWithoutTouchingIt) {
+    // The block of ReleasedOnABlockItStopsAtTheAnalyticAngle (its nodes 4 mm from the hinge) lies before the faces
+    // when they begin 5 mm out (ClipBlades::face_from_mm, a fulcrum's arms): released, the clip closes past it to
+    // the blades' own contact, nothing presses it; faces from 3.5 mm stop at the block's analytic angle as before.
+    // A face beginning beyond the blade is refused.
+    const Block b;
+    const fem::ClipSpring spring = test_spring();
+    Eigen::VectorXd v0 = Eigen::VectorXd::Zero(13);
+    v0[12] = 40 * DEG;
+    fem::NewtonOptions no;
+    no.tolerance = 1e-12;
+    fem::ClipBlades blades;
+    blades.face_from_mm = 5.0;
+    const fem::ClipBody past(*b.body, b.X, {2, 3}, v0, blades, spring);
+    const fem::NewtonResult r = fem::solve_neo_hookean(past, b.fixed, {}, v0, no);
+    const double theta_past = r.u[past.theta_dof()];
+    const double touch = 2 * std::atan(Block::H / Block::A);  // where the faces from the hinge would meet the block
+    EXPECT_LT(theta_past, 0.2 * touch) << theta_past / DEG << "°";
+    const fem::BladeLoads L = past.loads(r.u);
+    EXPECT_EQ(L.contacts[0] + L.contacts[1], 0);
+    EXPECT_NEAR(r.u[7], 0.0, 1e-12);  // the block not moved
+    blades.face_from_mm = 3.5;
+    const fem::ClipBody on(*b.body, b.X, {2, 3}, v0, blades, spring);
+    const fem::NewtonResult r2 = fem::solve_neo_hookean(on, b.fixed, {}, v0, no);
+    double lo = 0, hi = touch;
+    for (int it = 0; it < 200; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (block_residual(mid, spring, on.stiffness(), 0.01) < 0 ? lo : hi) = mid;
+    }
+    EXPECT_NEAR(r2.u[on.theta_dof()], 0.5 * (lo + hi), 1e-9);
+    blades.face_from_mm = 7.0;
+    EXPECT_THROW(fem::ClipBody(*b.body, b.X, {2, 3}, v0, blades, spring), InputError);
+}
+
 TEST(ClipBody, HeldOpenTheForcepsHoldsTheSpringLessTheTissue) {
     const Block b;
     const fem::ClipSpring spring = test_spring();

@@ -59,6 +59,21 @@ TEST(CompliantClip, BladeDistanceIsTheFacesOverTheBladeAndTheRoundedEdgesBeside)
     EXPECT_NEAR(fem::blade_distance(b, 1, th, 4.0 * t + 0.3 * n), 0.3, 1e-12);
 }
 
+TEST(CompliantClip, BladeDistanceBeforeTheHeelOfFacesThatBeginThereIsToTheHeelsEdge) {
+    // Blades 7 mm from the hinge whose faces begin 3 mm out (ClipBlades::face_from_mm: a fulcrum's arms before the
+    // heel do not clamp): a point 1 mm before the heel, level with the face, is its distance to the heel's rounded
+    // edge (ρ 0.1 mm: the core from 3.1 mm, 0.1 mm behind the face), not on the face; past the heel the face's plane
+    // as before; faces from 0: the old blade.
+    fem::ClipBlades b;
+    b.face_from_mm = 3.0;
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {2.0, -1e-9, 0.1}), std::hypot(1.1, 0.1) - 0.1, 1e-6);
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {2.0, -0.3, 0.1}), std::hypot(1.1, 0.4) - 0.1, 1e-6);
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {4.0, -0.25, 0.1}), 0.25, 1e-12);
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {3.1, 0.05, 0.0}), -0.05, 1e-12);  // behind the face just past the heel
+    b.face_from_mm = 0.0;
+    EXPECT_NEAR(fem::blade_distance(b, 1, 0.0, {2.0, -0.25, 0.1}), 0.25, 1e-12);
+}
+
 TEST(CompliantClip, BladeDistanceOnACurvedBladeIsAcrossItsCentreLine) {
     fem::ClipBlades b;  // 7 × 1 mm, curved from 2 mm at 5 mm towards +z (= axis × up), closed
     b.curve_radius_mm = 5.0;

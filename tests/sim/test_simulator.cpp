@@ -633,7 +633,7 @@ void expect_clip_model_refused(const json& j, const json& model, const std::stri
 TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     // A clip model whose blades turn about a fulcrum 20 mm behind their heel (ClipModel::fulcrum_mm): its jaws reach
     // 20 + 9 mm from the pose's position, and its spring gives its label force at the ISO 9713 point measured from the
-    // fulcrum (1 mm opening at 20 + 6 mm), not at 6 mm. Refused: a negative fulcrum, one with a mesh jaw, a reach
+    // fulcrum (1 mm opening at 20 + 6 mm), not at 6 mm; its blades' faces begin at the heel. Refused: a negative fulcrum, one with a mesh jaw, a reach
     // beyond 100 mm (each one line naming the key).
     test::TempDir d("fulcrum");
     json j = two_clip_scene(tube_bundle(Precision::FLOAT32), "exact");
@@ -644,6 +644,18 @@ TEST(ClipFiles, AFulcrumBehindTheHeelMovesTheLabelPoint) {
     EXPECT_DOUBLE_EQ(c.fulcrum_mm, 20.0);
     EXPECT_DOUBLE_EQ(c.reach_mm(), 29.0);
     EXPECT_DOUBLE_EQ(c.turn_per_heel_turn(), 4.5 / 24.5);  // the blade's middle 24.5 mm from the fulcrum, 4.5 from the heel
+    // Its faces begin at the heel (the arms and box before it do not clamp tissue); "arms_press" clamps with them too.
+    EXPECT_FALSE(c.arms_press);
+    EXPECT_DOUBLE_EQ(c.blades(sim::Pose{}).face_from_mm, 20.0);
+    EXPECT_DOUBLE_EQ(c.blades(sim::Pose{}).length_mm, 29.0);
+    {
+        json k = j;
+        k["clip_models"]["straight"]["arms_press"] = true;
+        put(d.file("arms.json"), k.dump());
+        const sim::Scene ka = sim::read_scene(d.file("arms.json"));
+        EXPECT_TRUE(ka.clip_models.at("straight").arms_press);
+        EXPECT_DOUBLE_EQ(ka.clip_models.at("straight").blades(sim::Pose{}).face_from_mm, 0.0);
+    }
     ASSERT_TRUE(c.spring);
     const double r = 20.0 + 6.0;
     EXPECT_NEAR(c.spring->force_at(r, 2 * std::asin(0.5 / r)), 1.5, 1e-9);

@@ -77,6 +77,11 @@ struct ClipBlades {
     /// its length along it. Valid for |R| ≥ 2 mm, > W, and an arc of at most 90° (check_curve()).
     double curve_radius_mm = 0.0, curve_from_mm = 0.0;
     bool curved() const { return curve_radius_mm != 0.0; }
+    /// Where the blades' inner faces begin along them, from the hinge [mm] (0: at the hinge). A clip that turns about
+    /// a fulcrum behind its heel has its box and arms there, which do not clamp tissue as faces do: its faces begin
+    /// at the heel, fulcrum_mm out (sim::ClipModel::blades). Before it the blade's solid ends in an edge rounded as
+    /// at its tip (ClipBody and the compliance frames' blade distance, the linear model's jaws, the assessment).
+    double face_from_mm = 0.0;
     /// A point's place on the face plane in the blade's own coordinates: s, the length along the centre line from
     /// the hinge end, and a, the offset across it (along w; the straight blade's r and a), with their first (ds, da)
     /// and second (hs, ha) derivatives on the straight coordinates (r = rel·t, a = rel·w). A straight blade: s = r,

@@ -120,9 +120,10 @@ struct JawsBox {
     double length_mm = 0, width_mm = 0;
     double margin_mm = 0, max_up_mm = std::numeric_limits<double>::infinity();
     double curve_radius_mm = 0, curve_from_mm = 0;  ///< curved blades (fem::ClipBlades): along and across their centre line
+    double face_from_mm = 0;  ///< where the faces begin along the axis (fem::ClipBlades::face_from_mm): a point before it is not in the jaws
 };
 /// Where a neck line (closed loops of points) lies against clips' jaws: the fraction of its length (segment by
-/// segment, at their midpoints) within some clip's jaws (0 ≤ along the axis ≤ length, within half the width plus the
+/// segment, at their midpoints) within some clip's jaws (face_from_mm ≤ along the axis ≤ length, within half the width plus the
 /// margin of the mid-plane across it, within max_up_mm of it along up), and the farthest beside that width that a
 /// midpoint along the jaws' length lies (0: none). NaN both without jaws or a line.
 std::pair<double, double> neck_in_jaws(const std::vector<std::vector<Eigen::Vector3d>>& loops, const std::vector<JawsBox>& jaws);

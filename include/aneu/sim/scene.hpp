@@ -41,10 +41,15 @@ struct ClipModel {
     /// How far behind the blades' heel they turn [mm] (0: at the heel). A coil-spring clip's blades open and close
     /// about the base end of its coil as a fulcrum (US patent 5,634,932, background), behind the heel by the coil, the
     /// arms and the box, so its blades close more nearly parallel than a hinge at the heel would let them. The pose's
-    /// position is the fulcrum; the clip's arms and box between it and the heel are taken as blade (the jaws reach
-    /// fulcrum_mm + jaw_length_mm from it: reach_mm()); the spring's label point lies 2/3 of the blade from the heel's
-    /// side, fulcrum_mm + 2/3 jaw_length_mm from the fulcrum. A box jaw only (not with jaw_mesh).
+    /// position is the fulcrum; the clip's arms and box between it and the heel are drawn as blade (the jaws reach
+    /// fulcrum_mm + jaw_length_mm from it: reach_mm()) but do not clamp tissue: the blades' faces begin at the heel
+    /// (fem::ClipBlades::face_from_mm; arms_press below). The spring's label point lies 2/3 of the blade from the
+    /// heel's side, fulcrum_mm + 2/3 jaw_length_mm from the fulcrum. A box jaw only (not with jaw_mesh).
     double fulcrum_mm = 0.0;
+    /// Whether the arms between the fulcrum and the heel clamp tissue as the blades' faces do (sessions 42-60's model:
+    /// the faces from the fulcrum). A real clip's box and crossed arms there do not close on tissue; the sample's
+    /// planned clip put 45 % of its force there (bench/results/study/compliance.md, "Session 61"). Default false.
+    bool arms_press = false;
     /// Blades curved in their face plane (a curved clip): from the heel their centre line bends on a circle of this
     /// radius [mm] towards axis × up (positive) or up × axis (negative); 0: straight (fem::ClipBlades::curve_radius_mm:
     /// the width is across the centre line, the length along it). A box jaw only (not with jaw_mesh).
@@ -56,7 +61,7 @@ struct ClipModel {
     /// is the force M / label_arm_mm() there.
     double label_arm_mm() const { return fulcrum_mm + 2.0 * jaw_length_mm / 3.0; }
     /// Its jaws as fem::ClipBlades with the fulcrum at `at` (the simulator's contact, spring balance and patch; the
-    /// arms and box behind the heel taken as blade, a curved clip's blades bent from the heel).
+    /// faces from the heel unless arms_press, a curved clip's blades bent from the heel).
     fem::ClipBlades blades(const Pose& at) const {
         fem::ClipBlades b;
         b.hinge = at.position;
@@ -68,6 +73,7 @@ struct ClipModel {
         b.closed_gap_mm = closed_gap_mm;
         b.curve_radius_mm = jaw_curve_radius_mm;
         b.curve_from_mm = fulcrum_mm;
+        b.face_from_mm = arms_press ? 0.0 : fulcrum_mm;
         return b;
     }
     /// An opening step's share that gives the blade's middle the travel the same step gives a clip turning at its
