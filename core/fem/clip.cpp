@@ -241,8 +241,7 @@ double ClipBody::blade_distance(const Eigen::Vector3d& rel, Touch& c) const {
         along = c.fc.s;
         across = c.fc.a;
     }
-    const double heel = m_blades.face_from_mm > 0 ? std::min(m_blades.face_from_mm + m_rho, tip) : 0.0;  // (ClipBlades::face_from_mm)
-    const double vr = along - std::clamp(along, heel, tip), va = across - std::clamp(across, -half, half);
+    const double vr = along - std::clamp(along, m_blades.core_from(m_rho, tip), tip), va = across - std::clamp(across, -half, half);
     if (vr == 0 && va == 0) {
         c.u = Eigen::Vector3d(0, 0, 1);
         c.dist = 0;

@@ -460,8 +460,7 @@ double blade_distance_d(const ClipBlades& b, int s, double theta, const Eigen::V
     const double half = 0.5 * b.width_mm - rho, tip = b.length_mm - rho;
     // A curved blade: the same in its face coordinates (ClipBlades::face_coords: s along its centre line, c across).
     const ClipBlades::FaceCoords fc = b.face_coords(r, a);
-    const double heel = b.face_from_mm > 0 ? std::min(b.face_from_mm + rho, tip) : 0.0;  // (faces from the heel: ClipBlades::face_from_mm)
-    const double vr = fc.s - std::clamp(fc.s, heel, tip), va = fc.a - std::clamp(fc.a, -half, half);
+    const double vr = fc.s - std::clamp(fc.s, b.core_from(rho, tip), tip), va = fc.a - std::clamp(fc.a, -half, half);
     if (vr == 0 && va == 0) {
         if (grad) *grad = n;
         if (dtheta) *dtheta = 0.5 * r;

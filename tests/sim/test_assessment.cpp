@@ -506,6 +506,13 @@ TEST(NeckInJaws, ALineWithinTheJawsWidthIsInAndOneSqueezedOutSidewaysIsBesideThe
     EXPECT_NEAR(neck_in_jaws(slit(0.0), {loose}).first, 2 * std::sqrt(0.02) / (7.8 + 2 * std::sqrt(0.02)), 1e-9);
     loose.max_up_mm = 0.06;
     EXPECT_DOUBLE_EQ(neck_in_jaws(slit(0.0), {loose}).first, 1.0);
+    // Faces that begin 4 mm out (a fulcrum clip's heel, JawsBox::face_from_mm): the half of the slit before them
+    // (x = 2 to 4) is not in the jaws, the rest is; faces from 7 mm hold none of it.
+    JawsBox heel = j;
+    heel.face_from_mm = 4.0;
+    EXPECT_NEAR(neck_in_jaws(slit(0.0), {heel}).first, 0.5, 0.0126);
+    heel.face_from_mm = 7.0;
+    EXPECT_EQ(neck_in_jaws(slit(0.0), {heel}).first, 0.0);
     // No clip, no line: not measured.
     EXPECT_TRUE(std::isnan(neck_in_jaws(slit(0.0), {}).first));
     EXPECT_TRUE(std::isnan(neck_in_jaws({}, {j}).second));

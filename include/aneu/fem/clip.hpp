@@ -21,6 +21,7 @@
 /// the same Newton solve (solve_neo_hookean). ∂Π/∂θ = 0 is the blades' moment balance, so a
 /// released clip (θ free) stops where the tissue pushes back as hard as its spring; a clip held open by the
 /// forceps has θ prescribed, and the solve's reaction on θ is the torque the forceps holds.
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -82,6 +83,9 @@ struct ClipBlades {
     /// at the heel, fulcrum_mm out (sim::ClipModel::blades). Before it the blade's solid ends in an edge rounded as
     /// at its tip (ClipBody and the compliance frames' blade distance, the linear model's jaws, the assessment).
     double face_from_mm = 0.0;
+    /// Where the core of a blade whose edges are rounded to ρ begins along it (its solid is the set within ρ of that
+    /// rectangle, ending at `tip`): face_from_mm + ρ where the faces begin past the hinge, else the hinge itself.
+    double core_from(double rho, double tip) const { return face_from_mm > 0 ? std::min(face_from_mm + rho, tip) : 0.0; }
     /// A point's place on the face plane in the blade's own coordinates: s, the length along the centre line from
     /// the hinge end, and a, the offset across it (along w; the straight blade's r and a), with their first (ds, da)
     /// and second (hs, ha) derivatives on the straight coordinates (r = rel·t, a = rel·w). A straight blade: s = r,
