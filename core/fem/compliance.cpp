@@ -13,7 +13,9 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <set>
 #include <string>
+#include <utility>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
@@ -802,7 +804,8 @@ void add_compliance_times(const Linearisation& lin, const Eigen::VectorXd& f, co
 /// behind a blade or a wall where the frame started (`start`: the candidates' displacement there) left out.
 CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held,
                           double theta_start, const CompliantFrame* warm, const CompliantOptions& opt, const CompliantWalls* walls,
-                          const Eigen::VectorXd& start, const std::vector<CompliantClip>* more, const Eigen::VectorXd* free_u = nullptr) {
+                          const Eigen::VectorXd& start, const std::vector<CompliantClip>* more, const Eigen::VectorXd* free_u = nullptr,
+                          const std::set<std::pair<int, int>>* held = nullptr) {
     const Stopwatch sw;
     if (!(spring.k_nmm_per_rad > 0) || !(spring.preload_rad >= 0)) throw InputError("compliant clip: the spring needs k > 0 and a preload >= 0");
     if (theta_held && !(*theta_held >= 0)) throw InputError("compliant clip: the held opening must be >= 0 rad");
@@ -995,7 +998,7 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             // Hard contact on the face's plane where the vertex lies over the face (over_face).
             OverFace of;
             const auto& h = had[static_cast<size_t>(v)];
-            const bool was = h[0] == 2 + f || h[1] == 2 + f;
+            const bool was = h[0] == 2 + f || h[1] == 2 + f || (opt.wall_one_face && held && held->count({v, 2 + f}));
             if (!over_face(Xl.row(r.k[0]).transpose(), Xl.row(r.k[1]).transpose(), Xl.row(r.k[2]).transpose(), Xl.row(r.k[3]).transpose(), of,
                            was ? OVER_KEPT : OVER_FACE))
                 continue;
@@ -1054,9 +1057,35 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
                 if (std::abs(rows[i].g[0].dot(rows[static_cast<size_t>(b)].g[0])) >= SECOND_COS) continue;
                 if (second[v] < 0 || score[i - wall_start].first < score[static_cast<size_t>(second[v]) - wall_start].first) second[v] = static_cast<long long>(i);
             }
+            // And every face that pressed the vertex in an earlier pass of this frame (`held`): one row each pass let
+            // the passes cycle where a vertex lies over a corner of the opposite wall (the sample's held clip with the
+            // faces from the heel, session 62: a vertex over a fan of faces took one pair of them in a pass, went
+            // 0.021 mm through a third, took that one's neighbour in the next and came back out, in turn to the frame's
+            // last pass, so every other frame ended 0.02 mm through). Kept, the passes' rows only grow within a frame.
+            // As for the second row, only where its plane differs by more than 10° from each row the vertex keeps
+            // (nearly parallel rows of one vertex make the LCP degenerate: the plates pressed together ended 1.4e-4 mm
+            // off complementarity with them).
+            std::vector<char> keep_held(rows.size(), 0);
+            if (held) {
+                std::vector<std::vector<size_t>> kept(static_cast<size_t>(nc));  // per vertex: its kept rows so far
+                for (size_t v = 0; v < static_cast<size_t>(nc); ++v) {
+                    if (best[v] >= 0) kept[v].push_back(static_cast<size_t>(best[v]));
+                    if (second[v] >= 0) kept[v].push_back(static_cast<size_t>(second[v]));
+                }
+                for (size_t i = wall_start; i < rows.size(); ++i) {
+                    const size_t v = static_cast<size_t>(rows[i].k[0]);
+                    if (!held->count({rows[i].k[0], rows[i].s}) || best[v] == static_cast<long long>(i) || second[v] == static_cast<long long>(i)) continue;
+                    bool apart = true;
+                    for (size_t j : kept[v]) apart = apart && std::abs(rows[i].g[0].dot(rows[j].g[0])) < SECOND_COS;
+                    if (!apart) continue;
+                    keep_held[i] = 1;
+                    kept[v].push_back(i);
+                }
+            }
             size_t w = wall_start;  // the kept rows moved down in place
             for (size_t i = wall_start; i < rows.size(); ++i)
-                if (best[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i) || second[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i)) {
+                if (best[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i) || second[static_cast<size_t>(rows[i].k[0])] == static_cast<long long>(i) ||
+                    keep_held[i]) {
                     if (w != i) rows[w] = std::move(rows[i]);
                     ++w;
                 }
@@ -1331,6 +1360,18 @@ void trace_walls(const Linearisation& lin, const CompliantWalls& walls, const Co
         const double vmoved = (pass_ends[p].candidate_u.segment<3>(3 * v) - from.segment<3>(3 * v)).norm();
         std::fprintf(stderr, "wall worst: pass %zu end %s; moved %.4f mm (its vertex %.4f); its wall rows (face:force)%s\n", p + 1, state(pass_ends[p].candidate_u).c_str(),
                      moved, vmoved, rows_of_v.empty() ? " none" : rows_of_v.c_str());
+        // Every face the vertex is paired with that it lies over to OVER_KEPT there: the choice the next pass's rows make.
+        std::string faces_of_v;
+        for (const auto& [pv, pf] : walls.pairs) {
+            OverFace of;
+            if (pv != v || !over_face(at(pass_ends[p].candidate_u, v), at(pass_ends[p].candidate_u, walls.faces(pf, 0)), at(pass_ends[p].candidate_u, walls.faces(pf, 1)),
+                                      at(pass_ends[p].candidate_u, walls.faces(pf, 2)), of, -0.5))
+                continue;
+            char buf[96];
+            std::snprintf(buf, sizeof buf, " %d:d%+.4f,b%.2f", pf, of.d, std::min({of.b0, of.b1, of.b2}));
+            faces_of_v += buf;
+        }
+        std::fprintf(stderr, "wall worst: pass %zu end: the faces it lies over (face:d,smallest b)%s\n", p + 1, faces_of_v.empty() ? " none" : faces_of_v.c_str());
     }
 }
 
@@ -1358,9 +1399,14 @@ CompliantFrame solve_compliant_clip(const Linearisation& lin, const ClipBlades& 
     const bool borrowed = lin.borrowed();
     Eigen::VectorXd free_eff;
     double mismatch = 0;
+    // The wall rows (vertex, 2 + face) that pressed in a pass of this frame so far: kept in its later passes with
+    // opt.wall_one_face (solve_pass; the rows of all faces a vertex lies over need no such memory).
+    std::set<std::pair<int, int>> held;
     auto pass = [&](const CompliantFrame* from) {
         const Eigen::VectorXd* fu = borrowed && free_eff.size() == 3 * nc ? &free_eff : nullptr;
-        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, from, opt, walls, start, more, fu);
+        CompliantFrame g = solve_pass(lin, blades, spring, theta_held, theta_start, from, opt, walls, start, more, fu, &held);
+        for (size_t i = 0; i < g.constraint.size() && i < g.lambda.size(); ++i)
+            if (g.constraint[i].second >= 2 && g.lambda[i] > 0) held.insert(g.constraint[i]);
         if (borrowed) {
             const Stopwatch bw;
             const Eigen::VectorXd exact = lin.candidate_displacement(g.candidate_forces);

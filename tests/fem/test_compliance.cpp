@@ -1744,3 +1744,91 @@ TEST(WallContact, AVertexPairsOnlyWithTheFacesOfItsOwnSurface) {
     bad.face_surface = short_list;
     EXPECT_THROW(fem::contact_pairs(X, F, rest, bad), InputError);
 }
+
+namespace {
+
+/// A wall vertex pushed into a hollow of the opposite wall: block B (1 × 1 × 1 mm, 2 × 2 × 2 elements, its bottom
+/// held) whose top is a bowl, y = 1 + c (|x − 0.5| + |z − 0.5|), lowest at its centre node, its 8 top faces the walls;
+/// a 0.2 mm cube A (its top held) whose bottom corner v stands at `v_at`, linearised squeezed by `squeeze` as in
+/// VertexOverACrease (its free step takes v back by −squeeze, into the bowl's faces unless rows hold it). One frame
+/// with CompliantOptions::wall_one_face, from a warm frame without rows.
+fem::CompliantFrame vertex_into_a_hollow(double c, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze, int geometry_passes, int* n_faces = nullptr) {
+    const fem::StructuredMesh b = fem::box_mesh(1.0, 1.0, 1.0, 2, 2, 2), a = fem::box_mesh(0.2, 0.2, 0.2, 1, 1, 1);
+    const Eigen::Index nb = b.V.rows();
+    Eigen::MatrixX3d X(nb + a.V.rows(), 3);
+    X.topRows(nb) = b.V;
+    std::vector<int> top;
+    for (Eigen::Index i = 0; i < nb; ++i)
+        if (b.V(i, 1) > 1.0 - 1e-9) {
+            X(i, 1) += c * (std::abs(b.V(i, 0) - 0.5) + std::abs(b.V(i, 2) - 0.5));
+            top.push_back(static_cast<int>(i));
+        }
+    const Eigen::RowVector3d at = (v_at - squeeze).transpose();
+    for (Eigen::Index i = 0; i < a.V.rows(); ++i) X.row(nb + i) = a.V.row(i) + at;
+    Eigen::MatrixXi T(b.T.rows() + a.T.rows(), 4);
+    T.topRows(b.T.rows()) = b.T;
+    T.bottomRows(a.T.rows()) = a.T.array() + static_cast<int>(nb);
+    const fem::NeoHookeanSolid solid(X, T, Eigen::VectorXi::Zero(T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
+    std::vector<int> fd, cand;
+    Eigen::VectorXd u0 = Eigen::VectorXd::Zero(3 * X.rows());
+    int v = -1;
+    for (Eigen::Index i = 0; i < X.rows(); ++i) {
+        const bool in_a = i >= nb;
+        const double y0 = in_a ? a.V(i - nb, 1) : b.V(i, 1);
+        if ((!in_a && y0 < 1e-9) || (in_a && y0 > 0.2 - 1e-9))
+            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
+        else if (in_a)
+            u0.segment<3>(3 * i) = squeeze;
+        if (in_a && a.V.row(i - nb).norm() < 1e-12) v = static_cast<int>(i);
+    }
+    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    cand.push_back(v);
+    cand.insert(cand.end(), top.begin(), top.end());
+    const Eigen::MatrixXi F = fem::boundary_faces_in_set(X, b.T, Eigen::Map<Eigen::VectorXi>(top.data(), static_cast<Eigen::Index>(top.size())));
+    std::vector<int> slot(static_cast<size_t>(X.rows()), -1);
+    for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
+    fem::CompliantWalls walls;
+    walls.faces.resize(F.rows(), 3);
+    for (Eigen::Index f = 0; f < F.rows(); ++f) {
+        for (int k = 0; k < 3; ++k) walls.faces(f, k) = slot[static_cast<size_t>(F(f, k))];
+        walls.pairs.push_back({0, static_cast<int>(f)});
+    }
+    if (n_faces) *n_faces = static_cast<int>(F.rows());
+    const fem::Linearisation lin(solid, X, fixed, u0, cand);
+    fem::ClipBlades blades;
+    blades.hinge = Eigen::Vector3d(-50.0, 0.0, 0.5);
+    blades.length_mm = 3.0;
+    fem::CompliantFrame warm;
+    warm.theta = 0.5;
+    warm.candidate_u = Eigen::VectorXd::Zero(3 * static_cast<Eigen::Index>(cand.size()));
+    for (size_t k = 0; k < cand.size(); ++k) warm.candidate_u.segment<3>(3 * static_cast<Eigen::Index>(k)) = u0.segment<3>(3 * cand[k]);
+    warm.candidate_forces = Eigen::VectorXd::Zero(warm.candidate_u.size());
+    fem::CompliantOptions opt;
+    opt.wall_one_face = true;
+    opt.geometry_passes = geometry_passes;
+    return fem::solve_compliant_clip(lin, blades, test_spring(), 0.5, 0.5, &warm, opt, &walls);
+}
+
+}  // namespace
+
+TEST(CompliantClip, AVertexPushedIntoAHollowOfTheOppositeWallIsHeldOutOfEveryFaceAroundIt) {
+    // The sample's held clip with the faces from the heel (session 62, ANEU_WALL_TRACE): a vertex over a hollow of
+    // the opposite wall (a fan of faces about one node) had one face's row and a second's in a pass, went 0.021 mm
+    // through a third, took that one's neighbour in the next and came back out, and so on to the frame's last pass.
+    // Here v is pushed 0.1 mm down into a bowl of 8 faces. A face that pressed it in an earlier pass of the frame
+    // keeps its row (CompliantOptions::wall_one_face; its plane more than 10° from the vertex's other rows), so the
+    // rows grow to those of the faces around it and v ends on them. Before: two rows, 0.017 mm through (bowl 0.4)
+    // and 0.005 mm (0.2).
+    for (double c : {0.2, 0.4})
+        for (const Eigen::Vector3d& sq : {Eigen::Vector3d(0, 0.1, 0), Eigen::Vector3d(0.03, 0.1, 0.01)}) {
+            int nf = 0;
+            const fem::CompliantFrame f = vertex_into_a_hollow(c, Eigen::Vector3d(0.5, 1.005, 0.5), sq, fem::CompliantOptions{}.geometry_passes, &nf);
+            ASSERT_EQ(nf, 8);
+            EXPECT_GT(f.wall_min_distance_mm, -1e-3) << "bowl " << c;
+            EXPECT_GE(wall_rows_of_v(f), 3) << "bowl " << c;
+            EXPECT_GE(f.wall_contacts, 3) << "bowl " << c;
+            EXPECT_LE(f.complementarity_mm, 1e-9) << "bowl " << c;
+            std::printf("hollow %.1f, pushed (%.2f %.2f %.2f): v %.5f mm from the nearest face, %d rows, %d pressed, %d passes\n", c, sq.x(), sq.y(), sq.z(),
+                        f.wall_min_distance_mm, wall_rows_of_v(f), f.wall_contacts, f.passes);
+        }
+}

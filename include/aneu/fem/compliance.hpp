@@ -167,7 +167,10 @@ struct CompliantOptions {
     /// frame if it is one of them, else the one its projection lies deepest inside (nearly parallel rows of one
     /// vertex over neighbouring faces make the LCP degenerate); and a second row on its other face in the last pass
     /// where the two faces' planes differ by more than 10° (a valley's sides). Either way a face a vertex had a row
-    /// on in the last pass keeps it while the vertex lies within 0.5 of the face beyond its edges (others: 0.1).
+    /// on in the last pass keeps it while the vertex lies within 0.5 of the face beyond its edges (others: 0.1). And
+    /// every face that pressed the vertex in an earlier pass of the same frame keeps its row in the frame's later
+    /// passes, where its plane differs by more than 10° from the vertex's other rows (a vertex over a hollow of the
+    /// opposite wall needs the rows of the faces around it; with one face and a second the passes cycled: session 62).
     bool wall_one_face = false;
     /// On a linearisation whose W is borrowed (Linearisation::borrowed): the passes go on, each from the exact end of
     /// the last (its forces' displacement on this tangent), until a pass's predicted end and its exact one differ by
