@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstring>
 #include <cstdio>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -820,34 +821,37 @@ namespace {
 /// the test puts it. A is linearised squeezed 0.1 mm (its bottom moved by `squeeze` from rest): its free step takes v
 /// back by −squeeze, through B's faces unless a row holds it. Faces f (x ≤ 0.5) and g (x ≥ 0.5) of B's top share the
 /// crease's edge; their normals point up, out of B. The blades stand far off.
-struct VertexOverACrease {
+/// Block B (1 × 1 × 1 mm, 2 × 2 × 2 elements, its bottom held) moved down by `drop`, its top nodes raised by
+/// rise(x, z), and a 0.2 mm cube A (its top held) whose corner (0, 0, 0) is v, at v_at less the squeeze (its rest
+/// place: A overlaps B there, as far as the squeeze); u0 moves A's bottom layer back by the squeeze from where it
+/// rests, so a linearisation at u0 has its free step take v back by −squeeze. Neo-Hookean, 1 MPa, ν 0.45.
+struct BlockUnderACube {
+    fem::StructuredMesh b, a;
     Eigen::MatrixX3d X;
-    std::unique_ptr<fem::NeoHookeanSolid> solid;
+    Eigen::MatrixXi T;
     Eigen::VectorXi fixed;
-    std::vector<int> cand;  // v, then B's top nodes
-    Eigen::MatrixX3i faces; // f, g in candidate numbering
     Eigen::VectorXd u0;
-    Eigen::MatrixX3d Xc;
-    fem::ClipBlades blades;
-    VertexOverACrease(double crease, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze) {
-        const fem::StructuredMesh b = fem::box_mesh(1.0, 1.0, 1.0, 2, 2, 2), a = fem::box_mesh(0.2, 0.2, 0.2, 1, 1, 1);
+    int v = -1;
+    std::vector<int> top;  // B's top nodes
+    BlockUnderACube(double drop, const std::function<double(double, double)>& rise, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze)
+        : b(fem::box_mesh(1.0, 1.0, 1.0, 2, 2, 2)), a(fem::box_mesh(0.2, 0.2, 0.2, 1, 1, 1)) {
         const Eigen::Index nb = b.V.rows();
         X.resize(nb + a.V.rows(), 3);
         X.topRows(nb) = b.V;
         for (Eigen::Index i = 0; i < nb; ++i) {
-            X(i, 1) -= 1.0;
-            if (b.V(i, 1) > 1.0 - 1e-9) X(i, 1) += crease * std::abs(b.V(i, 0) - 0.5);
+            X(i, 1) -= drop;
+            if (b.V(i, 1) > 1.0 - 1e-9) {
+                X(i, 1) += rise(b.V(i, 0), b.V(i, 2));
+                top.push_back(static_cast<int>(i));
+            }
         }
-        // A's corner (0, 0, 0) is v, at v_at less the squeeze (its rest place: A overlaps B there, as far as the squeeze).
         const Eigen::RowVector3d at = (v_at - squeeze).transpose();
         for (Eigen::Index i = 0; i < a.V.rows(); ++i) X.row(nb + i) = a.V.row(i) + at;
-        Eigen::MatrixXi T(b.T.rows() + a.T.rows(), 4);
+        T.resize(b.T.rows() + a.T.rows(), 4);
         T.topRows(b.T.rows()) = b.T;
         T.bottomRows(a.T.rows()) = a.T.array() + static_cast<int>(nb);
-        solid = std::make_unique<fem::NeoHookeanSolid>(X, T, Eigen::VectorXi::Zero(T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
         std::vector<int> fd;
         u0 = Eigen::VectorXd::Zero(3 * X.rows());
-        int v = -1;
         for (Eigen::Index i = 0; i < X.rows(); ++i) {
             const bool in_a = i >= nb;
             const double y0 = in_a ? a.V(i - nb, 1) : b.V(i, 1);
@@ -858,6 +862,27 @@ struct VertexOverACrease {
             if (in_a && (a.V.row(i - nb)).norm() < 1e-12) v = static_cast<int>(i);
         }
         fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
+    }
+};
+
+struct VertexOverACrease {
+    Eigen::MatrixX3d X;
+    std::unique_ptr<fem::NeoHookeanSolid> solid;
+    Eigen::VectorXi fixed;
+    std::vector<int> cand;  // v, then B's top nodes
+    Eigen::MatrixX3i faces; // f, g in candidate numbering
+    Eigen::VectorXd u0;
+    Eigen::MatrixX3d Xc;
+    fem::ClipBlades blades;
+    VertexOverACrease(double crease, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze) {
+        const BlockUnderACube bc(1.0, [&](double x, double) { return crease * std::abs(x - 0.5); }, v_at, squeeze);
+        const fem::StructuredMesh& b = bc.b;
+        const Eigen::Index nb = b.V.rows();
+        X = bc.X;
+        solid = std::make_unique<fem::NeoHookeanSolid>(X, bc.T, Eigen::VectorXi::Zero(bc.T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
+        fixed = bc.fixed;
+        u0 = bc.u0;
+        const int v = bc.v;
         cand.push_back(v);
         auto node = [&](double x, double z) {  // B's top node at (x, z), as a candidate
             for (Eigen::Index i = 0; i < nb; ++i)
@@ -1753,38 +1778,15 @@ namespace {
 /// VertexOverACrease (its free step takes v back by −squeeze, into the bowl's faces unless rows hold it). One frame
 /// with CompliantOptions::wall_one_face, from a warm frame without rows.
 fem::CompliantFrame vertex_into_a_hollow(double c, const Eigen::Vector3d& v_at, const Eigen::Vector3d& squeeze, int geometry_passes, int* n_faces = nullptr) {
-    const fem::StructuredMesh b = fem::box_mesh(1.0, 1.0, 1.0, 2, 2, 2), a = fem::box_mesh(0.2, 0.2, 0.2, 1, 1, 1);
-    const Eigen::Index nb = b.V.rows();
-    Eigen::MatrixX3d X(nb + a.V.rows(), 3);
-    X.topRows(nb) = b.V;
-    std::vector<int> top;
-    for (Eigen::Index i = 0; i < nb; ++i)
-        if (b.V(i, 1) > 1.0 - 1e-9) {
-            X(i, 1) += c * (std::abs(b.V(i, 0) - 0.5) + std::abs(b.V(i, 2) - 0.5));
-            top.push_back(static_cast<int>(i));
-        }
-    const Eigen::RowVector3d at = (v_at - squeeze).transpose();
-    for (Eigen::Index i = 0; i < a.V.rows(); ++i) X.row(nb + i) = a.V.row(i) + at;
-    Eigen::MatrixXi T(b.T.rows() + a.T.rows(), 4);
-    T.topRows(b.T.rows()) = b.T;
-    T.bottomRows(a.T.rows()) = a.T.array() + static_cast<int>(nb);
-    const fem::NeoHookeanSolid solid(X, T, Eigen::VectorXi::Zero(T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
-    std::vector<int> fd, cand;
-    Eigen::VectorXd u0 = Eigen::VectorXd::Zero(3 * X.rows());
-    int v = -1;
-    for (Eigen::Index i = 0; i < X.rows(); ++i) {
-        const bool in_a = i >= nb;
-        const double y0 = in_a ? a.V(i - nb, 1) : b.V(i, 1);
-        if ((!in_a && y0 < 1e-9) || (in_a && y0 > 0.2 - 1e-9))
-            for (int k = 0; k < 3; ++k) fd.push_back(static_cast<int>(3 * i + k));
-        else if (in_a)
-            u0.segment<3>(3 * i) = squeeze;
-        if (in_a && a.V.row(i - nb).norm() < 1e-12) v = static_cast<int>(i);
-    }
-    const Eigen::VectorXi fixed = Eigen::Map<Eigen::VectorXi>(fd.data(), static_cast<Eigen::Index>(fd.size()));
-    cand.push_back(v);
+    const BlockUnderACube bc(0.0, [&](double x, double z) { return c * (std::abs(x - 0.5) + std::abs(z - 0.5)); }, v_at, squeeze);
+    const Eigen::MatrixX3d& X = bc.X;
+    const std::vector<int>& top = bc.top;
+    const fem::NeoHookeanSolid solid(X, bc.T, Eigen::VectorXi::Zero(bc.T.rows()), std::vector<Material>{Material{"wall", 1.0, 0.45}});
+    const Eigen::VectorXi& fixed = bc.fixed;
+    const Eigen::VectorXd& u0 = bc.u0;
+    std::vector<int> cand{bc.v};
     cand.insert(cand.end(), top.begin(), top.end());
-    const Eigen::MatrixXi F = fem::boundary_faces_in_set(X, b.T, Eigen::Map<Eigen::VectorXi>(top.data(), static_cast<Eigen::Index>(top.size())));
+    const Eigen::MatrixXi F = fem::boundary_faces_in_set(X, bc.b.T, Eigen::Map<const Eigen::VectorXi>(top.data(), static_cast<Eigen::Index>(top.size())));
     std::vector<int> slot(static_cast<size_t>(X.rows()), -1);
     for (size_t k = 0; k < cand.size(); ++k) slot[static_cast<size_t>(cand[k])] = static_cast<int>(k);
     fem::CompliantWalls walls;
