@@ -1066,20 +1066,16 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
             // (nearly parallel rows of one vertex make the LCP degenerate: the plates pressed together ended 1.4e-4 mm
             // off complementarity with them).
             std::vector<char> keep_held(rows.size(), 0);
-            if (held) {
-                std::vector<std::vector<size_t>> kept(static_cast<size_t>(nc));  // per vertex: its kept rows so far
-                for (size_t v = 0; v < static_cast<size_t>(nc); ++v) {
-                    if (best[v] >= 0) kept[v].push_back(static_cast<size_t>(best[v]));
-                    if (second[v] >= 0) kept[v].push_back(static_cast<size_t>(second[v]));
-                }
+            if (held && !held->empty()) {
+                std::map<size_t, std::vector<size_t>> extra;  // per vertex with held rows: those kept so far
                 for (size_t i = wall_start; i < rows.size(); ++i) {
                     const size_t v = static_cast<size_t>(rows[i].k[0]);
-                    if (!held->count({rows[i].k[0], rows[i].s}) || best[v] == static_cast<long long>(i) || second[v] == static_cast<long long>(i)) continue;
-                    bool apart = true;
-                    for (size_t j : kept[v]) apart = apart && std::abs(rows[i].g[0].dot(rows[j].g[0])) < SECOND_COS;
-                    if (!apart) continue;
+                    if (best[v] == static_cast<long long>(i) || second[v] == static_cast<long long>(i) || !held->count({rows[i].k[0], rows[i].s})) continue;
+                    auto apart = [&](long long j) { return j < 0 || std::abs(rows[i].g[0].dot(rows[static_cast<size_t>(j)].g[0])) < SECOND_COS; };
+                    std::vector<size_t>& ex = extra[v];
+                    if (!apart(best[v]) || !apart(second[v]) || !std::all_of(ex.begin(), ex.end(), [&](size_t j) { return apart(static_cast<long long>(j)); })) continue;
                     keep_held[i] = 1;
-                    kept[v].push_back(i);
+                    ex.push_back(i);
                 }
             }
             size_t w = wall_start;  // the kept rows moved down in place
