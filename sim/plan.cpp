@@ -296,12 +296,13 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
         Eigen::Vector3d side = axis.cross(f.w).normalized();
         if (side.dot(n) < 0) side = -side;  // towards the sac
         const double tan_half = std::tan(0.5 * f.opening * PI / 180.0);
+        const double h_from = o.parent_whole_band ? -0.5 * JAW_W : 0.0;  // the band's half towards the sac, or all of it
         int n_in = 0;
         for (const Eigen::Vector3d& x : parent) {
             const Eigen::Vector3d r = x - hinge;
             const double up = r.dot(axis);
             const auto [along, h] = bent(bend_sac, up, r.dot(side));
-            if (up >= 0 && along <= length && h >= 0 && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= up * tan_half) ++n_in;
+            if (up >= 0 && along <= length && h >= h_from && h <= 0.5 * JAW_W && std::abs(r.dot(f.w)) <= up * tan_half) ++n_in;
         }
         return n_in;
     };
@@ -636,10 +637,11 @@ std::string plan_scene(const SimModel& m, const std::string& bundle_ref, const s
                   "// closes across the neck at t = %.1f s and is released. Its jaws (%.1f mm wide) lie %.2f mm above the neck's centre,\n"
                   "// turned %.0f deg from its long axis and tilted %.0f deg (the hinge up), where they cover %.0f %% of the neck line (its border);\n"
                   "// %d outer-surface vertices lie within %.1f mm of the open blades along the approach; %d lumen vertices of the parent\n"
-                  "// (over %.0f mm from the neck) lie half the jaws' width or more between them; no clamped node (the domain's cut ends) lies within\n"
+                  "// (over %.0f mm from the neck) lie %s between them; no clamped node (the domain's cut ends) lies within\n"
                   "// %.1f mm of the space the jaws close on. The suction tube is parked 3 mm clear. Format: docs/scene_format.md.\n",
                   m.case_id.c_str(), nf.centre.x(), nf.centre.y(), nf.centre.z(), nf.length_mm, nf.width_mm, nf.line_mm, nf.label_line_mm, n.x(), n.y(), n.z(),
-                  CR > 0 ? "curved" : "straight", blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM, EDGE_MM);
+                  CR > 0 ? "curved" : "straight", blade, opening, t_close, JAW_W, lift, yaw_deg, tilt_deg, 100.0 * covered, chosen_in_way, CLEAR, chosen_pinched, PARENT_MM,
+                  o.parent_whole_band ? "anywhere across the jaws' width" : "half the jaws' width or more", EDGE_MM);
     std::string header(head);
     if (CR > 0) {
         char cu[320];

@@ -103,6 +103,10 @@ int main(int argc, char** argv) {
                      "(the model's jaw_curve_radius_mm; 0: straight)")
         ->check(CLI::Range(0.0, 1000.0))
         ->capture_default_str();
+    bool plan_whole_band = aneu::sim::PlanOptions{}.parent_whole_band;
+    plan->add_flag("--parent-whole-band", plan_whole_band,
+                   "a pose is clear only with no lumen vertex of the parent anywhere across the open jaws' width (default: in the half towards the sac; "
+                   "the parent's top may graze the other half)");
     plan->add_flag("--flow", plan_flow, "the scene's outputs include the residual blood flow after the session (aneuprep flow, OpenFOAM: about a minute for the sample)");
 
     // aneusim serve SCENE: the simulator behind an OpenIGTLink server.
@@ -159,6 +163,7 @@ int main(int argc, char** argv) {
             po.fulcrum_mm = plan_fulcrum;
             po.curve_radius_mm = plan_curve;
             po.tandem = plan_tandem;
+            po.parent_whole_band = plan_whole_band;
             const std::string text = aneu::sim::plan_scene(m, ref, out.stem().string(), po);
             aneu::AtomicTextFile f(plan_out);
             f.out() << text;

@@ -52,6 +52,13 @@ struct PlanOptions {
     /// parent). Both close together. The second path's approach, parent and clamped-end checks are reported in the
     /// header, not chosen for: a second clip the clamped ends forbid is not planned (said in the header).
     bool tandem = false;
+    /// A pose is clear of the parent only where no lumen vertex of the parent (over 1 mm from the neck's border) lies
+    /// between its open jaws across their whole width. By default only the half of the width towards the sac counts:
+    /// a band that grazes the top of the parent beyond a sidewall neck pinches a sliver of its wall and is allowed.
+    /// On the sample and C0001 that sliver is what holds the clip open (session 63: the parent's top at the heel and
+    /// beyond the tips, 24-50 vertices in the parent's half), so a planned pose that keeps the whole width clear
+    /// trades cover of the neck line for a clip that presses only the neck.
+    bool parent_whole_band = false;
 };
 /// How far apart the tandem clips' jaws stand (PlanOptions::tandem): their blades' facing edges [mm].
 constexpr double TANDEM_GAP_MM = 0.1;
