@@ -117,6 +117,21 @@ constexpr int BORROW_SLOW_PASSES = 8;
 /// they take it wherever the tangent is not.
 constexpr int PROJECTED_RUN = 3;
 
+/// A frame's re-solves for the linear range stop where an attempt went more than this many times as far from its
+/// linearisation as the frame's nearest attempt: Newton's steps that have left the neighbourhood of an equilibrium by
+/// that much do not come back to it, and each costs a linearisation at a state ever further off (the sample's 2 mm
+/// jaws at t = 1.252 s, session 62: 0.88 -> 1.34 -> 37.3 -> 33.8 -> 28.1 wall thicknesses, an element inverted at the
+/// states reached, the candidates 3,930 -> 7,062, a minute a re-solve). The frame then ends with its nearest attempt,
+/// as after its last re-solve. (Nor is one re-solved from beyond RANGE_ABSURD, below.)
+constexpr double RANGE_HOPELESS = 4.0;
+
+/// A compliance frame that still ends this many wall thicknesses from its linearisation after its re-solves (the
+/// nearest attempt kept) is not taken: the tangent it was solved on (buckled, its element tangents projected) put the
+/// tissue millimetres away in one frame. It counts as a frame that did not converge: the patch stays where the frame
+/// started, and a second in a row goes back to the last converged state with a smaller step of the opening (the
+/// sample's 2 mm jaws at t = 1.260 s, session 63: 36.2 wall thicknesses, 4.8 mm, in the first attempt).
+constexpr double RANGE_ABSURD = 10.0;
+
 /// The linearisation of a compliance patch at state u, or where u has an element inverted (frames on a linearisation
 /// can take the patch where the nonlinear model cannot follow), at the state nearest u on the way back to `valid` (the
 /// last linearisation's, which has none) that has none: u_valid + β (u − u_valid), β halved from 1/2 at most 10 times.
@@ -1219,7 +1234,17 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
                     const bool over = reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > scene.linear_limit;
                     if (over && (!best || lag.ratio < best->lag.ratio)) best = Attempt{*C, f, res.u.head(nb), lag, range_again};
-                    if (over && range_again < scene.patch.range_resolves) {
+                    // No re-solve from an attempt gone over RANGE_HOPELESS times as far as the nearest, or over
+                    // RANGE_ABSURD wall thicknesses (its state's linearisation would be at elements nearly inverted).
+                    const bool off_nearest = over && best && best->number != range_again && lag.ratio > RANGE_HOPELESS * best->lag.ratio;
+                    const bool hopeless = off_nearest || (over && lag.ratio > RANGE_ABSURD);
+                    if (hopeless) {
+                        ++P.stats.range_hopeless;
+                        if (std::getenv("ANEU_PATCH_TRACE"))
+                            std::fprintf(stderr, "patch t=%.4f: the frame's attempt %d went %.2f wall thicknesses from its linearisation, over %s (attempt %d, %.2f): no more re-solves\n",
+                                         fr.t, range_again, lag.ratio, off_nearest ? "4 times its nearest" : "10 wall thicknesses; its nearest", best->number, best->lag.ratio);
+                    }
+                    if (over && !hopeless && range_again < scene.patch.range_resolves) {
                         const double was = lag.ratio;
                         const bool diverging = last_ratio >= 0 && was > last_ratio;
                         last_ratio = was;
@@ -1335,6 +1360,22 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation; as a Newton frame it did not converge in %d iterations (%s; %.3g of the opening's change reached, residual %.2e, %d substeps, %d iterations with the tangent projected, %.2f s): the compliance frame kept\n",
                                  fr.t, lag.ratio, nr.iterations, nr.failure.c_str(), nr.load_fraction, nr.residual, nr.substeps, nr.shifted, nw.seconds());
                 grips.clear();  // (the compliance frame's loads and walls: below)
+            }
+            if (reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > RANGE_ABSURD) {
+                ++P.stats.range_absurd;
+                if (std::getenv("ANEU_PATCH_TRACE"))
+                    std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation (vertex %ld, %.4f mm) after its re-solves: not taken (over %g), the patch stays where the frame started\n",
+                                 fr.t, lag.ratio, static_cast<long>(lag.vertex), lag.mm, RANGE_ABSURD);
+                res.u = v0;
+                res.converged = false;
+                res.failure = "the frame went " + std::to_string(lag.ratio) + " wall thicknesses from its linearisation";
+                res.iterations = f.passes;
+                loads = C->last.loads;  // (C->last stays the last frame's: the next starts warm from it)
+                for (size_t j = 0; j < mf.size() && j < C->last.more_loads.size(); ++j) mf[j].loads = C->last.more_loads[j];
+                wall_min = walls_at(C->last);
+                touching = C->last.wall_contacts;
+                lag = Reach{};
+                return res;
             }
             c_profile.assign(static_cast<size_t>(std::ceil(blades.length_mm)), 0.0);
             c_across.assign(static_cast<size_t>(std::ceil(10 * blades.width_mm - 1e-9)) + 2, 0.0);

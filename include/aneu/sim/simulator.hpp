@@ -186,6 +186,12 @@ struct Assessment {
         /// ... of those frames, the ones that ended with an earlier attempt than their last, the last having gone further
         /// from its linearisation (the re-solves diverging; halfway re-solves damp them)
         int range_earlier_kept = 0;
+        /// Frames whose re-solves stopped early: an attempt went over 4 times as far from its linearisation as the
+        /// frame's nearest attempt, or over 10 wall thicknesses (Newton's steps gone off; the nearest kept)
+        int range_hopeless = 0;
+        /// Frames still over 10 wall thicknesses from their linearisation after their re-solves: not taken (counted as
+        /// not converged; the patch stays where the frame started)
+        int range_absurd = 0;
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
