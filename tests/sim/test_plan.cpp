@@ -192,6 +192,13 @@ TEST(Plan, SceneClosesAClipAcrossTheNeck) {
 }
 
 namespace {
+/// The bundle's mesh, surface and lumen, without W (what the planner reads).
+sim::SimModel geometry_of(const fs::path& bundle) {
+    sim::LoadOptions lo;
+    lo.geometry_only = true;
+    return sim::load_model(bundle.string(), lo);
+}
+
 /// The parent's lumen vertices (no face of theirs the sac's, over 1 mm from the neck's border and its label loops)
 /// between the open jaws of a planned scene's clip, within their length, across their width: {in the half towards
 /// the sac, in the half towards the parent}. Counted here from the scene, as the planner's check would.
@@ -236,9 +243,7 @@ std::pair<int, int> parent_between_the_jaws(const sim::SimModel& m, const sim::S
 // the line (66 %: the band lifted off the parent). Both counted here from the scenes the planner wrote.
 TEST(Plan, APoseClearOfTheParentAcrossTheJawsWholeWidthGivesUpCoverForIt) {
     PlannedTube t;
-    sim::LoadOptions lo;
-    lo.geometry_only = true;
-    const sim::SimModel m = sim::load_model(t.bundle.string(), lo);
+    const sim::SimModel m = geometry_of(t.bundle);
     auto planned = [&](bool whole, const std::string& stem) {
         sim::PlanOptions po;
         po.parent_whole_band = whole;
