@@ -1216,6 +1216,45 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
     EXPECT_GT(grip[0], 1.5 * f_ref);
 }
 
+TEST(SimulatorPatch, AComplianceFrameThatTakesTheWallsThroughEachOtherPastTheLimitIsNotTaken) {
+    // The tube flattened by compliance frames never relinearised (the linear model about rest, as above): its walls
+    // end 0.0012 mm through each other at the closest (measured). With model.walls_reject_mm at half that, a frame
+    // that ends with the walls further through is not taken: it counts as not converged, the patch stays where the
+    // frame started, and a second in a row goes back to the last converged state with a smaller step. So no frame
+    // taken has the walls further through than the limit, and the clip stops short of the flattening the applier
+    // asks for. With the rule off (0) every frame is taken and the walls go past it.
+    // (The rule's default, 0.1 mm, is for frames whose linearisation went wrong, as the sample's 2 mm jaws at
+    // t = 1.252 s, session 63: 0.30 then 0.40 mm; no tube scene takes the walls that far.)
+    test::TempDir d("wallsreject");
+    const std::string bundle = tube_bundle(Precision::FLOAT64);
+    constexpr double LIMIT_MM = 0.0006;
+    for (const double limit : {0.0, LIMIT_MM}) {
+        SCOPED_TRACE("walls_reject_mm " + std::to_string(limit));
+        json j = compliance_flattening_scene(bundle, 0, 0.30);
+        j["model"]["walls_reject_mm"] = limit;
+        sim::Simulator s = make(j, d.file(""), "wr" + std::to_string(limit > 0) + ".json");
+        const sim::Assessment a = sim::run_scene(s, {});
+        ASSERT_EQ(a.patches.size(), 1u);
+        const auto& p = a.patches[0];
+        const sim::Clip& c = s.clips().at(0);
+        if (limit == 0) {
+            EXPECT_EQ(p.walls_absurd, 0);
+            EXPECT_EQ(p.unconverged_frames, 0);
+            EXPECT_LT(p.min_wall_distance_mm, -LIMIT_MM) << "the walls did not go past the limit: the rule was not exercised";
+            EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+        } else {
+            EXPECT_GT(p.walls_absurd, 0);
+            EXPECT_GE(p.unconverged_frames, p.walls_absurd);
+            EXPECT_GT(p.restarts, 0);
+            EXPECT_GE(p.min_wall_distance_mm, -LIMIT_MM);
+            EXPECT_GT(c.opening_deg, FLAT_END_DEG + 1e-3);
+        }
+        std::printf("walls_reject_mm %.4f: %ld frames, %d not taken for the walls, %ld unconverged, %ld restarts; walls %.4f mm apart at the closest; "
+                    "clip at %.3f deg (asked %.3f), blade force %.4f N\n",
+                    limit, p.frames, p.walls_absurd, p.unconverged_frames, p.restarts, p.min_wall_distance_mm, c.opening_deg, FLAT_END_DEG, c.grip_force_n);
+    }
+}
+
 TEST(SimulatorPatch, RefreshesThatBorrowTheLastCompliancesWFlattenTheTubeAsThoseThatMakeTheirOwn) {
     // The test above's scene relinearised every frame, with model.compliance_reuse 3: three refreshes in four (and
     // the frames' re-solves for the linear range) borrow the last W (the tangent factorised at the new state, W kept;

@@ -181,6 +181,10 @@ struct PatchSpec {
     /// neo-Hookean patch with the blades' and walls' barriers, from where the frame started), with at most this many
     /// iterations; the frames go on from its state, linearised there. 0: not (the frame ends beyond the range, warned).
     int range_newton = 0;
+    /// COMPLIANCE: a frame that ends with the patch's walls more than this far through each other (mm) is not taken: it
+    /// counts as not converged, the patch stays where it started, and a second in a row restarts from the last
+    /// converged state with a smaller step of the opening (why 0.1 mm: sim_patch.cpp, at the check; 0: every frame taken).
+    double walls_reject_mm = 0.1;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
     /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
     /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).
