@@ -955,6 +955,10 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 C->more_hinge_sel.clear();
                 start_at_state = true;
             }
+            if (C && C->from_state) {  // the patch went back (a frame not taken, a restart): its rows stay warm
+                start_at_state = true;
+                C->from_state = false;
+            }
             if (!C) {
                 // A remade patch's first frames (its state carried, off rest) start where it stands too, for the same
                 // reason: from the new linearisation's free state the gripped tissue starts sprung back through the
@@ -1145,12 +1149,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             auto walls_at = [](const fem::CompliantFrame& g) {
                 return g.wall_crossed_mm > 0 ? std::min(g.wall_min_distance_mm, -g.wall_crossed_mm) : g.wall_min_distance_mm;
             };
-            // What the last frame ended with, for a frame not taken (below): C->last is the next frame's warm start, which
-            // the re-solves carry to their linearisations' candidates (an earlier attempt's rows where one was kept).
-            const fem::BladeLoads last_loads = C->last.loads;
-            const std::vector<fem::BladeLoads> last_more_loads = C->last.more_loads;
-            const double last_walls = walls_at(C->last);
-            const int last_touching = C->last.wall_contacts;
             // A frame that takes the patch's surface beyond the linear range of its linearisation (Scene::linear_limit
             // wall thicknesses: its forces there are off by more than 10 %) is solved again on a linearisation at the
             // state it reached, warm from its own rows, up to PatchSpec::range_resolves times: Newton's steps on the
@@ -1317,15 +1315,18 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 return second == Span::WITHIN && first == Span::BEYOND ? Span::BEYOND : second;
             };
             const Span got = solve_split(v0[nb], theta_kept, v0, 0);
-            // A frame not taken: the blades' loads and the walls stay the last frame's.
+            // A frame not taken: the blades' loads and the walls stay what the last frame reported (C->last, the warm
+            // start, may be a re-solve's attempt of this frame or of one not taken: the re-solves carry it to their
+            // linearisations' candidates).
             auto keep_last_frame = [&] {
-                loads = last_loads;
-                for (size_t j = 0; j < mf.size() && j < last_more_loads.size(); ++j) mf[j].loads = last_more_loads[j];
-                wall_min = last_walls;
-                touching = last_touching;
+                loads = P.course.loads_shown;
+                for (MemberFrame& g : mf) g.loads = g.course.loads_shown;
+                wall_min = P.course.wall_min_shown;
+                touching = P.course.touching_shown;
             };
             // Not taken, the patch where the frame started (a frame over RANGE_ABSURD or PatchSpec::walls_reject_mm).
             auto reject_frame = [&](std::string why) {
+                C->from_state = true;
                 res.u = v0;
                 res.converged = false;
                 res.failure = std::move(why);
@@ -1484,7 +1485,12 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 g.theta_kept = g.theta_ok;
                 g.loads = g.course.loads_ok;
             }
+            if (P.compliant) P.compliant->from_state = true;
         }
+        P.course.loads_shown = loads;
+        P.course.wall_min_shown = wall_min;
+        P.course.touching_shown = touching;
+        for (MemberFrame& g : mf) g.course.loads_shown = g.loads;
         // A frame whose solve did not converge leaves the balance's estimate as it was (its reaction is not the
         // tissue's; a held clip goes on following the applier).
         // One spring clip's balance step from this frame's opening th and reaction R = τ − M (`turn`: its

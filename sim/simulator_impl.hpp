@@ -182,6 +182,10 @@ struct Simulator::Impl {
             fem::BladeLoads loads_ok;
             double wall_min_ok = std::numeric_limits<double>::infinity();
             int touching_ok = 0;
+            // What the last frame reported (a compliance frame not taken reports it again).
+            fem::BladeLoads loads_shown;
+            double wall_min_shown = std::numeric_limits<double>::infinity();
+            int touching_shown = 0;
             int failed_in_row = 0;            // frames in a row that did not converge
             double theta_failed = 0;          // the opening the first of them was asked for [rad]
             /// The most the opening may change in a frame [rad]: unbounded until a restart sets it to half the
@@ -218,6 +222,9 @@ struct Simulator::Impl {
             fem::CompliantWallSearch search;
             fem::CompliantFrame last;         // the warm start
             bool warm = false;
+            /// The next frame starts where the patch stands, not at the last solve's end (set where the patch went back:
+            /// a frame not taken, a restart; the last solve's end is then a state the patch did not keep)
+            bool from_state = false;
             /// The opening and hinge the candidates were selected at: the wedge the blades sweep closing from there
             /// (a refresh selects them again for the jaws as they are; opened past theta_sel, or the hinge moved,
             /// the frames are due for one).
