@@ -1646,4 +1646,23 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
     }
 }
 
+CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, const CompliantWallSearch& ws,
+                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt) {
+    const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
+    if (Xc.rows() != nc || u.size() != 3 * nc || start.size() != 3 * nc)
+        throw InputError("compliant walls: positions, displacement or start that do not fit the " + std::to_string(nc) + " candidates");
+    CompliantWallsAt out;
+    CompliantWalls walls;
+    walls.faces = faces;
+    walls.rest = Xc;
+    walls.pairs = ws.pairs;
+    out.min_distance_mm = wall_min_distance(lin, walls, u, start, opt);
+    const ContactParams& cp = ws.params;
+    const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
+    constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // (as solve_compliant_clip_walls counts a crossing)
+    for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth, nullptr, &cp.face_surface))
+        if (q.depth_mm > CONTACT_ROUNDOFF_MM) out.crossed_mm = std::max(out.crossed_mm, q.depth_mm);
+    return out;
+}
+
 }  // namespace aneu::fem

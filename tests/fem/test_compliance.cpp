@@ -457,6 +457,36 @@ TEST(CompliantClip, FramesOnABorrowedComplianceSolveTheNewTangentsProblem) {
                 lent.most_passes, lent.unconverged, lent.worst_mismatch, (lent.u - own.u).cwiseAbs().maxCoeff());
 }
 
+TEST(CompliantClip, TheWallsAtAStateAreWhatAFrameEndingThereReports) {
+    // fem::compliant_walls_at, for a state between a frame's start and end (aneusim's shortened frame): at the frame's
+    // end it gives the frame's own walls figures, to the bit; further along the frame's step the walls come closer.
+    const BladesOnATube tube(24);
+    const fem::ClipSpring spring = test_spring();
+    fem::CompliantWallSearch ws;
+    fem::CompliantFrame f, last;
+    f.theta = tube.theta_touch;
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(tube.solid.dofs());
+    std::unique_ptr<fem::Linearisation> lin;
+    for (int frame = 0; frame < 20; ++frame) {
+        const double th = tube.theta_touch + (tube.theta_end - tube.theta_touch) * (frame + 1) / 20.0;
+        lin = std::make_unique<fem::Linearisation>(tube.solid, tube.m.V, tube.fixed, u, tube.cand);
+        last = f;
+        f = fem::solve_compliant_clip_walls(*lin, tube.Xc, tube.faces, ws, tube.blades, spring, th, last.theta, frame ? &last : nullptr);
+        u = lin->displacement(f.candidate_forces);
+    }
+    ASSERT_GT(f.wall_contacts, 0);
+    const Eigen::VectorXd& start = last.candidate_u;  // where the last frame started (its warm start's end)
+    const fem::CompliantWallsAt end = fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, f.candidate_u, start);
+    EXPECT_EQ(end.min_distance_mm, f.wall_min_distance_mm);
+    EXPECT_EQ(end.crossed_mm, f.wall_crossed_mm);
+    const Eigen::VectorXd further = start + 4.0 * (f.candidate_u - start);
+    const fem::CompliantWallsAt past = fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, further, start);
+    EXPECT_LT(past.min_distance_mm, end.min_distance_mm);
+    std::printf("walls at the frame's end %.5f mm (crossed %.5f), four times its step along %.5f mm (crossed %.5f)\n", end.min_distance_mm, end.crossed_mm,
+                past.min_distance_mm, past.crossed_mm);
+    EXPECT_THROW(fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, f.candidate_u.head(6), start), InputError);
+}
+
 TEST(CompliantClip, ABorrowedComplianceOnOtherCandidatesMakesTheAddedOnesColumnsOnTheNewTangent) {
     // A refresh selects its candidates anew; borrowing only where they all were the last W's, C0024's planned clip
     // borrowed 7 of 176 times. Borrowed on other candidates, W's blocks between the old candidates are the old W's, the

@@ -27,6 +27,7 @@
 /// finished, and how far they lag is the trade the benchmark (bench/bench_compliance.cpp) measures.
 #include <array>
 #include <memory>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -378,6 +379,19 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
                                           const ClipBlades& blades, const ClipSpring& spring, std::optional<double> theta_held, double theta_start,
                                           const CompliantFrame* warm = nullptr, const CompliantOptions& opt = {}, int* repeats = nullptr,
                                           const Eigen::VectorXd* start = nullptr, const std::vector<CompliantClip>* more = nullptr);
+
+/// Where the inner walls stand with the candidates displaced by u (3|C|), as a walls frame's end reports them: the
+/// closest of the search's pairs (ws.pairs: the last frame's) over their face, creases where `start` has them left
+/// out (CompliantFrame::wall_min_distance_mm; inf: none over its face), and the deepest vertex behind a face whatever
+/// the pairs (CompliantFrame::wall_crossed_mm; 0: none). For a state between a frame's start and its end (aneusim's
+/// shortened frame, PatchSpec::walls_shorten).
+/// @throws InputError positions, u or start that do not fit the candidates
+struct CompliantWallsAt {
+    double min_distance_mm = std::numeric_limits<double>::infinity();
+    double crossed_mm = 0;
+};
+CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, const CompliantWallSearch& ws,
+                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt = {});
 
 /// A sequence of frames carried over to another candidate set (a refresh that selects the candidates again for the
 /// jaws as they are now: aneusim's patch): the last frame's constraints and their forces, and the candidates'

@@ -185,6 +185,11 @@ struct PatchSpec {
     /// counts as not converged, the patch stays where it started, and a second in a row restarts from the last
     /// converged state with a smaller step of the opening (why 0.1 mm: sim_patch.cpp, at the check; 0: every frame taken).
     double walls_reject_mm = 0.1;
+    /// COMPLIANCE: such a frame is first shortened, the patch moved 1/2, 1/4, ... of the way from where it started to
+    /// where it ended (its opening's change and blade loads alike), at most this many halvings; the longest step that
+    /// leaves the walls within walls_reject_mm is taken (a damped step: the frames after go on from there). 0: not
+    /// shortened (not taken, as above). One clip's frames only.
+    int walls_shorten = 0;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
     /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
     /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).

@@ -195,6 +195,9 @@ struct Assessment {
         /// Compliance frames that ended with the walls over 0.1 mm through each other: not taken (counted as not
         /// converged, as range_absurd's)
         int walls_absurd = 0;
+        /// Compliance frames that ended with the walls over PatchSpec::walls_reject_mm through each other and were taken
+        /// shortened (PatchSpec::walls_shorten)
+        int walls_shortened = 0;
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
