@@ -1647,7 +1647,7 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
 }
 
 CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, const CompliantWallSearch& ws,
-                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt) {
+                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt, double beyond_mm) {
     const Eigen::Index nc = static_cast<Eigen::Index>(lin.candidates().size());
     if (Xc.rows() != nc || u.size() != 3 * nc || start.size() != 3 * nc)
         throw InputError("compliant walls: positions, displacement or start that do not fit the " + std::to_string(nc) + " candidates");
@@ -1657,6 +1657,16 @@ CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::Matri
     walls.rest = Xc;
     walls.pairs = ws.pairs;
     out.min_distance_mm = wall_min_distance(lin, walls, u, start, opt);
+    // Each pair's distance, less where it started for one that started further behind its face's plane than beyond_mm
+    // (creases left out, as above).
+    auto at = [&](const Eigen::VectorXd& w, int k) { return Eigen::Vector3d(Xc.row(k).transpose() + w.segment<3>(3 * k)); };
+    for (const auto& [v, f] : walls.pairs) {
+        const double d0 = plane_distance(at(start, v), at(start, faces(f, 0)), at(start, faces(f, 1)), at(start, faces(f, 2)));
+        if (is_crease(walls, {v, faces(f, 0), faces(f, 1), faces(f, 2)}, d0, opt)) continue;
+        OverFace of;
+        if (over_face(at(u, v), at(u, faces(f, 0)), at(u, faces(f, 1)), at(u, faces(f, 2)), of))
+            out.deepened_mm = std::min(out.deepened_mm, d0 < -beyond_mm ? of.d - d0 : of.d);
+    }
     const ContactParams& cp = ws.params;
     const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
     constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // (as solve_compliant_clip_walls counts a crossing)

@@ -389,9 +389,13 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
 struct CompliantWallsAt {
     double min_distance_mm = std::numeric_limits<double>::infinity();
     double crossed_mm = 0;
+    /// The closest of the pairs over their face, a pair that was further than `beyond_mm` behind its face's plane at
+    /// `start` measured from there (how much further through it went; inf: none)
+    double deepened_mm = std::numeric_limits<double>::infinity();
 };
 CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, const CompliantWallSearch& ws,
-                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt = {});
+                                    const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt = {},
+                                    double beyond_mm = std::numeric_limits<double>::infinity());
 
 /// A sequence of frames carried over to another candidate set (a refresh that selects the candidates again for the
 /// jaws as they are now: aneusim's patch): the last frame's constraints and their forces, and the candidates'

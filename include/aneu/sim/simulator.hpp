@@ -198,6 +198,9 @@ struct Assessment {
         /// Compliance frames that ended with the walls over PatchSpec::walls_reject_mm through each other and were taken
         /// shortened (PatchSpec::walls_shorten)
         int walls_shortened = 0;
+        /// ... and of those past it only where they started (no pair further through than at the frame's start by more
+        /// than the limit, nothing through a face deeper): taken whole (PatchSpec::walls_shorten)
+        int walls_within_start = 0;
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
