@@ -1417,8 +1417,8 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     Eigen::VectorXd sc(3 * nk);
                     for (Eigen::Index k = 0; k < nk; ++k) sc.segment<3>(3 * k) = v0.segment<3>(3 * static_cast<Eigen::Index>(C->cand[static_cast<size_t>(k)]));
                     // What a step may do: take no pair further than the limit behind its face's plane, nor any vertex
-                    // through a face (fem::surface_crossings) deeper than it; a pair already past the limit where the
-                    // frame started, no further than the limit beyond where it was. (A pair the frame's crossings
+                    // through a face (fem::surface_crossings) deeper than it; a pair or a crossing already past the
+                    // limit where the frame started, no further than the limit beyond where it was. (A pair the frame's crossings
                     // paired closely may start far behind its face's plane: the sample's 2 mm jaws at t = 1.252 s,
                     // 0.22 mm, with nothing through a face deeper than 0.005 mm; measured from its plane it would
                     // refuse every step. Measured from where they started, all pairs would let the walls creep through
@@ -1428,17 +1428,18 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                         const double a = std::ldexp(1.0, -h);
                         const Eigen::VectorXd ua = sc + a * (f.candidate_u - sc);
                         const fem::CompliantWallsAt wa = fem::compliant_walls_at(*C->lin, C->Xc, C->faces, C->search, ua, sc, co, scene.patch.walls_reject_mm);
-                        const double wd = std::min(wa.deepened_mm, -wa.crossed_mm);
+                        const double wd = std::min(wa.deepened_mm, -wa.deepened_crossed_mm);
                         if (!(wd >= -scene.patch.walls_reject_mm)) {
                             if (std::getenv("ANEU_PATCH_TRACE"))
-                                std::fprintf(stderr, "patch t=%.4f: the frame shortened to %.4g of its step: the walls %.4f mm through (a pair past the limit at the start: further than there), %.4f mm through a face (their pairs' closest %.4f)\n",
-                                             fr.t, a, -wa.deepened_mm, wa.crossed_mm, wa.min_distance_mm);
+                                std::fprintf(stderr, "patch t=%.4f: the frame shortened to %.4g of its step: the walls %.4f mm through, %.4f mm through a face (past the limit at the start: further than there; "
+                                             "their pairs' closest %.4f, deepest through a face %.4f)\n",
+                                             fr.t, a, -wa.deepened_mm, wa.deepened_crossed_mm, wa.min_distance_mm, wa.crossed_mm);
                             continue;
                         }
                         if (h == 0) {
                             if (std::getenv("ANEU_PATCH_TRACE"))
-                                std::fprintf(stderr, "patch t=%.4f: the frame's walls %.4f mm through (pairs past the limit at its start: further than there), %.4f mm through a face: taken whole\n", fr.t, -wa.deepened_mm,
-                                             wa.crossed_mm);
+                                std::fprintf(stderr, "patch t=%.4f: the frame's walls %.4f mm through, %.4f mm through a face (past the limit at its start: further than there): taken whole\n", fr.t,
+                                             -wa.deepened_mm, wa.deepened_crossed_mm);
                             ++P.stats.walls_within_start;
                             shortened = true;
                             break;

@@ -1670,8 +1670,17 @@ CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::Matri
     const ContactParams& cp = ws.params;
     const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
     constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // (as solve_compliant_clip_walls counts a crossing)
-    for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth, nullptr, &cp.face_surface))
-        if (q.depth_mm > CONTACT_ROUNDOFF_MM) out.crossed_mm = std::max(out.crossed_mm, q.depth_mm);
+    // A crossing already deeper than beyond_mm at the start: how much deeper it went.
+    std::map<std::pair<int, int>, double> started;
+    if (std::isfinite(beyond_mm))
+        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, start, cp.exclude_rings, depth, nullptr, &cp.face_surface))
+            if (q.depth_mm > beyond_mm) started[{q.v, q.f}] = q.depth_mm;
+    for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth, nullptr, &cp.face_surface)) {
+        if (!(q.depth_mm > CONTACT_ROUNDOFF_MM)) continue;
+        out.crossed_mm = std::max(out.crossed_mm, q.depth_mm);
+        const auto it = started.find({q.v, q.f});
+        out.deepened_crossed_mm = std::max(out.deepened_crossed_mm, it == started.end() ? q.depth_mm : q.depth_mm - it->second);
+    }
     return out;
 }
 

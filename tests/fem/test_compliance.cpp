@@ -459,7 +459,8 @@ TEST(CompliantClip, FramesOnABorrowedComplianceSolveTheNewTangentsProblem) {
 
 TEST(CompliantClip, TheWallsAtAStateAreWhatAFrameEndingThereReports) {
     // fem::compliant_walls_at, for a state between a frame's start and end (aneusim's shortened frame): at the frame's
-    // end it gives the frame's own walls figures, to the bit; further along the frame's step the walls come closer.
+    // end it gives the frame's own walls figures, to the bit; further along the frame's step the walls come closer;
+    // measured from the start, the start has gone nowhere.
     const BladesOnATube tube(24);
     const fem::ClipSpring spring = test_spring();
     fem::CompliantWallSearch ws;
@@ -479,6 +480,13 @@ TEST(CompliantClip, TheWallsAtAStateAreWhatAFrameEndingThereReports) {
     const fem::CompliantWallsAt end = fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, f.candidate_u, start);
     EXPECT_EQ(end.min_distance_mm, f.wall_min_distance_mm);
     EXPECT_EQ(end.crossed_mm, f.wall_crossed_mm);
+    // With no pair or crossing taken as started past a limit, the measures from the start are the plain ones ...
+    EXPECT_EQ(end.deepened_mm, end.min_distance_mm);
+    EXPECT_EQ(end.deepened_crossed_mm, end.crossed_mm);
+    // ... and with all of them (a limit of 0), at the start nothing has gone further through than it was.
+    const fem::CompliantWallsAt at_start = fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, start, start, {}, 0.0);
+    EXPECT_GE(at_start.deepened_mm, 0.0);
+    EXPECT_EQ(at_start.deepened_crossed_mm, 0.0);
     const Eigen::VectorXd further = start + 4.0 * (f.candidate_u - start);
     const fem::CompliantWallsAt past = fem::compliant_walls_at(*lin, tube.Xc, tube.faces, ws, further, start);
     EXPECT_LT(past.min_distance_mm, end.min_distance_mm);

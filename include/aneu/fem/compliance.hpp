@@ -392,6 +392,8 @@ struct CompliantWallsAt {
     /// The closest of the pairs over their face, a pair that was further than `beyond_mm` behind its face's plane at
     /// `start` measured from there (how much further through it went; inf: none)
     double deepened_mm = std::numeric_limits<double>::infinity();
+    /// The deepest vertex behind a face, one that was deeper than `beyond_mm` behind it at `start` measured from there
+    double deepened_crossed_mm = 0;
 };
 CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::MatrixX3d& Xc, const Eigen::MatrixX3i& faces, const CompliantWallSearch& ws,
                                     const Eigen::VectorXd& u, const Eigen::VectorXd& start, const CompliantOptions& opt = {},

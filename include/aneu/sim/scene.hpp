@@ -187,7 +187,8 @@ struct PatchSpec {
     double walls_reject_mm = 0.1;
     /// COMPLIANCE: such a frame is first shortened, the patch moved 1/2, 1/4, ... of the way from where it started to
     /// where it ended (its opening's change and blade loads alike), at most this many halvings; the longest step that
-    /// leaves the walls within walls_reject_mm is taken (a damped step: the frames after go on from there). 0: not
+    /// leaves the walls within walls_reject_mm is taken (a damped step: the frames after go on from there; the whole step
+    /// first; a pair or crossing already past the limit where the frame started is measured from there). 0: not
     /// shortened (not taken, as above). One clip's frames only.
     int walls_shorten = 0;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
