@@ -1670,10 +1670,13 @@ CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::Matri
     const ContactParams& cp = ws.params;
     const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
     constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // (as solve_compliant_clip_walls counts a crossing)
-    // A crossing already deeper than beyond_mm at the start: how much deeper it went.
+    // A crossing already deeper than beyond_mm at the start: how much deeper it went. (Looked for at the start down to
+    // twice the crossings' depth: a vertex just beyond it there, which the step brings back within it, is one the step
+    // took out, not in. The sample's 2 mm jaws at t = 1.256 s: not found at the start, 0.2493 mm at 1/64 of the step,
+    // 0.2163 at half of it, read as a new crossing each time.)
     std::map<std::pair<int, int>, double> started;
     if (std::isfinite(beyond_mm))
-        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, start, cp.exclude_rings, depth, nullptr, &cp.face_surface))
+        for (const SurfaceCrossing& q : surface_crossings(Xc, faces, start, cp.exclude_rings, 2 * depth, nullptr, &cp.face_surface))
             if (q.depth_mm > beyond_mm) started[{q.v, q.f}] = q.depth_mm;
     for (const SurfaceCrossing& q : surface_crossings(Xc, faces, u, cp.exclude_rings, depth, nullptr, &cp.face_surface)) {
         if (!(q.depth_mm > CONTACT_ROUNDOFF_MM)) continue;
