@@ -1407,73 +1407,71 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // walls now near each other make (the frames' state was out of balance, not the contact unsolvable: the
             // sample's 2 mm jaws at t = 1.252 s, held at 5.430 deg, a frame with no change of the opening went 0.88 wall
             // thicknesses). One clip's frames only (a tandem's are not taken, as before).
+            const double walls = walls_at(f);
+            const bool walls_past = scene.patch.walls_reject_mm > 0 && walls < -scene.patch.walls_reject_mm;
             bool shortened = false;
-            if (const double walls = walls_at(f); scene.patch.walls_reject_mm > 0 && walls < -scene.patch.walls_reject_mm) {
-                if (std::getenv("ANEU_PATCH_TRACE") && scene.patch.walls_shorten > 0)
-                    std::fprintf(stderr, "patch t=%.4f: the walls %.4f mm (pairs %.4f, through a face %.4f); shortening: %zu further clips, %lld faces, %lld of %zu candidates' displacements\n", fr.t, walls,
-                                 f.wall_min_distance_mm, f.wall_crossed_mm, mf.size(), static_cast<long long>(C->faces.rows()), static_cast<long long>(f.candidate_u.size() / 3), C->cand.size());
-                if (scene.patch.walls_shorten > 0 && mf.empty() && C->faces.rows() > 0 && f.candidate_u.size() == 3 * static_cast<Eigen::Index>(C->cand.size())) {
-                    const Eigen::Index nk = static_cast<Eigen::Index>(C->cand.size());
-                    Eigen::VectorXd sc(3 * nk);
-                    for (Eigen::Index k = 0; k < nk; ++k) sc.segment<3>(3 * k) = v0.segment<3>(3 * static_cast<Eigen::Index>(C->cand[static_cast<size_t>(k)]));
-                    // What a step may do: take no pair further than the limit behind its face's plane, nor any vertex
-                    // through a face (fem::surface_crossings) deeper than it; a pair or a crossing already past the
-                    // limit where the frame started, no further than the limit beyond where it was. (A pair the frame's crossings
-                    // paired closely may start far behind its face's plane: the sample's 2 mm jaws at t = 1.252 s,
-                    // 0.22 mm, with nothing through a face deeper than 0.005 mm; measured from its plane it would
-                    // refuse every step. Measured from where they started, all pairs would let the walls creep through
-                    // a limit a frame: the tube's, to the 0.0012 mm of no limit.) The whole step first: one that only
-                    // keeps such a pair where it was is taken as it is.
-                    for (int h = 0; h <= scene.patch.walls_shorten; ++h) {
-                        const double a = std::ldexp(1.0, -h);
-                        const Eigen::VectorXd ua = sc + a * (f.candidate_u - sc);
-                        const fem::CompliantWallsAt wa = fem::compliant_walls_at(*C->lin, C->Xc, C->faces, C->search, ua, sc, co, scene.patch.walls_reject_mm);
-                        const double wd = std::min(wa.deepened_mm, -wa.deepened_crossed_mm);
-                        if (!(wd >= -scene.patch.walls_reject_mm)) {
-                            if (std::getenv("ANEU_PATCH_TRACE"))
-                                std::fprintf(stderr, "patch t=%.4f: the frame shortened to %.4g of its step: the walls %.4f mm through, %.4f mm through a face (past the limit at the start: further than there; "
-                                             "their pairs' closest %.4f, deepest through a face %.4f)\n",
-                                             fr.t, a, -wa.deepened_mm, wa.deepened_crossed_mm, wa.min_distance_mm, wa.crossed_mm);
-                            continue;
-                        }
-                        if (h == 0) {
-                            if (std::getenv("ANEU_PATCH_TRACE"))
-                                std::fprintf(stderr, "patch t=%.4f: the frame's walls %.4f mm through, %.4f mm through a face (past the limit at its start: further than there): taken whole\n", fr.t,
-                                             -wa.deepened_mm, wa.deepened_crossed_mm);
-                            ++P.stats.walls_within_start;
-                            shortened = true;
-                            break;
-                        }
-                        ++P.stats.walls_shortened;
+            if (walls_past && scene.patch.walls_shorten > 0 && mf.empty() && C->faces.rows() > 0 &&
+                f.candidate_u.size() == 3 * static_cast<Eigen::Index>(C->cand.size())) {
+                const Eigen::Index nk = static_cast<Eigen::Index>(C->cand.size());
+                Eigen::VectorXd sc(3 * nk);
+                for (Eigen::Index k = 0; k < nk; ++k) sc.segment<3>(3 * k) = v0.segment<3>(3 * static_cast<Eigen::Index>(C->cand[static_cast<size_t>(k)]));
+                // What a step may do: take no pair further than the limit behind its face's plane, nor any vertex
+                // through a face (fem::surface_crossings) deeper than it; a pair or a crossing already past the
+                // limit where the frame started, no further than the limit beyond where it was. (A pair the
+                // frame's crossings paired closely may start far behind its face's plane: the sample's 2 mm jaws
+                // at t = 1.252 s, 0.22 mm, with nothing through a face deeper than 0.005 mm; measured from its
+                // plane it would refuse every step. Measured from where they started, all pairs would let the
+                // walls creep through a limit a frame: the tube's, to the 0.0012 mm of no limit.) The whole step
+                // first: one that only keeps such a pair where it was is taken as it is.
+                for (int h = 0; h <= scene.patch.walls_shorten; ++h) {
+                    const double a = std::ldexp(1.0, -h);
+                    const Eigen::VectorXd ua = sc + a * (f.candidate_u - sc);
+                    const fem::CompliantWallsAt wa = fem::compliant_walls_at(*C->lin, C->Xc, C->faces, C->search, ua, sc, co, scene.patch.walls_reject_mm);
+                    const double wd = std::min(wa.deepened_mm, -wa.deepened_crossed_mm);
+                    if (!(wd >= -scene.patch.walls_reject_mm)) {
                         if (std::getenv("ANEU_PATCH_TRACE"))
-                            std::fprintf(stderr, "patch t=%.4f: the frame ended with the walls %.4f mm through each other (%.2f wall thicknesses from its linearisation): shortened to %.4g of its step, the walls %.4f mm (patch energy %.6g -> %.6g N mm; the whole step's %.6g)\n",
-                                         fr.t, -walls, lag.ratio, a, wd, pm.energy(v0.head(nb)), pm.energy(Eigen::VectorXd(v0.head(nb) + a * (res.u.head(nb) - v0.head(nb)))),
-                                         pm.energy(res.u.head(nb)));
-                        res.u.head(nb) = v0.head(nb) + a * (res.u.head(nb) - v0.head(nb));
-                        // Its loads between those where it started (the last frame's, which held the patch there) and
-                        // its end's: on one linearisation the state is affine in the forces. (Its rows' forces stay the
-                        // end's, the next frame's warm start.)
-                        f.candidate_u = ua;
-                        const fem::BladeLoads& l0 = P.course.loads_shown;
-                        const double th0 = v0[nb];
-                        f.theta = th0 + a * (f.theta - th0);
-                        f.loads.opening_rad = f.theta;
-                        for (size_t b = 0; b < 2; ++b) {
-                            f.loads.force_n[b] = l0.force_n[b] + a * (f.loads.force_n[b] - l0.force_n[b]);
-                            f.loads.moment_nmm[b] = l0.moment_nmm[b] + a * (f.loads.moment_nmm[b] - l0.moment_nmm[b]);
-                            f.loads.friction_n[b] = l0.friction_n[b] + a * (f.loads.friction_n[b] - l0.friction_n[b]);
-                        }
-                        f.loads.net_force = l0.net_force + a * (f.loads.net_force - l0.net_force);
-                        f.wall_min_distance_mm = wa.min_distance_mm;
-                        f.wall_crossed_mm = wa.crossed_mm;
-                        lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
-                        C->from_state = true;
+                            std::fprintf(stderr, "patch t=%.4f: the frame shortened to %.4g of its step: the walls %.4f mm through, %.4f mm through a face (past the limit at the start: further than there; "
+                                         "their pairs' closest %.4f, deepest through a face %.4f)\n",
+                                         fr.t, a, -wa.deepened_mm, wa.deepened_crossed_mm, wa.min_distance_mm, wa.crossed_mm);
+                        continue;
+                    }
+                    if (h == 0) {
+                        if (std::getenv("ANEU_PATCH_TRACE"))
+                            std::fprintf(stderr, "patch t=%.4f: the frame's walls %.4f mm through, %.4f mm through a face (past the limit at its start: further than there): taken whole\n", fr.t,
+                                         -wa.deepened_mm, wa.deepened_crossed_mm);
+                        ++P.stats.walls_within_start;
                         shortened = true;
                         break;
                     }
+                    ++P.stats.walls_shortened;
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: the frame ended with the walls %.4f mm through each other (%.2f wall thicknesses from its linearisation): shortened to %.4g of its step, the walls %.4f mm (patch energy %.6g -> %.6g N mm; the whole step's %.6g)\n",
+                                     fr.t, -walls, lag.ratio, a, wd, pm.energy(v0.head(nb)), pm.energy(Eigen::VectorXd(v0.head(nb) + a * (res.u.head(nb) - v0.head(nb)))),
+                                     pm.energy(res.u.head(nb)));
+                    res.u.head(nb) = v0.head(nb) + a * (res.u.head(nb) - v0.head(nb));
+                    // Its loads between those where it started (the last frame's, which held the patch there) and
+                    // its end's: on one linearisation the state is affine in the forces. (Its rows' forces stay the
+                    // end's, the next frame's warm start.)
+                    f.candidate_u = ua;
+                    const fem::BladeLoads& l0 = P.course.loads_shown;
+                    const double th0 = v0[nb];
+                    f.theta = th0 + a * (f.theta - th0);
+                    f.loads.opening_rad = f.theta;
+                    for (size_t b = 0; b < 2; ++b) {
+                        f.loads.force_n[b] = l0.force_n[b] + a * (f.loads.force_n[b] - l0.force_n[b]);
+                        f.loads.moment_nmm[b] = l0.moment_nmm[b] + a * (f.loads.moment_nmm[b] - l0.moment_nmm[b]);
+                        f.loads.friction_n[b] = l0.friction_n[b] + a * (f.loads.friction_n[b] - l0.friction_n[b]);
+                    }
+                    f.loads.net_force = l0.net_force + a * (f.loads.net_force - l0.net_force);
+                    f.wall_min_distance_mm = wa.min_distance_mm;
+                    f.wall_crossed_mm = wa.crossed_mm;
+                    lag = surface_reach(sf, P.cand_vertex, P.cand, res.u, C->lin->u0());
+                    C->from_state = true;
+                    shortened = true;
+                    break;
                 }
             }
-            if (const double walls = walls_at(f); !shortened && scene.patch.walls_reject_mm > 0 && walls < -scene.patch.walls_reject_mm) {
+            if (walls_past && !shortened) {
                 ++P.stats.walls_absurd;
                 if (std::getenv("ANEU_PATCH_TRACE"))
                     std::fprintf(stderr, "patch t=%.4f: the frame ended with the walls %.4f mm through each other (%.2f wall thicknesses from its linearisation): not taken (over %g mm), the patch stays where the frame started\n",

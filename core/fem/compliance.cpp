@@ -1285,25 +1285,35 @@ CompliantFrame solve_pass(const Linearisation& lin, const ClipBlades& blades, co
 /// candidates displaced by u (inf: none).
 /// Pairs whose vertex lay further than opt.wall_behind_mm behind its face's plane where the frame started (`start`: a
 /// crease, the far side of a fold; solve_pass makes them no constraint) are left out.
+/// With `deepened`: the same closest distance, a pair that started further than beyond_mm behind its face's plane
+/// measured from there (compliant_walls_at).
 double wall_min_distance(const Linearisation& lin, const CompliantWalls& walls, const Eigen::VectorXd& u, const Eigen::VectorXd& start,
-                         const CompliantOptions& opt, std::array<int, 2>* worst = nullptr) {
+                         const CompliantOptions& opt, std::array<int, 2>* worst = nullptr, double* deepened = nullptr,
+                         double beyond_mm = std::numeric_limits<double>::infinity()) {
     const Eigen::MatrixX3d& Xf = lin.free_positions();
     const Eigen::VectorXd& fu = lin.free_candidate_u();
     auto at = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + u.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
     auto at_start = [&](int k) { return Eigen::Vector3d(Xf.row(k).transpose() + start.segment<3>(3 * k) - fu.segment<3>(3 * k)); };
     double out = std::numeric_limits<double>::infinity();
+    if (deepened) *deepened = out;
     for (const auto& [v, f] : walls.pairs) {
-        if (is_crease(walls, {v, walls.faces(f, 0), walls.faces(f, 1), walls.faces(f, 2)},
-                      plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2))), opt))
-            continue;
+        const double d0 = plane_distance(at_start(v), at_start(walls.faces(f, 0)), at_start(walls.faces(f, 1)), at_start(walls.faces(f, 2)));
+        if (is_crease(walls, {v, walls.faces(f, 0), walls.faces(f, 1), walls.faces(f, 2)}, d0, opt)) continue;
         OverFace of;
-        if (over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of) && of.d < out) {
+        if (!over_face(at(v), at(walls.faces(f, 0)), at(walls.faces(f, 1)), at(walls.faces(f, 2)), of)) continue;
+        if (of.d < out) {
             out = of.d;
             if (worst) *worst = {v, f};
         }
+        if (deepened) *deepened = std::min(*deepened, d0 < -beyond_mm ? of.d - d0 : of.d);
     }
     return out;
 }
+
+/// A wall vertex behind a face by more than this counts as through it (a pressed vertex's linearisation error, well
+/// under the 0.02 mm limit, does not), down to the search's crossing depth (0.25 mm unless it says).
+constexpr double CONTACT_ROUNDOFF_MM = 1e-3;
+double crossing_depth(const ContactParams& cp) { return cp.depth_mm > 0 ? cp.depth_mm : 0.25; }
 
 /// ANEU_WALL_TRACE (stderr), at a frame's end `f`: how much of the walls' force the rows kept beyond their face's edge
 /// carry (OVER_KEPT: the face's plane holds a vertex beyond its edge, over a ridge as far out as the plane or further)
@@ -1570,10 +1580,9 @@ CompliantFrame solve_compliant_clip_walls(const Linearisation& lin, const Eigen:
         throw InputError("compliant clip: a start of " + std::to_string(start->size()) + " values for " + std::to_string(nc) + " candidates");
     ContactParams& cp = ws.params;
     const Eigen::VectorXd u0 = start ? *start : warm && warm->candidate_u.size() == 3 * nc ? warm->candidate_u : lin.free_candidate_u();
-    const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
+    const double depth = crossing_depth(cp);
     // (Hard contact leaves a pressed vertex on its face's plane, to the gaps' linearisation: a micrometre behind it is
-    // not a crossing; the next frame's row pushes it back.)
-    constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // a pressed vertex's linearisation error, well under the 0.02 mm limit
+    // not a crossing, CONTACT_ROUNDOFF_MM; the next frame's row pushes it back.)
     // The (vertex, face) pairs behind each other at u, sorted, and the deepest of them.
     struct Behind {
         std::vector<std::pair<int, int>> pairs;
@@ -1656,20 +1665,9 @@ CompliantWallsAt compliant_walls_at(const Linearisation& lin, const Eigen::Matri
     walls.faces = faces;
     walls.rest = Xc;
     walls.pairs = ws.pairs;
-    out.min_distance_mm = wall_min_distance(lin, walls, u, start, opt);
-    // Each pair's distance, less where it started for one that started further behind its face's plane than beyond_mm
-    // (creases left out, as above).
-    auto at = [&](const Eigen::VectorXd& w, int k) { return Eigen::Vector3d(Xc.row(k).transpose() + w.segment<3>(3 * k)); };
-    for (const auto& [v, f] : walls.pairs) {
-        const double d0 = plane_distance(at(start, v), at(start, faces(f, 0)), at(start, faces(f, 1)), at(start, faces(f, 2)));
-        if (is_crease(walls, {v, faces(f, 0), faces(f, 1), faces(f, 2)}, d0, opt)) continue;
-        OverFace of;
-        if (over_face(at(u, v), at(u, faces(f, 0)), at(u, faces(f, 1)), at(u, faces(f, 2)), of))
-            out.deepened_mm = std::min(out.deepened_mm, d0 < -beyond_mm ? of.d - d0 : of.d);
-    }
+    out.min_distance_mm = wall_min_distance(lin, walls, u, start, opt, nullptr, &out.deepened_mm, beyond_mm);
     const ContactParams& cp = ws.params;
-    const double depth = cp.depth_mm > 0 ? cp.depth_mm : 0.25;
-    constexpr double CONTACT_ROUNDOFF_MM = 1e-3;  // (as solve_compliant_clip_walls counts a crossing)
+    const double depth = crossing_depth(cp);
     // A crossing already deeper than beyond_mm at the start: how much deeper it went. (Looked for at the start down to
     // twice the crossings' depth: a vertex just beyond it there, which the step brings back within it, is one the step
     // took out, not in. The sample's 2 mm jaws at t = 1.256 s: not found at the start, 0.2493 mm at 1/64 of the step,
