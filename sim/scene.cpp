@@ -263,6 +263,7 @@ Scene read_scene(const std::string& path) {
         s.patch.range_newton = static_cast<int>(o.num("range_newton", s.patch.range_newton, 0, 1000));
         s.patch.walls_reject_mm = o.num("walls_reject_mm", s.patch.walls_reject_mm, 0, 10);
         s.patch.walls_shorten = static_cast<int>(o.num("walls_shorten", s.patch.walls_shorten, 0, 20));
+        s.patch.walls_newton = static_cast<int>(o.num("walls_newton", s.patch.walls_newton, 0, 1000));
         s.patch.friction_cell_mm = o.num("friction_cell_mm", s.patch.friction_cell_mm, 0, 10);
         s.patch.compliance_reuse = static_cast<int>(o.num("compliance_reuse", s.patch.compliance_reuse, 0, 1e6));
         o.done();

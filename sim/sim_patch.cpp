@@ -1345,10 +1345,13 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // from the state it reached, linearised there. Where it does not converge within those iterations the
             // compliance frame's nearest attempt stands (and is warned, as without it).
             // (Tandem clips: the Newton frames take one clip; their frames stay the compliance frame's.)
-            if (got == Span::BEYOND && scene.patch.range_newton > 0 && mf.empty()) {
+            // The frame solved as a Newton frame instead, with at most `iterations` iterations, from where it started
+            // (its walls and pressed nodes first lifted NEWTON_LIFT_MM apart); converged, the frames go on from its
+            // state, linearised there. `why` is what the trace says of the compliance frame.
+            auto as_newton_frame = [&](int iterations, const std::string& why) -> std::optional<fem::NewtonResult> {
                 const Stopwatch nw;
                 const int frame_halvings = o.max_halvings;  // (the frame's own budget, given back after)
-                o.max_iterations = o.max_total_iterations = scene.patch.range_newton;
+                o.max_iterations = o.max_total_iterations = iterations;
                 o.max_halvings = 6;
                 lift_mm = NEWTON_LIFT_MM;
                 const fem::NewtonResult nr = newton_frame();
@@ -1356,7 +1359,6 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
                 o.max_halvings = frame_halvings;
                 if (nr.converged && !cancel_frames) {
-                    ++P.stats.range_newton_frames;
                     // The frames' next start: Newton's state on the candidates (the LCP cold: no rows carried).
                     fem::CompliantFrame at;
                     at.theta = nr.u[nb];
@@ -1370,17 +1372,30 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                     C->warm = true;
                     const bool relinearised = refresh_at(Eigen::VectorXd(nr.u.head(nb)));
                     if (std::getenv("ANEU_PATCH_TRACE"))
-                        std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation after its re-solves: solved as a Newton frame instead (%d iterations, residual %.2e, %.2f s; walls %.4f mm)%s\n",
-                                     fr.t, lag.ratio, nr.iterations, nr.residual, nw.seconds(), wall_min,
+                        std::fprintf(stderr, "patch t=%.4f: %s: solved as a Newton frame instead (%d iterations, residual %.2e, %.2f s; walls %.4f mm, opening %.4f -> %.4f deg)%s\n",
+                                     fr.t, why.c_str(), nr.iterations, nr.residual, nw.seconds(), wall_min, v0[nb] * 180 / M_PI, nr.u[nb] * 180 / M_PI,
                                      relinearised ? ", the frames linearised at its state" : "; its state could not be linearised: the frames go on with the last linearisation");
                     lag = Reach{};  // (a Newton frame is the nonlinear patch's own: no linearisation to be away from)
                     return nr;
                 }
-                ++P.stats.range_newton_failed;
                 if (std::getenv("ANEU_PATCH_TRACE"))
-                    std::fprintf(stderr, "patch t=%.4f: the frame ended %.2f wall thicknesses from its linearisation; as a Newton frame it did not converge in %d iterations (%s; %.3g of the opening's change reached, residual %.2e, %d substeps, %d iterations with the tangent projected, %.2f s): the compliance frame kept\n",
-                                 fr.t, lag.ratio, nr.iterations, nr.failure.c_str(), nr.load_fraction, nr.residual, nr.substeps, nr.shifted, nw.seconds());
+                    std::fprintf(stderr, "patch t=%.4f: %s; as a Newton frame it did not converge in %d iterations (%s; %.3g of the opening's change reached, residual %.2e, %d substeps, %d iterations with the tangent projected, %.2f s): the compliance frame kept\n",
+                                 fr.t, why.c_str(), nr.iterations, nr.failure.c_str(), nr.load_fraction, nr.residual, nr.substeps, nr.shifted, nw.seconds());
                 grips.clear();  // (the compliance frame's loads and walls: below)
+                return std::nullopt;
+            };
+            // Still beyond the range after its re-solves (and halvings): with PatchSpec::range_newton the frame is solved
+            // as a Newton frame (the nonlinear patch has no linear range). Where it does not converge within those
+            // iterations the compliance frame's nearest attempt stands (and is warned, as without it).
+            // (Tandem clips: the Newton frames take one clip; their frames stay the compliance frame's.)
+            if (got == Span::BEYOND && scene.patch.range_newton > 0 && mf.empty()) {
+                char why[160];
+                std::snprintf(why, sizeof why, "the frame ended %.2f wall thicknesses from its linearisation after its re-solves", lag.ratio);
+                if (std::optional<fem::NewtonResult> nr = as_newton_frame(scene.patch.range_newton, why)) {
+                    ++P.stats.range_newton_frames;
+                    return *nr;
+                }
+                ++P.stats.range_newton_failed;
             }
             if (reselect && !fr.mx && scene.linear_limit > 0 && lag.ratio > RANGE_ABSURD) {
                 ++P.stats.range_absurd;
@@ -1409,6 +1424,21 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // thicknesses). One clip's frames only (a tandem's are not taken, as before).
             const double walls = walls_at(f);
             const bool walls_past = scene.patch.walls_reject_mm > 0 && walls < -scene.patch.walls_reject_mm;
+            // With PatchSpec::walls_newton N such a frame (one clip's) is first solved as a Newton frame, with at most N
+            // iterations: the barriers' steps are bounded by collision detection, so the walls cannot pass through each
+            // other, and its step is the neo-Hookean patch's, not the projected tangent's (the sample's 2 mm jaws from
+            // t = 1.252 s: every compliance frame's whole step 1.1-1.3 mm through, session 65). Not converged, the
+            // frame is shortened or not taken, as without it.
+            if (walls_past && scene.patch.walls_newton > 0 && mf.empty()) {
+                char why[200];
+                std::snprintf(why, sizeof why, "the frame ended with the walls %.4f mm through each other (%.2f wall thicknesses from its linearisation)", -walls,
+                              lag.ratio);
+                if (std::optional<fem::NewtonResult> nr = as_newton_frame(scene.patch.walls_newton, why)) {
+                    ++P.stats.walls_newton_frames;
+                    return *nr;
+                }
+                ++P.stats.walls_newton_failed;
+            }
             bool shortened = false;
             if (walls_past && scene.patch.walls_shorten > 0 && mf.empty() && C->faces.rows() > 0 &&
                 f.candidate_u.size() == 3 * static_cast<Eigen::Index>(C->cand.size())) {

@@ -191,6 +191,10 @@ struct PatchSpec {
     /// first; a pair or crossing already past the limit where the frame started is measured from there). 0: not
     /// shortened (not taken, as above). One clip's frames only.
     int walls_shorten = 0;
+    /// COMPLIANCE: such a frame (one clip's) is first solved as a Newton frame (as range_newton's: the neo-Hookean patch
+    /// with the blades' and walls' barriers, from where it started), with at most this many iterations; converged, the
+    /// frames go on from its state, linearised there; not, it is shortened or not taken as above. 0: not.
+    int walls_newton = 0;
     /// COMPLIANCE: the pressed nodes of a blade share their friction rows within square cells of this side on the
     /// blade's face (fem::CompliantOptions::friction_cell_mm; 0: two rows a node). Fewer rows, faster pressed frames;
     /// what a cell gives up is its nodes' slip relative to one another (bench/results/study/compliance.md).

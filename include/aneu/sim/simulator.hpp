@@ -201,6 +201,9 @@ struct Assessment {
         /// ... and of those past it only where they started (no pair further through than at the frame's start by more
         /// than the limit, nothing through a face deeper): taken whole (PatchSpec::walls_shorten)
         int walls_within_start = 0;
+        /// Frames whose walls went past walls_reject_mm solved as Newton frames instead (PatchSpec::walls_newton), and
+        /// those whose Newton solve did not converge (then shortened or not taken).
+        int walls_newton_frames = 0, walls_newton_failed = 0;
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
