@@ -601,6 +601,7 @@ void write_report(const std::string& path, const Scene& scene, const SimModel& m
                 j["patches"][k]["walls_within_start"] = p.walls_within_start;
                 j["patches"][k]["walls_newton_frames"] = p.walls_newton_frames;
                 j["patches"][k]["walls_newton_failed"] = p.walls_newton_failed;
+                j["patches"][k]["newton_frames_loose"] = p.newton_frames_loose;
                 j["patches"][k]["max_frame_resolves"] = p.max_frame_resolves;
                 j["patches"][k]["range_splits"] = p.range_splits;
                 j["patches"][k]["max_frame_splits"] = p.max_frame_splits;

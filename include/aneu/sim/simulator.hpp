@@ -204,6 +204,9 @@ struct Assessment {
         /// Frames whose walls went past walls_reject_mm solved as Newton frames instead (PatchSpec::walls_newton), and
         /// those whose Newton solve did not converge (then shortened or not taken).
         int walls_newton_frames = 0, walls_newton_failed = 0;
+        /// Of the Newton frames (range_newton's, walls_newton's), those taken at the residual they reached when their
+        /// iterations ran out (at most 1e-2 of the force, the frame's whole opening reached: sim_patch.cpp, NEWTON_FRAME_LOOSE)
+        int newton_frames_loose = 0;
         /// The most re-solves one frame took (at most PatchSpec::range_resolves)
         int max_frame_resolves = 0;
         /// Frames (or halves of them) still beyond the range after their re-solves, solved again in two halves of their
