@@ -797,6 +797,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // the blades (fem::separate_walls, fem::ClipBody::separated), for the barriers to start from.
         double lift_mm = 0;
         Eigen::VectorXd v_from = v0;  // (the walls already apart, newton_frame)
+        double newton_deepened_mm = 0;  // how much deeper the deepest vertex behind a face is at a Newton frame's end than at its start
         // One solve of the frame with the blades on `body` (the patch, or the patch with its inner walls' contact).
         auto solve_with = [&](const fem::ElasticBody& body, const fem::ContactBody* wall) {
             t_wall = sw.seconds();
@@ -852,6 +853,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
         // every frame; a COMPLIANCE frame still beyond its linear range after its re-solves (PatchSpec::range_newton).
         auto newton_frame = [&]() {
             v_from = v0;
+            newton_deepened_mm = 0;
             if (!scene.patch.wall_contact || P.inner.rows() == 0) return solve_with(pm, nullptr);
             fem::ContactParams cp;
             cp.stiffness = P.kappa_wall;
@@ -872,6 +874,7 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 return solve_with(wall, &wall);
             });
             fem::NewtonResult r = cs.result;
+            newton_deepened_mm = cs.deepest_mm - cs.deepest_start_mm;
             P.close_vertices = cs.close_vertices;
             P.stats.wall_resolves += cs.rounds;
             // Whatever is through a face at the end counts as interpenetration (a vertex behind a face where the
@@ -1364,6 +1367,18 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 lift_mm = 0;
                 o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
                 o.max_halvings = frame_halvings;
+                // Its barriers hold the walls apart where they are apart at its start; a vertex already behind a face
+                // there has no pair to push it out and may go deeper (the sample's 2 mm jaws at t = 1.260 s: 0.247 mm).
+                // A Newton frame that takes the deepest such vertex further than PatchSpec::walls_reject_mm is not
+                // taken, as a compliance frame would not be.
+                if (scene.patch.walls_reject_mm > 0 && newton_deepened_mm > scene.patch.walls_reject_mm) {
+                    if (std::getenv("ANEU_PATCH_TRACE"))
+                        std::fprintf(stderr, "patch t=%.4f: %s; as a Newton frame it took a vertex behind a face %.4f mm deeper than at its start (walls %.4f mm): not taken (over %g mm)\n",
+                                     fr.t, why.c_str(), newton_deepened_mm, wall_min, scene.patch.walls_reject_mm);
+                    nr.converged = false;
+                    nr.load_fraction = 0;  // (not taken where it stands either)
+                    nr.failure = "a vertex behind a face taken deeper";
+                }
                 const bool loose = !nr.converged && !nr.cancelled && nr.load_fraction >= 1 && nr.residual <= NEWTON_FRAME_LOOSE &&
                                    nr.u.size() == v0.size();
                 if (loose) {

@@ -450,9 +450,12 @@ CrossingFreeSolve solve_without_crossings(const ElasticBody& body, const Eigen::
     const Eigen::Index n = body.dofs();
     // What is behind a face where the solve starts stays out of the count (a crease, an earlier crossing).
     std::vector<std::pair<int, int>> before;
-    for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth, nullptr, &cp.face_surface)) before.emplace_back(q.v, q.f);
-    std::sort(before.begin(), before.end());
     CrossingFreeSolve out;
+    for (const SurfaceCrossing& q : surface_crossings(X, faces, u0.head(n), cp.exclude_rings, depth, nullptr, &cp.face_surface)) {
+        before.emplace_back(q.v, q.f);
+        out.deepest_start_mm = std::max(out.deepest_start_mm, q.depth_mm);
+    }
+    std::sort(before.begin(), before.end());
     for (int round = 0;; ++round) {
         const ContactBody contact(body, X, faces, u0.head(n), cp);
         out.result = solve(contact);

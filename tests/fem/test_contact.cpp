@@ -358,6 +358,16 @@ TEST(WallContact, AVertexThroughAFaceItsPairsLeftOutIsCaughtAndTheSolveRepeated)
     EXPECT_NEAR(once.left.front().depth_mm, PUSH - Plates::GAP, 1e-9);
     EXPECT_NEAR(once.deepest_mm, PUSH - Plates::GAP, 1e-9);
     EXPECT_EQ(cs.deepest_mm, 0.0);
+    EXPECT_EQ(cs.deepest_start_mm, 0.0);
+    // A solve that starts with the plates already through each other (where `once` left them) pushed further: what
+    // was behind a face at its start goes deeper (no barrier acts on a vertex behind its face); the start's depth is
+    // handed back beside the end's, so that a caller can tell how much deeper it went (the simulator refuses a Newton
+    // frame that went past its walls' limit so).
+    constexpr double FURTHER = 0.12;
+    const fem::CrossingFreeSolve deeper = fem::solve_without_crossings(
+        solid, p.V, p.faces, once.result.u, cp, [&](const fem::ContactBody& body) { return fem::solve_neo_hookean(body, p.fixed, p.push(FURTHER), once.result.u); }, 0.25, 0);
+    EXPECT_NEAR(deeper.deepest_start_mm, PUSH - Plates::GAP, 1e-9);
+    EXPECT_NEAR(deeper.deepest_mm, FURTHER - Plates::GAP, 1e-6);
     // The close vertices it paired are handed back (every vertex that went through, with its ring); a solve that
     // starts with them paired within reach of their path (the simulator's next frame: its own reach covers a held
     // vertex's) needs no repeat and ends where the repeat did.

@@ -204,6 +204,7 @@ struct CrossingFreeSolve {
     int rounds = 0;                      ///< solves run again
     std::vector<SurfaceCrossing> left;   ///< crossings after the last one that were not there at u0
     double deepest_mm = 0;               ///< the deepest vertex behind a face at the end, at u0's too (0: none)
+    double deepest_start_mm = 0;         ///< the deepest vertex behind a face at u0 (0: none)
     std::size_t pairs = 0;               ///< candidate pairs of the last solve
     /// The close vertices (ContactParams::close_vertices) the last solve paired with every face near them: the
     /// given ones and the crossings' rings. A caller solving step after step passes them on to the next step: a
