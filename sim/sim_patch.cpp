@@ -1368,7 +1368,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
                 o.max_iterations = o.max_total_iterations = scene.patch.newton_per_frame;
                 o.max_halvings = frame_halvings;
                 // Its barriers hold the walls apart where they are apart at its start; a vertex already behind a face
-                // there has no pair to push it out and may go deeper (the sample's 2 mm jaws at t = 1.260 s: 0.247 mm).
+                // there has no pair to push it out and may go deeper (fem::CrossingFreeSolve::deepest_start_mm). (The
+                // sample's 2 mm jaws' −0.247 mm from t = 1.260 s is not this: that vertex was as deep at the frame's
+                // start; bench/results/study/compliance.md, session 66.)
                 // A Newton frame that takes the deepest such vertex further than PatchSpec::walls_reject_mm is not
                 // taken, as a compliance frame would not be.
                 if (scene.patch.walls_reject_mm > 0 && newton_deepened_mm > scene.patch.walls_reject_mm) {
