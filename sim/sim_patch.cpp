@@ -1357,7 +1357,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // The frame solved as a Newton frame instead, with at most `iterations` iterations, from where it started
             // (its walls and pressed nodes first lifted NEWTON_LIFT_MM apart); converged, the frames go on from its
             // state, linearised there. `why` is what the trace says of the compliance frame.
+            bool newton_tried = false;  // (a frame's Newton solve is tried once: range_newton's or walls_newton's)
             auto as_newton_frame = [&](int iterations, const std::string& why) -> std::optional<fem::NewtonResult> {
+                newton_tried = true;
                 const Stopwatch nw;
                 const int frame_halvings = o.max_halvings;  // (the frame's own budget, given back after)
                 o.max_iterations = o.max_total_iterations = iterations;
@@ -1460,8 +1462,9 @@ void Simulator::Impl::solve_patches(Frame& fr) {
             // iterations: the barriers' steps are bounded by collision detection, so the walls cannot pass through each
             // other, and its step is the neo-Hookean patch's, not the projected tangent's (the sample's 2 mm jaws from
             // t = 1.252 s: every compliance frame's whole step 1.1-1.3 mm through, session 65). Not converged, the
-            // frame is shortened or not taken, as without it.
-            if (walls_past && scene.patch.walls_newton > 0 && mf.empty()) {
+            // frame is shortened or not taken, as without it. (Not again where range_newton's Newton solve of this
+            // frame has just failed: it would be the same solve.)
+            if (walls_past && scene.patch.walls_newton > 0 && mf.empty() && !newton_tried) {
                 char why[200];
                 std::snprintf(why, sizeof why, "the frame ended with the walls %.4f mm through each other (%.2f wall thicknesses from its linearisation)", -walls,
                               lag.ratio);

@@ -1216,6 +1216,29 @@ TEST(SimulatorPatch, TheComplianceSolverFlattensTheTubeAsTheNeoHookeanReferenceW
     EXPECT_GT(grip[0], 1.5 * f_ref);
 }
 
+/// The tube flattened by compliance frames never relinearised (compliance_flattening_scene, held to 0.30 s) with the
+/// `model` keys given: its patch's end, the clip's opening and force, and how far the lumen goes through itself.
+struct WallsLimitedRun {
+    sim::Assessment::PatchEnd p;
+    double opening_deg = 0, grip_n = 0, lumen_crossing_mm = 0;
+};
+WallsLimitedRun walls_limited_run(const std::string& bundle, const std::string& dir, const std::string& name, const json& model) {
+    json j = compliance_flattening_scene(bundle, 0, 0.30);
+    for (const auto& [k, v] : model.items()) j["model"][k] = v;
+    sim::Simulator s = make(j, dir, name + ".json");
+    const sim::Assessment a = sim::run_scene(s, {});
+    WallsLimitedRun r;
+    if (a.patches.size() != 1) {
+        ADD_FAILURE() << name << ": " << a.patches.size() << " patches, expected 1";
+        return r;
+    }
+    r.p = a.patches[0];
+    r.opening_deg = s.clips().at(0).opening_deg;
+    r.grip_n = s.clips().at(0).grip_force_n;
+    r.lumen_crossing_mm = a.lumen_crossing_mm;
+    return r;
+}
+
 TEST(SimulatorPatch, AComplianceFrameThatTakesTheWallsThroughEachOtherPastTheLimitIsNotTaken) {
     // The tube flattened by compliance frames never relinearised (the linear model about rest, as above): its walls
     // end 0.0012 mm through each other at the closest (measured). With model.walls_reject_mm at half that, a frame
@@ -1231,28 +1254,23 @@ TEST(SimulatorPatch, AComplianceFrameThatTakesTheWallsThroughEachOtherPastTheLim
     constexpr double LIMIT_MM = 0.0006;
     for (const double limit : {0.0, LIMIT_MM}) {
         SCOPED_TRACE("walls_reject_mm " + std::to_string(limit));
-        json j = compliance_flattening_scene(bundle, 0, 0.30);
-        j["model"]["walls_reject_mm"] = limit;
-        sim::Simulator s = make(j, d.file(""), "wr" + std::to_string(limit > 0) + ".json");
-        const sim::Assessment a = sim::run_scene(s, {});
-        ASSERT_EQ(a.patches.size(), 1u);
-        const auto& p = a.patches[0];
-        const sim::Clip& c = s.clips().at(0);
+        const WallsLimitedRun r = walls_limited_run(bundle, d.file(""), "wr" + std::to_string(limit > 0), {{"walls_reject_mm", limit}});
+        const auto& p = r.p;
         if (limit == 0) {
             EXPECT_EQ(p.walls_absurd, 0);
             EXPECT_EQ(p.unconverged_frames, 0);
             EXPECT_LT(p.min_wall_distance_mm, -LIMIT_MM) << "the walls did not go past the limit: the rule was not exercised";
-            EXPECT_NEAR(c.opening_deg, FLAT_END_DEG, 1e-9);
+            EXPECT_NEAR(r.opening_deg, FLAT_END_DEG, 1e-9);
         } else {
             EXPECT_GT(p.walls_absurd, 0);
             EXPECT_GE(p.unconverged_frames, p.walls_absurd);
             EXPECT_GT(p.restarts, 0);
             EXPECT_GE(p.min_wall_distance_mm, -LIMIT_MM);
-            EXPECT_GT(c.opening_deg, FLAT_END_DEG + 1e-3);
+            EXPECT_GT(r.opening_deg, FLAT_END_DEG + 1e-3);
         }
         std::printf("walls_reject_mm %.4f: %ld frames, %d not taken for the walls, %ld unconverged, %ld restarts; walls %.4f mm apart at the closest; "
                     "clip at %.3f deg (asked %.3f), blade force %.4f N\n",
-                    limit, p.frames, p.walls_absurd, p.unconverged_frames, p.restarts, p.min_wall_distance_mm, c.opening_deg, FLAT_END_DEG, c.grip_force_n);
+                    limit, p.frames, p.walls_absurd, p.unconverged_frames, p.restarts, p.min_wall_distance_mm, r.opening_deg, FLAT_END_DEG, r.grip_n);
     }
 }
 
@@ -1272,24 +1290,19 @@ TEST(SimulatorPatch, AComplianceFrameThatTakesTheWallsThroughEachOtherPastTheLim
     for (const int run : {0, 1, 2}) {  // no limit; the limit, not shortened; the limit, shortened
         const int halvings = run == 2 ? 6 : 0;
         SCOPED_TRACE("run " + std::to_string(run));
-        json j = compliance_flattening_scene(bundle, 0, 0.30);
-        j["model"]["walls_reject_mm"] = run == 0 ? 0.0 : LIMIT_MM;
-        j["model"]["walls_shorten"] = halvings;
-        sim::Simulator s = make(j, d.file(""), "ws" + std::to_string(run) + ".json");
-        const sim::Assessment a = sim::run_scene(s, {});
-        ASSERT_EQ(a.patches.size(), 1u);
-        const auto& p = a.patches[0];
-        const sim::Clip& c = s.clips().at(0);
+        const WallsLimitedRun r =
+            walls_limited_run(bundle, d.file(""), "ws" + std::to_string(run), {{"walls_reject_mm", run == 0 ? 0.0 : LIMIT_MM}, {"walls_shorten", halvings}});
+        const auto& p = r.p;
         ends[run] = p;
-        opening[run] = c.opening_deg;
-        grip[run] = c.grip_force_n;
+        opening[run] = r.opening_deg;
+        grip[run] = r.grip_n;
         if (run > 0) {
             EXPECT_GE(p.min_wall_distance_mm, -LIMIT_MM);
         }
         std::printf("walls_reject_mm %.4f, walls_shorten %d: %ld frames, %d shortened, %d not taken for the walls, %ld unconverged, %ld restarts; walls %.5f mm "
                     "apart at the closest; clip at %.3f deg (asked %.3f), blade force %.4f N\n",
                     run == 0 ? 0.0 : LIMIT_MM, halvings, p.frames, p.walls_shortened, p.walls_absurd, p.unconverged_frames, p.restarts, p.min_wall_distance_mm,
-                    c.opening_deg, FLAT_END_DEG, c.grip_force_n);
+                    r.opening_deg, FLAT_END_DEG, r.grip_n);
     }
     EXPECT_EQ(ends[1].walls_shortened, 0);
     EXPECT_GT(ends[2].walls_shortened, 0);
@@ -1318,23 +1331,18 @@ TEST(SimulatorPatch, AComplianceFrameThatTakesTheWallsThroughEachOtherPastTheLim
     const int budget[3] = {0, 40, 30};
     for (const int run : {0, 1, 2}) {  // the limit, not solved as Newton frames; solved so; with 30 iterations
         SCOPED_TRACE("run " + std::to_string(run));
-        json j = compliance_flattening_scene(bundle, 0, 0.30);
-        j["model"]["walls_reject_mm"] = LIMIT_MM;
-        j["model"]["walls_newton"] = budget[run];
-        sim::Simulator s = make(j, d.file(""), "wn" + std::to_string(run) + ".json");
-        const sim::Assessment a = sim::run_scene(s, {});
-        ASSERT_EQ(a.patches.size(), 1u);
-        const auto& p = a.patches[0];
-        const sim::Clip& c = s.clips().at(0);
+        const WallsLimitedRun r =
+            walls_limited_run(bundle, d.file(""), "wn" + std::to_string(run), {{"walls_reject_mm", LIMIT_MM}, {"walls_newton", budget[run]}});
+        const auto& p = r.p;
         ends[run] = p;
-        opening[run] = c.opening_deg;
-        grip[run] = c.grip_force_n;
+        opening[run] = r.opening_deg;
+        grip[run] = r.grip_n;
         EXPECT_GE(p.min_wall_distance_mm, -LIMIT_MM);
-        EXPECT_LE(a.lumen_crossing_mm, LIMIT_MM);
+        EXPECT_LE(r.lumen_crossing_mm, LIMIT_MM);
         std::printf("walls_reject_mm %.4f, walls_newton %d: %ld frames, %d solved as Newton frames (%d did not converge, %d taken where their iterations ran out), %d not taken for the walls, %ld unconverged, "
                     "%ld restarts, %d linearisations; walls %.5f mm apart at the closest, lumen through itself %.5f mm; clip at %.3f deg (asked %.3f), blade force %.4f N\n",
                     LIMIT_MM, budget[run], p.frames, p.walls_newton_frames, p.walls_newton_failed, p.newton_frames_loose, p.walls_absurd, p.unconverged_frames, p.restarts,
-                    p.linearisations, p.min_wall_distance_mm, a.lumen_crossing_mm, c.opening_deg, FLAT_END_DEG, c.grip_force_n);
+                    p.linearisations, p.min_wall_distance_mm, r.lumen_crossing_mm, r.opening_deg, FLAT_END_DEG, r.grip_n);
     }
     EXPECT_EQ(ends[0].walls_newton_frames, 0);
     EXPECT_GT(ends[1].walls_newton_frames, 0);
